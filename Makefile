@@ -1,0 +1,29 @@
+# hpcwedge: `make demo` (the main job) and `make test` (the test suite).
+# Both install what is missing first (scripts/setup.sh; quick when done).
+PY := .venv/bin/python
+
+.PHONY: setup setup-bench demo test bench bench-quick check clean
+
+setup:
+	@bash scripts/setup.sh
+
+setup-bench:
+	@bash scripts/setup.sh bench
+
+demo: setup
+	$(PY) scripts/demo.py
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup-bench
+	$(PY) scripts/bench_2d.py
+
+bench-quick: setup-bench
+	$(PY) scripts/bench_2d.py --quick
+
+check: setup
+	../shared/acceptance/check_public
+
+clean:
+	rm -rf .venv build *.egg-info

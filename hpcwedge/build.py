@@ -1,0 +1,143 @@
+"""Scene -> Model -> ContactProblem: the model stage and the raw-stiffness route.
+
+A `stiffness` scene gives the condensed, block-ordered local K directly (no
+model, no condensation); every other kind builds a Model and condenses it.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from . import exact as xq
+from .model import Model
+from .problem import ContactProblem
+from .scene import Scene, SceneError, array
+
+SYM_RTOL = 1e-10      # symmetry of a raw K, relative to max |K|
+PSD_RTOL = 1e-10      # lambda_min >= -PSD_RTOL * lambda_max
+SINGULAR_RTOL = 1e-10  # lambda_min <= SINGULAR_RTOL * lambda_max: numerically singular
+
+
+def build_model(scene: Scene) -> Model:
+    """The Model of a non-stiffness scene (ValueError from the models -> SceneError)."""
+    from .models import library, truss
+    try:
+        if scene.kind == "truss":
+            c = scene.contact
+            if "nodes" not in c or "normals" not in c:
+                raise SceneError("contact.nodes, contact.normals: required for a truss")
+            m = scene.model
+            for key in ("nodes", "bars"):
+                if key not in m:
+                    raise SceneError(f"model.{key}: required for a truss")
+            nodes = array(m["nodes"], "model.nodes", 2)
+            if nodes.shape[1] != scene.dim:
+                raise SceneError(f"model.nodes: {nodes.shape[1]} coordinates per node, scene dim = {scene.dim}")
+            return truss.truss_model(nodes, m["bars"], m.get("EA", 1.0), m.get("supports", []),
+                                     c["nodes"], c["normals"], c.get("tangents"))
+        return getattr(library, scene.kind)(**scene.model)
+    except SceneError:
+        raise
+    except (ValueError, TypeError, IndexError) as e:
+        raise SceneError(str(e).splitlines()[0]) from None
+
+
+def contact_problem(scene: Scene, model: Model | None = None) -> ContactProblem:
+    """ContactProblem of a scene: condensed from `model`, or the raw K of a stiffness scene."""
+    if scene.kind != "stiffness":
+        from .condense import condense
+        if model is None:
+            model = build_model(scene)
+        try:
+            K, N = condense(model)
+        except ValueError as e:
+            raise SceneError(f"model: {str(e).splitlines()[0]}") from None
+        return ContactProblem(scene.dim, K, N)
+    return raw_stiffness(scene)
+
+
+def raw_stiffness(scene: Scene) -> ContactProblem:
+    """Validate a raw block-ordered K (inline or file) and its null space (SPEC §3)."""
+    m = scene.model
+    for k in m:
+        if k not in ("K", "file", "null_space"):
+            raise SceneError(f"model.{k}: unknown key for kind stiffness (K, file, null_space)")
+    if ("K" in m) == ("file" in m):
+        raise SceneError("model.K / model.file: give exactly one")
+    N = None
+    if "file" in m:
+        K, N = _load_file(os.path.join(scene.base_dir, m["file"]), m["file"])
+    else:
+        K = array(m["K"], "model.K", 2)
+    if "null_space" in m:
+        if N is not None:
+            raise SceneError("model.null_space: given both inline and in model.file")
+        N = array(m["null_space"], "model.null_space")
+    n = K.shape[0]
+    if K.shape != (n, n) or n == 0:
+        raise SceneError(f"model.K: must be square, got shape {K.shape}")
+    if n % scene.dim:
+        raise SceneError(f"model.K: size {n} is not a multiple of dim = {scene.dim}")
+    scale = np.abs(K).max()
+    if scale == 0:
+        raise SceneError("model.K: all zero")
+    if np.abs(K - K.T).max() > SYM_RTOL * scale:
+        raise SceneError(f"model.K: not symmetric (max |K - K^T| = {np.abs(K - K.T).max():.3g})")
+    K = 0.5 * (K + K.T)
+    lam = np.linalg.eigvalsh(K)
+    if lam[0] < -PSD_RTOL * lam[-1]:
+        raise SceneError(f"model.K: indefinite (eigenvalue {lam[0]:.3g} < 0)")
+    if N is not None:
+        N = N.reshape(n, -1) if N.ndim == 1 else N
+        if N.shape[0] != n:
+            if N.shape[1] == n:
+                N = N.T
+            else:
+                raise SceneError(f"model.null_space: expected {n} rows (columns = rigid modes), got shape {N.shape}")
+        if np.linalg.matrix_rank(N) < N.shape[1]:
+            raise SceneError("model.null_space: columns are linearly dependent")
+        Q = np.linalg.qr(N)[0]
+        if np.abs(K @ Q).max() > 1e-8 * lam[-1]:
+            raise SceneError(f"model.null_space: K @ null_space is not zero (max {np.abs(K @ Q).max():.3g})")
+        lam_r = np.linalg.eigvalsh(K + lam[-1] * Q @ Q.T)
+        if lam_r[0] <= SINGULAR_RTOL * lam[-1]:
+            raise SceneError("model.null_space: K has more null directions than the given null_space")
+        return ContactProblem(scene.dim, K, Q)
+    if lam[0] > SINGULAR_RTOL * lam[-1]:
+        return ContactProblem(scene.dim, K, np.zeros((n, 0)))
+    # singular: unambiguous only when the null space is exact (rational rank deficit)
+    Kq = xq.to_q(K)
+    rank = Kq.rank()
+    if rank < n:
+        Z = xq.to_float(xq.nullspace(Kq))
+        return ContactProblem(scene.dim, K, np.linalg.qr(Z)[0])
+    raise SceneError(f"model.K: numerically singular (eigenvalue ratio {lam[0] / lam[-1]:.2e} "
+                     f"<= {SINGULAR_RTOL:g}) but of full rank in exact arithmetic: give model.null_space")
+
+
+def _load_file(path: str, key: str):
+    if not os.path.exists(path):
+        raise SceneError(f"model.file: {key} not found")
+    ext = os.path.splitext(path)[1].lower()
+    try:
+        if ext == ".npy":
+            return array(np.load(path, allow_pickle=False), "model.file", 2), None
+        if ext == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                if "K" not in z:
+                    raise SceneError(f"model.file: {key} has no array named K")
+                N = array(z["null_space"], "model.file null_space") if "null_space" in z else None
+                return array(z["K"], "model.file K", 2), N
+        if ext in (".h5", ".hdf5"):
+            import h5py
+            with h5py.File(path, "r") as f:
+                if "K" not in f:
+                    raise SceneError(f"model.file: {key} has no dataset K")
+                N = array(f["null_space"][()], "model.file null_space") if "null_space" in f else None
+                return array(f["K"][()], "model.file K", 2), N
+    except SceneError:
+        raise
+    except Exception as e:  # unreadable file of a known type
+        raise SceneError(f"model.file: cannot read {key} ({type(e).__name__})") from None
+    raise SceneError(f"model.file: {key}: unsupported file type (use .npy, .npz or .h5)")

@@ -1,0 +1,101 @@
+"""Command line (SPEC §4): hpcwedge run | show | plot."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="hpcwedge", description="Wedged configurations and critical friction "
+                                "coefficients of elastic bodies in frictional contact.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="solve a scene and write RESULT.h5")
+    r.add_argument("scene")
+    r.add_argument("-o", "--output", required=True)
+    r.add_argument("--resume", action="store_true", help="continue from the checkpoint beside the output")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    s = sub.add_parser("show", help="print a result")
+    s.add_argument("result")
+    s.add_argument("--json", action="store_true", help="one JSON object (SPEC §4)")
+    s.add_argument("--no-rays", action="store_true", help="leave the ray vectors out of the JSON")
+    pl = sub.add_parser("plot", help="draw a wedged configuration and the cones' mu^c")
+    pl.add_argument("result")
+    pl.add_argument("-o", "--output", required=True)
+    pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
+    pl.add_argument("--ray", type=int, default=0, help="wedged ray to draw")
+    args = p.parse_args(argv)
+    try:
+        return {"run": _run, "show": _show, "plot": _plot}[args.cmd](args)
+    except _UserError as e:
+        print(f"hpcwedge: error: {e}", file=sys.stderr)
+        return 2
+
+
+class _UserError(Exception):
+    pass
+
+
+def _run(args) -> int:
+    from .pipeline import run_scene
+    from .progress import Progress
+    from .results import write_result
+    from .scene import SceneError, load_scene
+    try:
+        scene = load_scene(args.scene)
+        result = run_scene(scene, Progress(quiet=args.quiet))
+    except SceneError as e:
+        raise _UserError(str(e)) from None
+    write_result(args.output, result)
+    if not args.quiet:
+        mu_c = "null" if result.mu_c is None else f"{result.mu_c:.12g}"
+        print(f"[hpcwedge] {scene.name}: mu_c = {mu_c}; wrote {args.output} "
+              f"({result.timings['total']:.2f} s)", file=sys.stderr)
+    return 0
+
+
+def _read(path: str, with_rays: bool = True) -> dict:
+    from .results import read_result
+    if not os.path.exists(path):
+        raise _UserError(f"{path}: no such file")
+    try:
+        return read_result(path, with_rays=with_rays)
+    except (OSError, KeyError) as e:
+        raise _UserError(f"{path}: not a hpcwedge result ({e})") from None
+
+
+def _show(args) -> int:
+    res = _read(args.result, with_rays=not args.no_rays)
+    if args.json:
+        print(json.dumps(res))
+        return 0
+    mu_c = "null" if res["mu_c"] is None else f"{res['mu_c']:.12g}"
+    print(f"{res['name']}: dim {res['dim']}, m {res['m']}, mu_c = {mu_c}"
+          + (f" ({res['mu_c_status']})" if res["mu_c_status"] else ""))
+    print(f"{'mu':>8} {'wedged':>8} {'trivial':>8} {'cones':>6} {'patterns':>9}")
+    for run in res["runs"]:
+        cells = [run[k] for k in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns")]
+        print(f"{run['mu']:8.4g} " + " ".join(f"{'-' if v is None else v:>{w}}"
+                                               for v, w in zip(cells, (8, 8, 6, 9))))
+        for j, cone in enumerate(run["cones"] or []):
+            mc = "-" if cone["mu_c"] is None else f"{cone['mu_c']:.12g}"
+            print(f"         cone {j}: {len(cone['rays'])} rays, zero_u {cone['zero_u']}, "
+                  f"zero_r {cone['zero_r']}, mu_c {mc}")
+    t = res["timings"]
+    print("timings: " + ", ".join(f"{k} {v:.3f} s" for k, v in t.items()))
+    return 0
+
+
+def _plot(args) -> int:
+    from .plot import plot_result
+    _read(args.result, with_rays=False)
+    try:
+        plot_result(args.result, args.output, run=args.run, ray=args.ray)
+    except ValueError as e:
+        raise _UserError(str(e)) from None
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

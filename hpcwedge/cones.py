@@ -1,0 +1,68 @@
+"""Cross-complementarity graph, its maximal cliques (the solution cones), zero sets.
+
+Rays enter as support masks over nodes: gap (u_n,i != 0) and load (r_n,i != 0).
+Two complementary rays are cross-complementary when gap(a) & load(b) and
+gap(b) & load(a) are empty. Rays with the same (gap, load) are twins (adjacent
+to each other, same neighbours), so cliques are found on the graph of distinct
+signatures and expanded back; networkx's find_cliques does the search.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Cone:
+    """rays: indices into the ray list (ascending); zero_u, zero_r: (m,) bool."""
+
+    rays: tuple[int, ...]
+    zero_u: np.ndarray
+    zero_r: np.ndarray
+
+    def key(self) -> tuple:
+        return (tuple(np.flatnonzero(self.zero_u)), tuple(np.flatnonzero(self.zero_r)))
+
+
+def cross_complementary(gap_a: np.ndarray, load_a: np.ndarray,
+                        gap_b: np.ndarray, load_b: np.ndarray) -> np.ndarray:
+    """(A, m) x (B, m) bool masks -> (A, B) bool: the pairwise cross-complementarity."""
+    ga, la = np.packbits(gap_a, axis=1), np.packbits(load_a, axis=1)
+    gb, lb = np.packbits(gap_b, axis=1), np.packbits(load_b, axis=1)
+    clash = (ga[:, None, :] & lb[None, :, :]) | (gb[None, :, :] & la[:, None, :])
+    return ~clash.any(axis=-1)
+
+
+def maximal_cones(gap: np.ndarray, load: np.ndarray, wedged: np.ndarray) -> list[Cone]:
+    """Maximal cliques of the cross-complementarity graph on the complementary rays
+    (gap, load: (R, m) bool; wedged: (R,) bool) that contain a wedged ray, with
+    their zero sets, in canonical order (sorted by (zero_u, zero_r) node lists)."""
+    R, m = gap.shape
+    if R == 0:
+        return []
+    sig = np.hstack([gap, load])
+    classes, inverse = np.unique(sig, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    cg, cl = classes[:, :m], classes[:, m:]
+    adj = cross_complementary(cg, cl, cg, cl)
+    G = nx.Graph()
+    G.add_nodes_from(range(len(classes)))
+    ii, jj = np.nonzero(np.triu(adj, 1))
+    G.add_edges_from(zip(ii.tolist(), jj.tolist()))
+    has_wedged = np.zeros(len(classes), dtype=bool)
+    has_wedged[inverse[wedged]] = True
+    members = [[] for _ in range(len(classes))]
+    for r, c in enumerate(inverse):
+        members[c].append(r)
+    cones = []
+    for clique in nx.find_cliques(G):
+        if not has_wedged[clique].any():
+            continue
+        rays = tuple(sorted(r for c in clique for r in members[c]))
+        zero_u = ~cg[clique].any(axis=0)
+        zero_r = ~cl[clique].any(axis=0)
+        cones.append(Cone(rays=rays, zero_u=zero_u, zero_r=zero_r))
+    cones.sort(key=Cone.key)
+    return cones

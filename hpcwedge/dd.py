@@ -1,0 +1,245 @@
+"""Complementarity-pruned double description (float and exact rational).
+
+Input: node-wise constraint rows A (3m x d) of a pointed cone P = {x : A x >= 0}
+(row 3i: u_n,i; rows 3i+1, 3i+2: the two friction edges; see problem.py).
+Output: every extreme ray of P that is complementary (u_n,i = 0 or r_n,i = 0 at
+every node), with its zero set.
+
+Pruning. Once the three rows of node i are in, a ray with u_n,i > 0 and
+r_n,i > 0 is dropped: every complementary extreme ray of the final cone lies on
+a face {u_n,i = 0} or {r_n,i = 0} of each intermediate cone, and a DD
+combination lies on a face only if both parents do. Pairs are combined only if
+at every finished node they share a face (so the child can be complementary).
+
+Adjacency (exact after pruning). For such a pair (p, q) every ray r whose zero
+set contains Z(p) & Z(q) shares those faces, so r is complementary at every
+finished node and was *not* pruned. The combinatorial test "no third ray's zero
+set contains Z(p) & Z(q)" is therefore run against a set that still holds every
+possible witness, and stays exact. (Pairs that share no face would not be exact
+this way; they are never tested.) tests/test_dd.py checks it against an
+unpruned run and against brute force.
+
+Zero sets are bitsets: node i's three rows occupy bits 3*(i % 21) + kind of
+uint64 word i // 21, so each node's test stays inside one word.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from . import exact as xq
+from .problem import F_MINUS, F_PLUS, U_N
+
+NODES_PER_WORD = 21
+FLOAT_ZERO_TOL = 1e-10   # on unit-norm rows and unit-norm rays
+
+
+@dataclass
+class DDResult:
+    """Rays X (R x d; float, or object ints when exact) and their zero flags
+    zero (R x 3m bool) on the constraint rows; stats: counters and timings."""
+
+    X: np.ndarray
+    zero: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    def zero_u(self) -> np.ndarray:
+        """(R, m) bool: u_n,i = 0."""
+        return self.zero[:, U_N::3]
+
+    def zero_r(self) -> np.ndarray:
+        """(R, m) bool: r_n,i = 0 (both friction edges tight)."""
+        return self.zero[:, F_PLUS::3] & self.zero[:, F_MINUS::3]
+
+    def wedged(self) -> np.ndarray:
+        """(R,) bool: r != 0 (not a rigid lift-off)."""
+        return ~self.zero_r().all(axis=1)
+
+
+class _Bits:
+    """Bit layout of zero sets and node masks."""
+
+    def __init__(self, m: int):
+        self.m = m
+        self.W = max(1, -(-m // NODES_PER_WORD))
+        self.node_mask = np.zeros(self.W, dtype=np.uint64)   # bits 3j of every node slot used
+        for i in range(m):
+            w, b = divmod(i, NODES_PER_WORD)
+            self.node_mask[w] |= np.uint64(1) << np.uint64(3 * b)
+
+    def pos(self, c: int) -> tuple[int, np.uint64]:
+        i, kind = divmod(c, 3)
+        w, b = divmod(i, NODES_PER_WORD)
+        return w, np.uint64(1) << np.uint64(3 * b + kind)
+
+    def pack(self, zero: np.ndarray) -> np.ndarray:
+        """(R, 3m) bool -> (R, W) uint64."""
+        Z = np.zeros((zero.shape[0], self.W), dtype=np.uint64)
+        for c in range(zero.shape[1]):
+            w, bit = self.pos(c)
+            Z[zero[:, c], w] |= bit
+        return Z
+
+    def unpack(self, Z: np.ndarray) -> np.ndarray:
+        out = np.zeros((Z.shape[0], 3 * self.m), dtype=bool)
+        for c in range(3 * self.m):
+            w, bit = self.pos(c)
+            out[:, c] = (Z[:, w] & bit) != 0
+        return out
+
+    def complementary_at(self, Z: np.ndarray, done: np.ndarray) -> np.ndarray:
+        """(..., W) zero words -> (...) bool: at every node in `done` (W words of
+        bits 3j) u_n = 0 or both friction rows tight."""
+        one, two = np.uint64(1), np.uint64(2)
+        ok = (Z | ((Z >> one) & (Z >> two))) & done
+        return np.all(ok == done, axis=-1)
+
+
+def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
+                       order: list[int] | None = None,
+                       progress: Callable[[dict], None] | None = None) -> DDResult:
+    """All complementary extreme rays of {x : A x >= 0} (pointed, rank d).
+
+    A: (3m, d) node-wise rows (float unit rows, or exact integer object rows).
+    order: node order in which the u_n rows are added (default 0..m-1).
+    progress: called after every constraint with {"done", "total", "rays", "elapsed"}.
+    """
+    t0 = time.perf_counter()
+    nc, d = A.shape
+    bits = _Bits(m)
+    order = list(range(m)) if order is None else list(order)
+    basis = _initial_basis(A, m, order, exact)
+    X = _initial_rays(A[basis], exact)
+    R0 = X.shape[0]
+    zero = np.zeros((R0, nc), dtype=bool)
+    for j, c in enumerate(basis):
+        zero[:, c] = True
+        zero[j, c] = False
+    Z = bits.pack(zero)
+    added = set(basis)
+    done = np.zeros(bits.W, dtype=np.uint64)
+    for i in range(m):
+        if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
+            w, b = divmod(i, NODES_PER_WORD)
+            done[w] |= np.uint64(1) << np.uint64(3 * b)
+    keep = bits.complementary_at(Z, done)
+    X, Z = X[keep], Z[keep]
+    rest = [3 * i + U_N for i in order if 3 * i + U_N not in added]
+    rest += [c for c in range(nc) if c not in added and c not in rest]
+    stats = {"initial_rays": int(X.shape[0]), "pairs_tested": 0, "pairs_adjacent": 0,
+             "max_rays": int(X.shape[0])}
+    total = len(rest)
+    for step, h in enumerate(rest, 1):
+        X, Z = _add_constraint(A[h], h, X, Z, done, d, bits, exact, stats)
+        added.add(h)
+        i = h // 3
+        if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
+            w, b = divmod(i, NODES_PER_WORD)
+            done[w] |= np.uint64(1) << np.uint64(3 * b)
+            keep = bits.complementary_at(Z, done)
+            X, Z = X[keep], Z[keep]
+        stats["max_rays"] = max(stats["max_rays"], int(X.shape[0]))
+        if progress is not None:
+            progress({"done": step, "total": total, "rays": int(X.shape[0]),
+                      "elapsed": time.perf_counter() - t0})
+    stats["seconds"] = time.perf_counter() - t0
+    return DDResult(X=X, zero=bits.unpack(Z), stats=stats)
+
+
+def _initial_basis(A, m, order, exact) -> list[int]:
+    """d independent rows: friction rows first, then u_n rows, nodes in `order`."""
+    cand = [3 * i + k for i in order for k in (F_PLUS, F_MINUS)] + [3 * i + U_N for i in order]
+    d = A.shape[1]
+    chosen: list[int] = []
+    if exact:
+        rank = 0
+        for c in cand:
+            M = xq.to_q(np.array([[int(v) for v in A[r]] for r in chosen + [c]], dtype=object))
+            if M.rank() > rank:
+                chosen.append(c)
+                rank += 1
+                if rank == d:
+                    break
+    else:
+        Q = np.zeros((0, d))
+        for c in cand:
+            v = A[c] - Q.T @ (Q @ A[c])
+            nv = np.linalg.norm(v)
+            if nv > 1e-9:
+                chosen.append(c)
+                Q = np.vstack([Q, v / nv])
+                if len(chosen) == d:
+                    break
+    if len(chosen) < d:
+        raise ValueError(f"the cone is not pointed: constraint rank {len(chosen)} < {d}")
+    return chosen
+
+
+def _initial_rays(AS, exact) -> np.ndarray:
+    """Rays of the simplicial cone {x : AS x >= 0}: the columns of AS^-1 (as rows)."""
+    if exact:
+        inv = xq.to_q(np.array([[int(v) for v in row] for row in AS], dtype=object)).inv()
+        return xq.integer_rows(inv.transpose())
+    X = np.linalg.inv(AS).T
+    return X / np.linalg.norm(X, axis=1, keepdims=True)
+
+
+def _add_constraint(a, h, X, Z, done, d, bits, exact, stats):
+    """One DD step with complementarity-restricted, exactly tested adjacency."""
+    s = X.dot(a)
+    if exact:
+        pos = np.array([v > 0 for v in s], dtype=bool)
+        neg = np.array([v < 0 for v in s], dtype=bool)
+    else:
+        pos, neg = s > FLOAT_ZERO_TOL, s < -FLOAT_ZERO_TOL
+    zer = ~(pos | neg)
+    P, M = np.flatnonzero(pos), np.flatnonzero(neg)
+    w, bit = bits.pos(h)
+    pi, qi = _adjacent_pairs(P, M, Z, done, d, bits, stats)
+    Zn = Z[pi] & Z[qi]
+    Zn[:, w] |= bit
+    if exact:
+        Xn = np.empty((len(pi), X.shape[1]), dtype=object)
+        for k, (p, q) in enumerate(zip(pi, qi)):
+            Xn[k] = xq.primitive(s[p] * X[q] - s[q] * X[p])
+    else:
+        Xn = s[pi, None] * X[qi] - s[qi, None] * X[pi]
+        Xn /= np.linalg.norm(Xn, axis=1, keepdims=True)
+    Zz = Z[zer].copy()
+    Zz[:, w] |= bit
+    return np.concatenate([X[pos], X[zer], Xn]), np.concatenate([Z[pos], Zz, Zn])
+
+
+def _adjacent_pairs(P, M, Z, done, d, bits, stats):
+    """Pairs (p in P, q in M) that share a face at every finished node, have
+    |Z(p) & Z(q)| >= d - 2, and pass the combinatorial adjacency test."""
+    if len(P) == 0 or len(M) == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    ZP = Z[P]
+    chunk = max(1, (1 << 20) // max(1, len(P)))
+    out_p, out_q = [], []
+    for a in range(0, len(M), chunk):
+        q = M[a:a + chunk]
+        common = ZP[None, :, :] & Z[q][:, None, :]            # (cq, |P|, W)
+        cnt = np.bitwise_count(common).sum(axis=-1, dtype=np.int64)
+        ok = cnt >= d - 2
+        ok &= bits.complementary_at(common, done)
+        qq, pp = np.nonzero(ok)
+        out_p.append(P[pp])
+        out_q.append(q[qq])
+    pi, qi = np.concatenate(out_p), np.concatenate(out_q)
+    stats["pairs_tested"] += len(pi)
+    if len(pi) == 0:
+        return pi, qi
+    keep = np.zeros(len(pi), dtype=bool)
+    R = Z.shape[0]
+    chunk = max(1, (1 << 22) // max(1, R * Z.shape[1]))
+    for a in range(0, len(pi), chunk):
+        Zc = Z[pi[a:a + chunk]] & Z[qi[a:a + chunk]]          # (c, W)
+        contains = np.all((Z[None, :, :] & Zc[:, None, :]) == Zc[:, None, :], axis=-1)
+        keep[a:a + chunk] = contains.sum(axis=1) == 2
+    stats["pairs_adjacent"] += int(keep.sum())
+    return pi[keep], qi[keep]

@@ -1,0 +1,182 @@
+"""ContactProblem: the condensed contact stiffness, its rigid modes, and the
+one place that states the constraints every engine uses.
+
+Local block ordering (SPEC §1): 2D [n_1..n_m, t_1..t_m], 3D [n.., t1.., t2..].
+
+Rigid modes are handled exactly (SPEC §1): with N the rigid modes, every
+solution is u = F r + N alpha, N^T r = 0, F the pseudo-inverse of K on
+range(K) = N^perp. We parametrise
+
+    r = B y,  u = F B y + N W beta,   x = (y, beta) in R^d,
+
+with B a basis of N^perp and W a basis of range(N_n^T) (alpha is taken
+orthogonal to ker N_n: the rigid slides with u_n = 0 and r = 0 — the
+lineality — are factored out). F B comes from the bordered system
+[K N; N^T 0][X; L] = [B; 0], which never asks rounding to decide a null space.
+For a supported body (k = 0): x = r, u = K^-1 r.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from . import exact as xq
+
+#: constraint kinds inside a node, in the node-wise constraint numbering 3*i + kind
+U_N, F_PLUS, F_MINUS = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class ContactProblem:
+    """Condensed, block-ordered local stiffness K (n x n, n = dim*m, symmetric PSD)
+    and rigid modes N (n x k, k = 0 for a supported body)."""
+
+    dim: int
+    K: np.ndarray
+    N: np.ndarray
+
+    @property
+    def m(self) -> int:
+        return self.K.shape[0] // self.dim
+
+    @property
+    def n(self) -> int:
+        return self.K.shape[0]
+
+    @property
+    def free(self) -> bool:
+        return self.N.shape[1] > 0
+
+
+@dataclass(frozen=True)
+class Parametrization:
+    """u = U x, r = R x for x in R^d (lineality factored out).
+
+    U, R: float (n x d) arrays; Uq, Rq: exact flint.fmpq_mat copies when exact.
+    n_alpha: number of trailing x coordinates that are rigid-mode amplitudes (beta).
+    """
+
+    U: np.ndarray
+    R: np.ndarray
+    n_alpha: int
+    Uq: object = None
+    Rq: object = None
+
+    @property
+    def d(self) -> int:
+        return self.U.shape[1]
+
+    @property
+    def exact(self) -> bool:
+        return self.Uq is not None
+
+
+def lineality_rows(N: np.ndarray, m: int, rtol: float = 1e-9) -> list[int]:
+    """Rows of N_n = N[:m] forming a basis of its row space (pivoted QR).
+
+    The same choice serves the float and the exact route, so both factor out
+    the same lineality. rtol is relative to the largest |R_jj| (geometry O(1)).
+    """
+    Nn = N[:m]
+    if Nn.size == 0:
+        return []
+    _, Rr, piv = sla.qr(Nn.T, pivoting=True, mode="economic")
+    diag = np.abs(np.diag(Rr))
+    if diag.size == 0 or diag[0] == 0:
+        return []
+    rank = int(np.sum(diag > rtol * diag[0]))
+    return sorted(piv[:rank].tolist())
+
+
+def parametrize(problem: ContactProblem, exact: bool = False) -> Parametrization:
+    """The (y, beta) parametrisation of SPEC §1 (see module docstring)."""
+    K, N, m = problem.K, problem.N, problem.m
+    n, k = K.shape[0], N.shape[1]
+    rows = lineality_rows(N, m) if k else []
+    if not exact:
+        if k == 0:
+            return Parametrization(U=np.linalg.inv(K), R=np.eye(n), n_alpha=0)
+        Qn, _ = np.linalg.qr(N)
+        B = sla.null_space(Qn.T)                      # orthonormal basis of N^perp
+        FB = np.linalg.solve(_bordered(K, Qn), np.vstack([B, np.zeros((k, B.shape[1]))]))[:n]
+        W = N[rows].T
+        U = np.hstack([FB, N @ W])
+        R = np.hstack([B, np.zeros((n, len(rows)))])
+        return Parametrization(U=U, R=R, n_alpha=len(rows))
+    Kq = xq.to_q(K)
+    if k == 0:
+        Uq = Kq.inv()
+        Rq = xq.to_q(np.eye(n))
+        return Parametrization(U=xq.to_float(Uq), R=np.eye(n), n_alpha=0, Uq=Uq, Rq=Rq)
+    Nq = xq.to_q(N)
+    B = xq.nullspace(Nq.transpose())
+    rhs = xq.to_q(np.zeros((n + k, B.ncols())))
+    for i in range(n):
+        for j in range(B.ncols()):
+            rhs[i, j] = B[i, j]
+    FB = xq.take_rows(xq.to_q(_bordered(K, N)).solve(rhs), range(n))
+    W = xq.take_rows(Nq, rows).transpose()
+    Uq = xq.hstack(FB, Nq * W)
+    Rq = xq.hstack(B, xq.to_q(np.zeros((n, len(rows)))))
+    return Parametrization(U=xq.to_float(Uq), R=xq.to_float(Rq), n_alpha=len(rows), Uq=Uq, Rq=Rq)
+
+
+def _bordered(K: np.ndarray, N: np.ndarray) -> np.ndarray:
+    k = N.shape[1]
+    return np.block([[K, N], [N.T, np.zeros((k, k))]])
+
+
+def friction_rows_2d(param: Parametrization, mu: float, m: int, exact: bool = False):
+    """Node-wise constraint rows of the 2D cone P(mu) = {x : A x >= 0}.
+
+    Row 3*i + U_N: u_n,i;  3*i + F_PLUS: mu r_n,i + r_t,i;  3*i + F_MINUS: mu r_n,i - r_t,i.
+    (r_n >= 0 follows from the two friction rows.) Float rows are scaled to unit
+    norm; exact rows are primitive integer vectors (object array), same directions.
+    """
+    if not exact:
+        U, R = param.U, param.R
+        A = np.empty((3 * m, param.d))
+        A[U_N::3] = U[:m]
+        A[F_PLUS::3] = mu * R[:m] + R[m:2 * m]
+        A[F_MINUS::3] = mu * R[:m] - R[m:2 * m]
+        return A / np.linalg.norm(A, axis=1, keepdims=True)
+    U, R, muq = param.Uq, param.Rq, xq.q_scalar(mu)
+    A = xq.to_q(np.zeros((3 * m, param.d)))
+    for i in range(m):
+        for j in range(param.d):
+            A[3 * i + U_N, j] = U[i, j]
+            A[3 * i + F_PLUS, j] = muq * R[i, j] + R[m + i, j]
+            A[3 * i + F_MINUS, j] = muq * R[i, j] - R[m + i, j]
+    return xq.integer_rows(A)
+
+
+def ray_vectors(param: Parametrization, X: np.ndarray, m: int,
+                wedged: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Map rays x (rows of X, float or exact ints) to full local (u, r) vectors.
+
+    wedged: (R,) bool, r != 0 (decided combinatorially by the zero sets).
+    Returns (wedged, V (R, 2n)) with V rows [u..., r...] normalised to sum(r_n) = 1
+    for wedged rays and to sum(u_n) = 1 for trivial ones (r set to exact zero).
+    Exact rays are mapped and normalised in rational arithmetic, rounded once.
+    """
+    n = param.U.shape[0]
+    if X.dtype == object:
+        out = np.zeros((len(X), 2 * n))
+        if len(X) == 0:
+            return wedged, out
+        Xq = xq.to_q(np.array([[int(v) for v in row] for row in X], dtype=object).T)
+        Uq, Rq = param.Uq * Xq, param.Rq * Xq
+        for c in range(len(X)):
+            src = Rq if wedged[c] else Uq
+            s = src[0, c]
+            for i in range(1, m):
+                s += src[i, c]
+            col = [Uq[i, c] / s for i in range(n)] + [Rq[i, c] / s for i in range(n)]
+            out[c] = [int(v.p) / int(v.q) for v in col]
+        return wedged, out
+    u, r = X @ param.U.T, X @ param.R.T
+    r[~wedged] = 0.0
+    s = np.where(wedged, r[:, :m].sum(1), u[:, :m].sum(1))
+    return wedged, np.hstack([u, r]) / s[:, None]

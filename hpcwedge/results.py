@@ -1,0 +1,120 @@
+"""Result files (SPEC §4): HDF5 layout, atomic writes, and the JSON of `show`.
+
+Layout of RESULT.h5
+    /                attrs: name, dim, m, complete, mu_c (NaN = null), mu_c_status,
+                     version, scene_hash, stages (JSON), timings (JSON), stats (JSON)
+    /scene_text      the scene file, verbatim
+    /model/          coords, contact_nodes, normals, cells_<kind> (when a model was built)
+    /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
+                     (an attribute absent = null); datasets rays, trivial_rays,
+                     ray_zero, cones_json (JSON list), patterns_json
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+
+import h5py
+import numpy as np
+
+from . import __version__
+
+
+def write_atomic(path: str, fill) -> None:
+    """Write an HDF5 file through `fill(h5file)`: temp file in the same folder,
+    flush + fsync, then os.replace, so a crash never leaves a half-written file."""
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=folder)
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w") as f:
+            fill(f)
+            f.flush()
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_result(path: str, result) -> None:
+    """Store a pipeline.Result (see module doc)."""
+
+    def fill(f):
+        s = result.scene
+        f.attrs.update({"name": s.name, "dim": s.dim, "m": result.m, "complete": result.complete,
+                        "mu_c": np.nan if result.mu_c is None else result.mu_c,
+                        "mu_c_status": result.mu_c_status or "",
+                        "version": __version__, "scene_hash": s.hash,
+                        "stages": json.dumps(result.stages), "timings": json.dumps(result.timings),
+                        "stats": json.dumps(result.stats, default=_plain)})
+        f.create_dataset("scene_text", data=s.text)
+        if result.model is not None:
+            g = f.create_group("model")
+            mdl = result.model
+            g["coords"], g["contact_nodes"], g["normals"] = mdl.coords, mdl.contact_nodes, mdl.normals
+            for kind, cells in mdl.cells.items():
+                g[f"cells_{kind}"] = np.asarray(cells)
+        runs = f.create_group("runs")
+        for k, run in enumerate(result.runs):
+            g = runs.create_group(f"{k:03d}")
+            g.attrs["mu"] = run.mu
+            for name in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns"):
+                v = getattr(run, name)
+                if v is not None:
+                    g.attrs[name] = v
+            for name in ("rays", "trivial_rays", "ray_zero"):
+                v = getattr(run, name)
+                if v is not None:
+                    g.create_dataset(name, data=v, compression="gzip" if v.size > 4096 else None)
+            if run.cones is not None:
+                g.create_dataset("cones_json", data=json.dumps(run.cones, default=_plain))
+            if run.patterns is not None:
+                g.create_dataset("patterns_json", data=json.dumps(run.patterns, default=_plain))
+
+    write_atomic(path, fill)
+
+
+def read_result(path: str, with_rays: bool = True) -> dict:
+    """The `show --json` object of a result file (SPEC §4)."""
+    with h5py.File(path, "r") as f:
+        a = f.attrs
+        mu_c = float(a["mu_c"])
+        out = {"name": str(a["name"]), "dim": int(a["dim"]), "m": int(a["m"]),
+               "complete": bool(a["complete"]),
+               "mu_c": None if math.isnan(mu_c) else mu_c,
+               "mu_c_status": str(a["mu_c_status"]) or None,
+               "runs": [], "timings": json.loads(a["timings"]),
+               "stages": json.loads(a["stages"]), "stats": json.loads(a["stats"]),
+               "version": str(a["version"]), "scene_hash": str(a["scene_hash"])}
+        for k in sorted(f["runs"]):
+            g = f["runs"][k]
+            run = {"mu": float(g.attrs["mu"])}
+            for name in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns"):
+                run[name] = int(g.attrs[name]) if name in g.attrs else None
+            for name in ("rays", "trivial_rays"):
+                run[name] = g[name][()].tolist() if (name in g and with_rays) else None
+            run["cones"] = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
+            run["patterns"] = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
+            out["runs"].append(run)
+    return out
+
+
+def _text(ds) -> str:
+    v = ds[()]
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _plain(o):
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.floating):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o))

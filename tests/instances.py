@@ -1,0 +1,35 @@
+"""Random small contact problems for the tests (supported and free bodies)."""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from hpcwedge.problem import ContactProblem
+
+
+def rigid_modes_local(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """2D rigid modes (x, y translation, rotation) of contact points, block-ordered local."""
+    m = len(points)
+    tang = np.stack([normals[:, 1], -normals[:, 0]], axis=1)
+    modes = [np.tile([1.0, 0.0], (m, 1)), np.tile([0.0, 1.0], (m, 1)),
+             np.stack([-points[:, 1], points[:, 0]], axis=1)]
+    return np.stack([np.concatenate([(v * normals).sum(1), (v * tang).sum(1)]) for v in modes], axis=1)
+
+
+def random_problem(rng: np.random.Generator, m: int, free: bool) -> ContactProblem:
+    """A random 2D problem: supported (K SPD) or free (K PSD, null space = rigid modes
+    of random contact points and normals pointing roughly upward into the body)."""
+    n = 2 * m
+    if not free:
+        G = rng.standard_normal((n, n))
+        return ContactProblem(2, G @ G.T + 0.2 * np.eye(n), np.zeros((n, 0)))
+    pts = rng.uniform(-1, 1, size=(m, 2))
+    ang = rng.uniform(0.2, np.pi - 0.2, size=m)
+    nrm = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    N = np.linalg.qr(rigid_modes_local(pts, nrm))[0]
+    k = np.linalg.matrix_rank(N)
+    N = N[:, :k]
+    B = sla.null_space(N.T)
+    G = rng.standard_normal((B.shape[1], B.shape[1]))
+    K = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
+    return ContactProblem(2, 0.5 * (K + K.T), N)

@@ -1,0 +1,104 @@
+"""Complementarity-pruned DD against exact arithmetic, an unpruned brute force, and
+an LP per sign pattern, on random supported and free bodies."""
+import itertools
+
+import numpy as np
+import pytest
+
+from hpcwedge.conic import FEASIBLE, INFEASIBLE, lp_feasible, pattern_rows
+from hpcwedge.dd import complementary_rays
+from hpcwedge.problem import friction_rows_2d, parametrize
+from instances import random_problem
+
+
+def brute_force_rays(A: np.ndarray) -> set:
+    """Zero sets of all extreme rays of {A x >= 0}: every d-1 row subset of rank
+    d-1, its null vector (either sign) if feasible; then the complementarity filter."""
+    nc, d = A.shape
+    found = set()
+    for S in itertools.combinations(range(nc), d - 1):
+        _, s, vt = np.linalg.svd(A[list(S)])
+        if s[-1] < 1e-9 * s[0]:
+            continue
+        for y in (vt[-1], -vt[-1]):
+            v = A @ y
+            if np.all(v >= -1e-9):
+                found.add(tuple(np.abs(v) <= 1e-9))
+    return {z for z in found
+            if all(z[3 * i] or (z[3 * i + 1] and z[3 * i + 2]) for i in range(nc // 3))}
+
+
+def patterns_from_rays(zero: np.ndarray, m: int) -> set:
+    """(C, G) is feasible iff a wedged ray has supp(r_n) in C and supp(u_n) in G."""
+    out = set()
+    for z in zero:
+        zu, zr = z[0::3], z[1::3] & z[2::3]
+        if zr.all():
+            continue
+        free = [i for i in range(m) if zu[i] and zr[i]]
+        for bits in itertools.product((0, 1), repeat=len(free)):
+            contact = set(np.flatnonzero(~zr)) | {i for i, b in zip(free, bits) if b}
+            out.add(tuple(sorted(contact)))
+    return out
+
+
+CASES = [(seed, m, free) for seed in range(40) for m, free in
+         [(1, False), (2, False), (2, True), (3, False), (3, True)]]
+
+
+@pytest.mark.parametrize("seed,m,free", CASES)
+def test_float_exact_bruteforce_agree(seed, m, free):
+    rng = np.random.default_rng(1000 * seed + 10 * m + free)
+    prob = random_problem(rng, m, free)
+    mu = float(rng.uniform(0.2, 1.5))
+    pf, pe = parametrize(prob), parametrize(prob, exact=True)
+    rf = complementary_rays(friction_rows_2d(pf, mu, m), m)
+    re = complementary_rays(friction_rows_2d(pe, mu, m, exact=True), m, exact=True)
+    zf, ze = set(map(tuple, rf.zero)), set(map(tuple, re.zero))
+    assert len(zf) == len(rf.zero) and len(ze) == len(re.zero)      # no duplicates
+    assert zf == ze
+    assert zf == brute_force_rays(friction_rows_2d(pf, mu, m))
+    # the float rays really are rays of the cone with those zero sets
+    A = friction_rows_2d(pf, mu, m)
+    V = rf.X @ A.T
+    assert np.all(V >= -1e-9)
+    assert np.array_equal(np.abs(V) <= 1e-9, rf.zero)
+
+
+@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize("m,free", [(4, False), (4, True), (5, True)])
+def test_patterns_lp_per_pattern(seed, m, free):
+    """Patterns implied by the rays = patterns with a feasible LP (one per partition)."""
+    rng = np.random.default_rng(77 + 1000 * seed + 10 * m + free)
+    prob = random_problem(rng, m, free)
+    mu = float(rng.uniform(0.3, 1.5))
+    p = parametrize(prob)
+    dd = complementary_rays(friction_rows_2d(p, mu, m), m)
+    lp = set()
+    for bits in itertools.product((False, True), repeat=m):
+        zu = np.array(bits)
+        status, _ = lp_feasible(pattern_rows(p, m, zu, ~zu), mu)
+        assert status in (FEASIBLE, INFEASIBLE)
+        if status == FEASIBLE:
+            lp.add(tuple(np.flatnonzero(zu)))
+    assert patterns_from_rays(dd.zero, m) == lp
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_exact_m6(seed):
+    rng = np.random.default_rng(5 + seed)
+    prob = random_problem(rng, 6, free=bool(seed % 2))
+    pf, pe = parametrize(prob), parametrize(prob, exact=True)
+    rf = complementary_rays(friction_rows_2d(pf, 0.8, 6), 6)
+    re = complementary_rays(friction_rows_2d(pe, 0.8, 6, exact=True), 6, exact=True)
+    assert set(map(tuple, rf.zero)) == set(map(tuple, re.zero))
+
+
+def test_pruned_equals_unpruned_filtered():
+    """Pruning loses nothing: compare with the full DD of all extreme rays
+    (brute force) filtered for complementarity on a free m = 4 body."""
+    rng = np.random.default_rng(3)
+    prob = random_problem(rng, 4, free=True)
+    p = parametrize(prob)
+    A = friction_rows_2d(p, 0.9, 4)
+    assert set(map(tuple, complementary_rays(A, 4).zero)) == brute_force_rays(A)
