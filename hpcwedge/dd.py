@@ -90,6 +90,12 @@ class _Bits:
             out[:, c] = (Z[:, w] & bit) != 0
         return out
 
+    def faces(self, Z: np.ndarray, done: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(R, W) zero words -> (u, r) words with bit 3j set where finished node j has
+        u_n = 0 (u) or r_n = 0 (r)."""
+        one, two = np.uint64(1), np.uint64(2)
+        return Z & done, (Z >> one) & (Z >> two) & done
+
     def complementary_at(self, Z: np.ndarray, done: np.ndarray) -> np.ndarray:
         """(..., W) zero words -> (...) bool: at every node in `done` (W words of
         bits 3j) u_n = 0 or both friction rows tight."""
@@ -215,31 +221,107 @@ def _add_constraint(a, h, X, Z, done, d, bits, exact, stats):
 
 def _adjacent_pairs(P, M, Z, done, d, bits, stats):
     """Pairs (p in P, q in M) that share a face at every finished node, have
-    |Z(p) & Z(q)| >= d - 2, and pass the combinatorial adjacency test."""
+    |Z(p) & Z(q)| >= d - 2, and are adjacent (combinatorial test, exact).
+
+    Simple rays (exactly d-1 zeros) are joined by hashing: for simple p and q,
+    Z(p) & Z(q) has d-2 elements and equals Z(p) minus one bit and Z(q) minus
+    one bit, and every simple witness has that set among its own "keys"
+    (its zero set minus one bit). So (p, q) is adjacent iff its key occurs once
+    among the keys of P, once among those of M, never among the other rays'
+    keys, and no degenerate ray (more than d-1 zeros) contains it. Pairs with a
+    degenerate ray are searched by brute force (they are few).
+    """
+    empty = np.zeros(0, dtype=np.intp)
     if len(P) == 0 or len(M) == 0:
-        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        return empty, empty
+    R = Z.shape[0]
+    simple = np.bitwise_count(Z).sum(axis=1, dtype=np.int64) == d - 1
+    sign = np.zeros(R, dtype=np.int8)
+    sign[P], sign[M] = 1, -1
+    deg = np.flatnonzero(~simple)
+    out_p, out_q = [], []
+    # simple x simple: hash join on keys
+    kp, rp = _keys(Z, P[simple[P]])
+    km, rm = _keys(Z, M[simple[M]])
+    ko, _ = _keys(Z, np.flatnonzero(simple & (sign == 0)))
+    up, ip, cp = np.unique(kp, return_index=True, return_counts=True)
+    um, im, cm = np.unique(km, return_index=True, return_counts=True)
+    both, a, b = np.intersect1d(up, um, assume_unique=True, return_indices=True)
+    ok = (cp[a] == 1) & (cm[b] == 1) & ~np.isin(both, ko)
+    pi, qi = rp[ip[a[ok]]], rm[im[b[ok]]]
+    stats["pairs_tested"] += len(pi)
+    if len(pi):
+        Zc = Z[pi] & Z[qi]
+        good = bits.complementary_at(Zc, done)
+        if len(deg):
+            Zd = Z[deg]
+            for c0 in range(0, len(pi), 4096):
+                zc = Zc[c0:c0 + 4096]
+                hit = np.all((Zd[None, :, :] & zc[:, None, :]) == zc[:, None, :], axis=-1).any(axis=1)
+                good[c0:c0 + 4096] &= ~hit
+        stats["pairs_adjacent"] += int(good.sum())
+        out_p.append(pi[good])
+        out_q.append(qi[good])
+    # pairs with a degenerate ray: brute force, witnesses among all rays
+    dp, dm = P[~simple[P]], M[~simple[M]]
+    for a_, b_ in ((dp, M), (P[simple[P]], dm)):
+        if len(a_) and len(b_):
+            pi, qi = _candidates(a_, b_, Z, done, d, bits)
+            pi, qi = _adjacent(pi, qi, Z, Z, stats)
+            out_p.append(pi)
+            out_q.append(qi)
+    if not out_p:
+        return empty, empty
+    return np.concatenate(out_p), np.concatenate(out_q)
+
+
+def _keys(Z, rows):
+    """Keys of simple rays: each zero set with one bit removed, as comparable
+    scalars; returns (keys, ray index of each key)."""
+    if len(rows) == 0:
+        return _as_key(np.zeros((0, Z.shape[1]), dtype=np.uint64)), np.zeros(0, dtype=np.intp)
+    Zr = Z[rows]
+    bitmat = np.unpackbits(Zr.view(np.uint8), axis=1, bitorder="little")   # (n, 64W)
+    r, pos = np.nonzero(bitmat)
+    K = Zr[r]
+    K[np.arange(len(r)), pos >> 6] ^= np.left_shift(np.uint64(1), (pos & 63).astype(np.uint64))
+    return _as_key(K), rows[r]
+
+
+def _as_key(K):
+    if K.shape[1] == 1:
+        return K[:, 0].copy()
+    K = np.ascontiguousarray(K)
+    return K.view(np.dtype((np.void, 8 * K.shape[1]))).ravel()
+
+
+def _candidates(P, M, Z, done, d, bits):
+    """All (p, q) in P x M with a shared face at finished nodes and |Z(p) & Z(q)| >= d-2."""
     ZP = Z[P]
     chunk = max(1, (1 << 20) // max(1, len(P)))
     out_p, out_q = [], []
     for a in range(0, len(M), chunk):
         q = M[a:a + chunk]
         common = ZP[None, :, :] & Z[q][:, None, :]            # (cq, |P|, W)
-        cnt = np.bitwise_count(common).sum(axis=-1, dtype=np.int64)
-        ok = cnt >= d - 2
+        ok = np.bitwise_count(common).sum(axis=-1, dtype=np.int64) >= d - 2
         ok &= bits.complementary_at(common, done)
         qq, pp = np.nonzero(ok)
         out_p.append(P[pp])
         out_q.append(q[qq])
-    pi, qi = np.concatenate(out_p), np.concatenate(out_q)
+    return np.concatenate(out_p), np.concatenate(out_q)
+
+
+def _adjacent(pi, qi, Z, Zw, stats):
+    """Keep pairs for which no ray of Zw but p and q has a zero set containing Z(p) & Z(q)
+    (Zw must hold p, q and every possible witness)."""
     stats["pairs_tested"] += len(pi)
     if len(pi) == 0:
         return pi, qi
     keep = np.zeros(len(pi), dtype=bool)
-    R = Z.shape[0]
-    chunk = max(1, (1 << 22) // max(1, R * Z.shape[1]))
+    chunk = max(1, (1 << 22) // max(1, Zw.shape[0] * Zw.shape[1]))
     for a in range(0, len(pi), chunk):
         Zc = Z[pi[a:a + chunk]] & Z[qi[a:a + chunk]]          # (c, W)
-        contains = np.all((Z[None, :, :] & Zc[:, None, :]) == Zc[:, None, :], axis=-1)
+        contains = np.all((Zw[None, :, :] & Zc[:, None, :]) == Zc[:, None, :], axis=-1)
         keep[a:a + chunk] = contains.sum(axis=1) == 2
     stats["pairs_adjacent"] += int(keep.sum())
     return pi[keep], qi[keep]

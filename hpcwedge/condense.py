@@ -1,0 +1,195 @@
+"""Static condensation (Schur complement) of a Model onto its contact DOFs, in local frames.
+
+The only module that imports petsc4py. Serial (PETSc.COMM_SELF).
+
+    K_local = T (K_cc - K_ci K_ii^-1 K_ic) T^T      (dim*m, dim*m), block ordering (SPEC §1)
+    N_local = orth(T R_c)                           (dim*m, k), R_c = rigid modes on contact DOFs
+
+with supports applied (fixed DOFs dropped), c = contact DOFs (node-major), i = the other free
+DOFs, T = model.local_map().
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .model import Model, check_contact_free
+from .models.rigid import orthonormalise
+
+#: a pivot |p| <= NULL_PIVOT_RTOL * ||A|| (MUMPS, after scaling) or <= NULL_PIVOT_RTOL * row sum
+#: (PETSc native LU) is taken as zero: K_ii singular. A K_ii that ill-conditioned would leave
+#: fewer than ~4 correct digits in K_local anyway.
+NULL_PIVOT_RTOL = 1e-12
+#: ||K_local N_local|| <= RIGID_RTOL ||K_local|| is required of the result (free bodies)
+RIGID_RTOL = 1e-7
+
+
+@dataclass(frozen=True)
+class DofSplit:
+    """Which DOFs are condensed out and how the contact DOFs are rotated.
+
+    contact:  (dim*m,) global contact DOFs, node-major (model.contact_dofs()).
+    interior: (n_i,) free (unsupported) non-contact global DOFs, ascending.
+    T:        (dim*m, dim*m) global node-major contact DOFs -> local block ordering.
+    Rc:       (dim*m, k) the model's rigid modes restricted to the contact DOFs.
+    """
+
+    contact: np.ndarray
+    interior: np.ndarray
+    T: np.ndarray
+    Rc: np.ndarray
+
+
+def split_dofs(model: Model) -> DofSplit:
+    """Partition the DOFs of `model` (shared by the PETSc and the dense route)."""
+    check_contact_free(np.asarray(model.fixed_dofs), np.asarray(model.contact_nodes), model.dim)
+    c = model.contact_dofs()
+    keep = np.ones(model.n_dofs, dtype=bool)
+    keep[np.asarray(model.fixed_dofs, dtype=np.int64)] = False
+    keep[c] = False
+    return DofSplit(contact=c, interior=np.flatnonzero(keep), T=model.local_map(), Rc=model.rigid_modes[c])
+
+
+def _blocks(model: Model, sp_: DofSplit):
+    K = sp.csr_matrix(model.K)
+    Kcc = K[sp_.contact][:, sp_.contact].toarray()
+    Kic = K[sp_.interior][:, sp_.contact]
+    Kii = K[sp_.interior][:, sp_.interior]
+    return Kcc, Kic, Kii
+
+
+def finish(model: Model, sp_: DofSplit, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotate the condensed (global, node-major) S into K_local, symmetrise, and build N_local."""
+    T = sp_.T
+    KL = T @ S @ T.T
+    KL = 0.5 * (KL + KL.T)
+    k = sp_.Rc.shape[1]
+    if k:
+        N = orthonormalise(T @ sp_.Rc, expect_rank=k,
+                           what="condense: rigid modes restricted to the contact DOFs")
+        scale = max(np.abs(KL).max(), 1e-300)
+        res = np.abs(KL @ N).max() / scale
+        if res > RIGID_RTOL:
+            raise ValueError(f"condense: the condensed stiffness does not annihilate the rigid modes "
+                             f"(relative residual {res:.2e}): K_ii is (nearly) singular or the model's "
+                             "rigid modes do not match K")
+    else:
+        N = np.zeros((KL.shape[0], 0))
+    return KL, N
+
+
+def _singular(model: Model, detail: str) -> ValueError:
+    return ValueError(f"condense: the stiffness of the non-contact DOFs (K_ii) is singular ({detail}): "
+                      "the body is a mechanism apart from its contact nodes (add bars/elements or supports)")
+
+
+def schur_dense(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """(K_local, N_local) by dense numpy linear algebra (independent check of condense; small models)."""
+    sp_ = split_dofs(model)
+    Kcc, Kic, Kii = _blocks(model, sp_)
+    if sp_.interior.size == 0:
+        return finish(model, sp_, Kcc)
+    A = Kii.toarray()
+    lam = np.linalg.eigvalsh(0.5 * (A + A.T))
+    if lam[0] <= NULL_PIVOT_RTOL * lam[-1]:
+        raise _singular(model, f"smallest/largest eigenvalue {lam[0] / lam[-1]:.2e}")
+    X = np.linalg.solve(A, Kic.toarray())
+    return finish(model, sp_, Kcc - Kic.T.toarray() @ X)
+
+
+def _petsc():
+    import petsc4py
+    petsc4py.init()
+    from petsc4py import PETSc
+    return PETSc
+
+
+def solver_name() -> str:
+    """'mumps' if this PETSc has MUMPS, else 'petsc' (native sparse LU)."""
+    return "mumps" if _petsc().Sys.hasExternalPackage("mumps") else "petsc"
+
+
+def condense(model: Model, solver: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(K_local (dim*m, dim*m) symmetric PSD, N_local (dim*m, k) orthonormal) via PETSc sparse LU.
+
+    K_ii is factored once (solver None: MUMPS if available, else "petsc" = PETSc's native LU
+    with nested-dissection ordering; or force "mumps" / "petsc")
+    and solved for all dim*m contact columns at once (MatMatSolve). ValueError if K_ii is
+    singular (null pivot) or the result does not annihilate the model's rigid modes.
+    """
+    sp_ = split_dofs(model)
+    Kcc, Kic, Kii = _blocks(model, sp_)
+    if sp_.interior.size == 0:
+        return finish(model, sp_, Kcc)
+    X = _solve_petsc(Kii, Kic.toarray(), model, solver)
+    return finish(model, sp_, Kcc - Kic.T @ X)
+
+
+def _solve_petsc(Kii: sp.csr_matrix, B: np.ndarray, model: Model, solver: str | None = None) -> np.ndarray:
+    """X = Kii^-1 B for dense B (n_i, p)."""
+    PETSc = _petsc()
+    comm = PETSc.COMM_SELF
+    Kii = sp.csr_matrix(Kii)
+    Kii.sort_indices()
+    n, p = B.shape
+    A = PETSc.Mat().createAIJ(size=(n, n), csr=(Kii.indptr.astype(PETSc.IntType),
+                                                Kii.indices.astype(PETSc.IntType), Kii.data), comm=comm)
+    A.assemble()
+    ksp = PETSc.KSP().create(comm=comm)
+    try:
+        ksp.setOperators(A)
+        ksp.setType("preonly")
+        pc = ksp.getPC()
+        pc.setType("lu")
+        if solver not in (None, "mumps", "petsc"):
+            raise ValueError(f"condense: unknown solver {solver!r} (mumps, petsc)")
+        use_mumps = solver == "mumps" or (solver is None and PETSc.Sys.hasExternalPackage("mumps"))
+        if use_mumps:
+            pc.setFactorSolverType("mumps")
+            pc.setFactorSetUpSolverType()
+            F = pc.getFactorMatrix()
+            F.setMumpsIcntl(24, 1)                 # detect null pivots ...
+            F.setMumpsCntl(3, NULL_PIVOT_RTOL)     # ... |pivot| <= tol * ||A_pre||
+        else:
+            pc.setFactorSolverType("petsc")
+            pc.setFactorOrdering("nd")
+            pc.setFactorPivot(zeropivot=NULL_PIVOT_RTOL)
+        try:
+            ksp.setUp()
+        except PETSc.Error as e:
+            raise _singular(model, f"PETSc error {e.ierr} in the LU factorisation") from None
+        F = pc.getFactorMatrix()
+        if use_mumps:
+            info = F.getMumpsInfog(1)
+            if info < 0:
+                raise _singular(model, f"MUMPS INFOG(1) = {info}") if info == -10 else \
+                    RuntimeError(f"condense: MUMPS failed, INFOG(1) = {info}, INFOG(2) = {F.getMumpsInfog(2)}")
+            nnull = F.getMumpsInfog(28)
+            if nnull > 0:
+                raise _singular(model, f"{nnull} null pivot(s) found by MUMPS")
+        # petsc4py 3.18 has no PCGetFailedReason: a failed factorisation shows as a KSP
+        # solve that diverges with DIVERGED_PC_FAILED (native LU flags zero pivots this way)
+        b = A.createVecLeft()
+        b.setArray(B[:, 0])
+        x = A.createVecRight()
+        ksp.solve(b, x)
+        reason = ksp.getConvergedReason()
+        b.destroy()
+        x.destroy()
+        if reason < 0:
+            raise _singular(model, f"LU factorisation failed, KSP reason {reason}")
+        Bm = PETSc.Mat().createDense((n, p), array=np.asfortranarray(B), comm=comm)
+        Xm = PETSc.Mat().createDense((n, p), comm=comm)
+        Xm.setUp()
+        Bm.assemble()
+        Xm.assemble()
+        F.matSolve(Bm, Xm)
+        X = np.array(Xm.getDenseArray(), copy=True)
+        for M in (Bm, Xm):
+            M.destroy()
+        return X
+    finally:
+        ksp.destroy()
+        A.destroy()

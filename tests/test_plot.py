@@ -1,0 +1,193 @@
+"""`hpcwedge plot`: figures from real result files (pipeline -> write_result -> plot_result)."""
+import struct
+import tomllib
+
+import h5py
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from hpcwedge.cli import main
+from hpcwedge.pipeline import Result, Run, run_scene
+from hpcwedge.plot import plot_result
+from hpcwedge.results import write_result
+from hpcwedge.scene import parse_scene
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+STIFFNESS_TOML = """\
+name = "two-dof"
+dim = 2
+[model]
+kind = "stiffness"
+K = [[2.0, 0.5], [0.5, 1.0]]
+[friction]
+mu = [2.5]
+"""
+
+PLUG2D_TOML = """\
+name = "plug2d-rows2"
+dim = 2
+[model]
+kind = "plug2d"
+rows = 2
+[friction]
+mu = [0.65]
+"""
+
+
+def _result_file(tmp_path, text: str, name: str = "result.h5", compute: dict | None = None) -> str:
+    data = tomllib.loads(text)
+    if compute:
+        data["compute"] = compute
+    result = run_scene(parse_scene(data, text))
+    path = str(tmp_path / name)
+    write_result(path, result)
+    return path
+
+
+def _check_png(path) -> tuple[int, int]:
+    with open(path, "rb") as f:
+        head = f.read(24)
+        f.seek(0, 2)
+        size = f.tell()
+    assert head[:8] == PNG_SIGNATURE
+    assert head[12:16] == b"IHDR"
+    width, height = struct.unpack(">II", head[16:24])
+    assert 600 <= width <= 4000 and 300 <= height <= 3000, (width, height)
+    assert size > 10_000, size                     # two drawn panels, not an empty canvas
+    return width, height
+
+
+@pytest.fixture
+def stiffness_h5(tmp_path):
+    return _result_file(tmp_path, STIFFNESS_TOML)
+
+
+def _plug2d_available() -> str | None:
+    try:
+        from hpcwedge.models import library
+        library.plug2d
+    except (ImportError, AttributeError) as e:
+        return f"hpcwedge.models.library.plug2d not importable ({e})"
+    try:
+        import petsc4py  # noqa: F401
+    except ImportError as e:
+        return f"petsc4py not importable ({e}); condensation of a model needs it"
+    return None
+
+
+# ---------------------------------------------------------------- raw stiffness scene
+
+def test_stiffness_scene_png(stiffness_h5, tmp_path):
+    with h5py.File(stiffness_h5, "r") as f:
+        assert "model" not in f                   # -> bar chart of r_n, u_n
+        assert len(f["runs/000/rays"]) >= 1
+    png = tmp_path / "fig.png"
+    plot_result(stiffness_h5, str(png))
+    _check_png(png)
+
+
+def test_run_and_ray_indices(stiffness_h5, tmp_path):
+    png = tmp_path / "fig.png"
+    plot_result(stiffness_h5, str(png), run=0, ray=-1)
+    _check_png(png)
+    with pytest.raises(ValueError, match=r"^plot: ray 5 out of range") as e:
+        plot_result(stiffness_h5, str(tmp_path / "bad.png"), ray=5)
+    assert "\n" not in str(e.value)
+    with pytest.raises(ValueError, match=r"^plot: run 3 out of range"):
+        plot_result(stiffness_h5, str(tmp_path / "bad.png"), run=3)
+    with pytest.raises(ValueError, match=r"^plot: run -2 out of range"):
+        plot_result(stiffness_h5, str(tmp_path / "bad.png"), run=-2)
+    assert not (tmp_path / "bad.png").exists()
+    assert [p.name for p in tmp_path.iterdir() if p.suffix == ".png"] == ["fig.png"]
+
+
+@pytest.mark.parametrize("compute", [{"mu_c": "none"}, {"enumerate": "rays"},
+                                     {"enumerate": False, "mu_c": "global"}])
+def test_missing_answers_are_said_in_text(tmp_path, compute):
+    # mu^c not computed / no cones / no rays: the panels say so, the figure is still written
+    h5 = _result_file(tmp_path, STIFFNESS_TOML, compute=compute)
+    png = tmp_path / "fig.png"
+    plot_result(h5, str(png))
+    _check_png(png)
+
+
+def test_run_without_wedged_rays(tmp_path):
+    # K = identity: u = r at every node, no wedged configuration at any mu
+    text = STIFFNESS_TOML.replace("[[2.0, 0.5], [0.5, 1.0]]", "[[1.0, 0.0], [0.0, 1.0]]")
+    h5 = _result_file(tmp_path, text)
+    with h5py.File(h5, "r") as f:
+        n_wedged = int(f["runs/000"].attrs["n_wedged_rays"])
+    png = tmp_path / "fig.png"
+    plot_result(h5, str(png))
+    _check_png(png)
+    if n_wedged == 0:
+        with pytest.raises(ValueError, match="out of range"):
+            plot_result(h5, str(png), ray=1)
+
+
+def test_3d_result_refused(stiffness_h5, tmp_path):
+    with h5py.File(stiffness_h5, "r+") as f:
+        f.attrs["dim"] = 3
+    with pytest.raises(ValueError, match=r"^plot: 3D results are not drawn yet$"):
+        plot_result(stiffness_h5, str(tmp_path / "fig.png"))
+
+
+# ---------------------------------------------------------------- command line
+
+def test_cli_plot(stiffness_h5, tmp_path, capsys):
+    png = str(tmp_path / "cli.png")
+    assert main(["plot", stiffness_h5, "-o", png]) == 0
+    _check_png(png)
+    bad = str(tmp_path / "bad.png")
+    assert main(["plot", stiffness_h5, "-o", bad, "--ray", "7"]) == 2
+    err = capsys.readouterr().err
+    assert "ray 7 out of range" in err and len(err.strip().splitlines()) == 1
+    assert main(["plot", stiffness_h5, "-o", bad, "--run", "9"]) == 2
+    assert not (tmp_path / "bad.png").exists()
+
+
+# ---------------------------------------------------------------- a model (geometry)
+
+@pytest.mark.skipif(_plug2d_available() is not None, reason=str(_plug2d_available()))
+def test_plug2d_png(tmp_path):
+    h5 = _result_file(tmp_path, PLUG2D_TOML)
+    with h5py.File(h5, "r") as f:
+        assert "model" in f and "cells_line" in f["model"]
+        assert len(f["runs/000/rays"]) >= 1
+    png = tmp_path / "plug.png"
+    plot_result(h5, str(png))
+    _check_png(png)
+    assert main(["plot", h5, "-o", str(tmp_path / "cli.png"), "--ray", "-1"]) == 0
+    _check_png(tmp_path / "cli.png")
+    assert main(["plot", h5, "-o", str(tmp_path / "bad.png"), "--ray", "100000"]) == 2
+
+
+def test_model_panel_without_condensation(tmp_path):
+    """The body drawing on a real plug2d Model (no PETSc needed): the result holds the
+    model and hand-made rays instead of enumerated ones."""
+    library = pytest.importorskip("hpcwedge.models.library")
+    model = library.plug2d(rows=2)
+    scene = parse_scene(tomllib.loads(PLUG2D_TOML), PLUG2D_TOML)
+    m = model.m
+    rng = np.random.default_rng(0)
+    rays = np.abs(rng.normal(size=(3, 4 * m)))
+    rays[:, m:2 * m] -= 0.5                                   # tangential u of both signs
+    rays[:, 3 * m:] -= 0.5
+    rays[:, 2 * m:3 * m] /= rays[:, 2 * m:3 * m].sum(axis=1, keepdims=True)   # sum r_n = 1
+    cones = [{"rays": [0, 1], "trivial_rays": [], "zero_u": [0], "zero_r": [1], "mu_c": 0.4},
+             {"rays": [2], "trivial_rays": [], "zero_u": [1], "zero_r": [0], "mu_c": None}]
+    result = Result(scene=scene, m=m, model=model, mu_c=0.176, mu_c_status="found",
+                    runs=[Run(mu=0.65, rays=rays, trivial_rays=np.zeros((0, 4 * m)),
+                              ray_zero=np.zeros((3, 3 * m), dtype=bool), cones=cones)],
+                    timings={"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0, "total": 0.0})
+    h5 = str(tmp_path / "synthetic.h5")
+    write_result(h5, result)
+    for ray in (0, 2):
+        png = tmp_path / f"ray{ray}.png"
+        plot_result(h5, str(png), ray=ray)
+        _check_png(png)
+    with pytest.raises(ValueError, match=r"^plot: ray 3 out of range"):
+        plot_result(h5, str(tmp_path / "bad.png"), ray=3)
