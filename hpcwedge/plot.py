@@ -233,11 +233,11 @@ def _cones_panel(ax, d: dict) -> None:
 
     title = f"mu^c of the cones at mu = {d['mu']:.6g}"
     cones = d["cones"]
+    glob = "none" if d["mu_c"] is None else f"{d['mu_c']:.6g}"
     if cones is None:
-        _message(ax, "cones were not computed for this run", title)
+        _message(ax, f"cones were not computed for this run\n(global mu^c = {glob})", title)
         return
     if not cones:
-        glob = "none" if d["mu_c"] is None else f"{d['mu_c']:.6g}"
         _message(ax, f"the run has no cones\n(global mu^c = {glob})", title)
         return
     vals = [c.get("mu_c") for c in cones]
@@ -256,7 +256,8 @@ def _cones_panel(ax, d: dict) -> None:
         handles.append(Patch(color="tab:blue", label="other cones" if has_ray.any() else "cones"))
     top = np.nanmax(np.append(y, [d["mu"]] + ([d["mu_c"]] if d["mu_c"] is not None else [])))
     for i in np.flatnonzero(np.isnan(y)):
-        ax.text(x[i], 0.02 * top, "n/a", ha="center", va="bottom", fontsize=8, rotation=90)
+        ax.text(x[i], 0.02 * top, "mu^c n/a", ha="center", va="bottom", fontsize=8, rotation=90,
+                color=colors[i])
     ax.axhline(d["mu"], color="black", ls="--", lw=1.2, label=f"run mu = {d['mu']:.6g}")
     if d["mu_c"] is not None:
         ax.axhline(d["mu_c"], color="tab:green", lw=1.5, label=f"global mu^c = {d['mu_c']:.6g}")

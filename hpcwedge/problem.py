@@ -110,17 +110,49 @@ def parametrize(problem: ContactProblem, exact: bool = False) -> Parametrization
         Uq = Kq.inv()
         Rq = xq.to_q(np.eye(n))
         return Parametrization(U=xq.to_float(Uq), R=np.eye(n), n_alpha=0, Uq=Uq, Rq=Rq)
-    Nq = xq.to_q(N)
+    Nq = _snap_dependent_rows(N, m, rows)
     B = xq.nullspace(Nq.transpose())
     rhs = xq.to_q(np.zeros((n + k, B.ncols())))
     for i in range(n):
         for j in range(B.ncols()):
             rhs[i, j] = B[i, j]
-    FB = xq.take_rows(xq.to_q(_bordered(K, N)).solve(rhs), range(n))
+    Bord = xq.to_q(np.zeros((n + k, n + k)))
+    for i in range(n + k):
+        for j in range(n + k):
+            Bord[i, j] = Kq[i, j] if i < n and j < n else (
+                Nq[i, j - n] if i < n and j >= n else (Nq[j, i - n] if j < n else 0))
+    FB = xq.take_rows(Bord.solve(rhs), range(n))
     W = xq.take_rows(Nq, rows).transpose()
     Uq = xq.hstack(FB, Nq * W)
     Rq = xq.hstack(B, xq.to_q(np.zeros((n, len(rows)))))
     return Parametrization(U=xq.to_float(Uq), R=xq.to_float(Rq), n_alpha=len(rows), Uq=Uq, Rq=Rq)
+
+
+def _snap_dependent_rows(N: np.ndarray, m: int, rows: list[int]):
+    """Exact copy of N in which each normal row outside `rows` is an exact rational
+    combination of the basis rows (coefficients snapped to small denominators when
+    that moves them by < 1e-13). Geometry known to float precision keeps its
+    dependencies (collinear nodes on one wall stay collinear) instead of rounding
+    creating tiny extra facets of the lift-off cone in exact arithmetic."""
+    from fractions import Fraction
+    Nq = xq.to_q(N)
+    if not rows:
+        return Nq
+    base = N[rows]
+    for j in range(m):
+        if j in rows:
+            continue
+        c, *_ = np.linalg.lstsq(base.T, N[j], rcond=None)
+        coef = []
+        for v in c:
+            f = Fraction(v).limit_denominator(10**6)
+            coef.append(f if abs(float(f) - v) < 1e-13 else Fraction(v))
+        for col in range(N.shape[1]):
+            acc = xq.q_scalar(0.0)
+            for f, r in zip(coef, rows):
+                acc += xq.flint.fmpq(f.numerator, f.denominator) * Nq[r, col]
+            Nq[j, col] = acc
+    return Nq
 
 
 def _bordered(K: np.ndarray, N: np.ndarray) -> np.ndarray:

@@ -120,12 +120,12 @@ def test_run_without_wedged_rays(tmp_path):
     h5 = _result_file(tmp_path, text)
     with h5py.File(h5, "r") as f:
         n_wedged = int(f["runs/000"].attrs["n_wedged_rays"])
+    assert n_wedged == 0
     png = tmp_path / "fig.png"
-    plot_result(h5, str(png))
+    plot_result(h5, str(png))                      # ray 0 of none: the panel says so
     _check_png(png)
-    if n_wedged == 0:
-        with pytest.raises(ValueError, match="out of range"):
-            plot_result(h5, str(png), ray=1)
+    with pytest.raises(ValueError, match="out of range"):
+        plot_result(h5, str(tmp_path / "bad.png"), ray=1)
 
 
 def test_3d_result_refused(stiffness_h5, tmp_path):

@@ -1,0 +1,549 @@
+#!/usr/bin/env python3
+"""Benchmark of the 2D pipeline (issue "2D pipeline", SPEC §7).
+
+    scripts/bench_2d.py [--quick] [--budget SECONDS] [--profile-m M]
+
+Scene: plug2d (cols 3, taper 10 deg, free body), rows 2..10 (m = 2*rows = 4..20), mu = 0.65.
+Engines, run in the same invocation on the same condensed stiffness:
+
+  ours_enumerate  our float engine, the enumerate stage only: parametrize + friction_rows_2d
+                  + complementary_rays (complementarity-pruned DD) + maximal_cones
+  ours_run_scene  the whole pipeline, run_scene() with mu_c = "global" (model, PETSc
+                  condensation, enumeration, cones, every cone's mu^c, global mu^c)
+  ours_exact      our engine in exact rational arithmetic (exact=True), enumerate stage,
+                  for the sizes it finishes within --exact-limit (default 60 s)
+  cdd_exact       the peer: a full double description with cddlib in exact arithmetic
+                  (pycddlib, number_type 'fraction' = GMP rationals) of the cone
+                  P = {x : A x >= 0}, then a complementarity filter and a clique search
+                  (networkx find_cliques via hpcwedge.cones.maximal_cones)
+
+The peer's A is friction_rows_2d() of *our* parametrisation (SPEC §1): lineality-free, the
+rigid modes of the free body factored out exactly. We hand it the exact rows (primitive
+integer vectors from the rational parametrisation, the same cone that ours_exact sees),
+not the float rows converted to fractions: rounding the float rows breaks the degenerate
+vertices of P (at m = 6 cddlib finds 1044 instead of 990 extreme rays on the rounded rows).
+
+Every engine runs in a subprocess with a time limit, one size after the other; an engine's
+sizes stop growing once it times out. The peer shares one budget (--budget, default 600 s,
+--quick: 60 s) over its sizes. Model building and condensation are outside every time
+except ours_run_scene's; the peer's time is cddlib + filter + cliques (building the exact
+rows is reported apart, as "setup").
+
+Writes results/bench_2d.csv, results/bench_2d.png and results/bench_2d.json (per-stage
+breakdown); prints a summary. Exit status 1 (and MISMATCH on stderr) if two engines that
+both finished disagree on the wedged-ray or cone counts, or on the zero sets.
+
+The peer needs pycddlib (GPL, benchmark only):
+    apt-get install -y libcdd-dev libgmp-dev
+    .venv/bin/pip install "pycddlib<3"          # or: scripts/setup.sh bench
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+MARK = "BENCH_RESULT "
+COLS, TAPER = 3, 10.0
+ENGINES = ("ours_enumerate", "ours_run_scene", "ours_exact", "cdd_exact")
+CDD_HELP = ("pycddlib is not installed (needed for the cdd_exact peer). Install it with\n"
+            "    apt-get install -y libcdd-dev libgmp-dev\n"
+            f"    {sys.executable} -m pip install \"pycddlib<3\"\n"
+            "or run scripts/setup.sh bench; or skip the peer with --no-peer.")
+
+
+# --------------------------------------------------------------------------- workers
+
+def _problem(rows: int):
+    import hpcwedge.cones  # noqa: F401  (networkx: imported before any clock starts)
+    from hpcwedge.condense import condense
+    from hpcwedge.models.library import plug2d
+    from hpcwedge.problem import ContactProblem
+    K, N = condense(plug2d(rows, COLS, TAPER))
+    return ContactProblem(2, K, N)
+
+
+def _fingerprint(zero_wedged, cone_keys) -> str:
+    """Order-independent digest of the wedged rays' zero sets and the cones' zero sets."""
+    import numpy as np
+    h = hashlib.sha1()
+    packed = np.packbits(np.asarray(zero_wedged, dtype=bool), axis=1)
+    for r in sorted(row.tobytes() for row in packed):
+        h.update(r)
+    h.update(repr(sorted((tuple(map(int, zu)), tuple(map(int, zr))) for zu, zr in cone_keys)).encode())
+    return h.hexdigest()[:16]
+
+
+def _cones_of(zero, wedged):
+    """maximal_cones on complementary rays given by their (R, 3m) zero flags."""
+    from hpcwedge.cones import maximal_cones
+    gap = ~zero[:, 0::3]
+    load = ~(zero[:, 1::3] & zero[:, 2::3])
+    return maximal_cones(gap, load, wedged)
+
+
+def worker_ours(rows: int, mu: float, exact: bool) -> dict:
+    from hpcwedge.dd import complementary_rays
+    from hpcwedge.problem import friction_rows_2d, parametrize
+    problem = _problem(rows)
+    m = problem.m
+    t0 = time.perf_counter()
+    param = parametrize(problem, exact=exact)
+    A = friction_rows_2d(param, mu, m, exact=exact)
+    t1 = time.perf_counter()
+    dd = complementary_rays(A, m, exact=exact)
+    t2 = time.perf_counter()
+    wedged = dd.wedged()
+    cones = _cones_of(dd.zero, wedged)
+    t3 = time.perf_counter()
+    return {"seconds": t3 - t0, "n_wedged_rays": int(wedged.sum()), "n_cones": len(cones),
+            "n_trivial_rays": int((~wedged).sum()),
+            "fingerprint": _fingerprint(dd.zero[wedged], [c.key() for c in cones]),
+            "breakdown": {"parametrize": t1 - t0, "dd": t2 - t1, "cones": t3 - t2},
+            "dd_stats": {k: v for k, v in dd.stats.items()}, "d": int(A.shape[1])}
+
+
+def worker_scene(rows: int, mu: float) -> dict:
+    from hpcwedge.condense import solver_name
+    from hpcwedge.pipeline import run_scene
+    from hpcwedge.scene import parse_scene
+    solver_name()      # imports and initialises petsc4py before the clock starts
+    scene = parse_scene({"name": f"plug2d-r{rows}", "dim": 2,
+                         "model": {"kind": "plug2d", "rows": rows, "cols": COLS, "taper_deg": TAPER},
+                         "friction": {"mu": [mu]},
+                         "compute": {"enumerate": True, "mu_c": "global"}})
+    t0 = time.perf_counter()
+    res = run_scene(scene)
+    sec = time.perf_counter() - t0
+    run = res.runs[0]
+    keys = [(c["zero_u"], c["zero_r"]) for c in run.cones]
+    return {"seconds": sec, "n_wedged_rays": run.n_wedged_rays, "n_cones": run.n_cones,
+            "n_trivial_rays": run.n_trivial_rays, "fingerprint": _fingerprint(run.ray_zero, keys),
+            "breakdown": {k: float(v) for k, v in res.timings.items()},
+            "mu_c": res.mu_c, "mu_c_status": res.mu_c_status,
+            "mu_c_rel_err": (abs(res.mu_c - math.tan(math.radians(TAPER))) / math.tan(math.radians(TAPER))
+                             if res.mu_c is not None else None),
+            "lp_solves": res.stats.get("lp_solves")}
+
+
+def _cdd_generators(H):
+    """Generators (rows [t, x...], Fractions or ints) and lin_set of the H-representation
+    rows H ([b, a...]: b + a.x >= 0) in exact arithmetic, pycddlib 2.x or 3.x."""
+    try:
+        import cdd
+    except ImportError:
+        print(CDD_HELP, file=sys.stderr)
+        raise SystemExit(3)
+    if hasattr(cdd, "Matrix"):                      # pycddlib 2.x
+        mat = cdd.Matrix(H, number_type="fraction")
+        mat.rep_type = cdd.RepType.INEQUALITY
+        gen = cdd.Polyhedron(mat).get_generators()
+        return [gen[i] for i in range(gen.row_size)], set(gen.lin_set), "pycddlib " + _cdd_version()
+    import cdd.gmp                                   # pycddlib 3.x (needs a GMP build)
+    mat = cdd.gmp.matrix_from_array(H, rep_type=cdd.RepType.INEQUALITY)
+    gen = cdd.gmp.copy_generators(cdd.gmp.polyhedron_from_matrix(mat))
+    return list(gen.array), set(gen.lin_set), "pycddlib " + _cdd_version()
+
+
+def _cdd_version() -> str:
+    try:
+        from importlib.metadata import version
+        return version("pycddlib")
+    except Exception:
+        return "?"
+
+
+def worker_peer(rows: int, mu: float) -> dict:
+    import flint
+    import numpy as np
+    from fractions import Fraction
+    from math import lcm
+    from hpcwedge.problem import friction_rows_2d, parametrize
+    problem = _problem(rows)
+    m = problem.m
+    t0 = time.perf_counter()
+    param = parametrize(problem, exact=True)
+    A = friction_rows_2d(param, mu, m, exact=True)            # (3m, d) primitive integer rows
+    Aint = [[int(v) for v in row] for row in A]
+    t_setup = time.perf_counter() - t0
+    try:
+        import cdd  # noqa: F401  (imported before the clock starts)
+    except ImportError:
+        print(CDD_HELP, file=sys.stderr)
+        raise SystemExit(3)
+    t0 = time.perf_counter()
+    gens, lin, version = _cdd_generators([[0] + row for row in Aint])
+    t1 = time.perf_counter()
+    if lin:
+        raise RuntimeError(f"cddlib found {len(lin)} lines: the cone is not pointed")
+    rays = []
+    for g in gens:
+        if g[0] != 0:          # the apex (origin) vertex
+            continue
+        x = [Fraction(v) for v in g[1:]]
+        den = lcm(*(v.denominator for v in x))
+        rays.append([int(v * den) for v in x])
+    d = len(Aint[0])
+    R = len(rays)
+    if R:
+        S = flint.fmpz_mat(Aint) * flint.fmpz_mat(d, R, [v for j in range(d) for v in (r[j] for r in rays)])
+        sign = np.array([int(s > 0) - int(s < 0) for s in S.entries()], dtype=np.int8).reshape(3 * m, R).T
+    else:
+        sign = np.zeros((0, 3 * m), dtype=np.int8)
+    if (sign < 0).any():
+        raise RuntimeError("a cddlib generator violates A x >= 0")
+    zero = sign == 0
+    zu, zr = zero[:, 0::3], zero[:, 1::3] & zero[:, 2::3]
+    comp = (zu | zr).all(axis=1)                               # complementarity filter
+    zero = zero[comp]
+    wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
+    t2 = time.perf_counter()
+    cones = _cones_of(zero, wedged)
+    t3 = time.perf_counter()
+    bits = max(abs(v).bit_length() for row in Aint for v in row)
+    return {"seconds": t3 - t0, "n_wedged_rays": int(wedged.sum()), "n_cones": len(cones),
+            "n_trivial_rays": int((~wedged).sum()),
+            "fingerprint": _fingerprint(zero[wedged], [c.key() for c in cones]),
+            "breakdown": {"setup_exact_rows": t_setup, "cdd_dd": t1 - t0, "filter": t2 - t1,
+                          "cliques": t3 - t2},
+            "n_extreme_rays_P": R, "n_complementary": int(comp.sum()), "max_row_bits": bits,
+            "cdd": version}
+
+
+def worker_main(kind: str, rows: int, mu: float) -> None:
+    if kind == "ours":
+        out = worker_ours(rows, mu, exact=False)
+    elif kind == "exact":
+        out = worker_ours(rows, mu, exact=True)
+    elif kind == "scene":
+        out = worker_scene(rows, mu)
+    elif kind == "peer":
+        out = worker_peer(rows, mu)
+    else:
+        raise SystemExit(f"unknown worker {kind}")
+    print(MARK + json.dumps(out), flush=True)
+
+
+# --------------------------------------------------------------------------- driver
+
+def run_worker(kind: str, rows: int, mu: float, limit: float) -> tuple[str, dict | None, float, str]:
+    """(status, result, wall seconds, stderr tail) of one worker subprocess, killed at `limit`."""
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", kind, "--rows", str(rows), "--mu", repr(mu)]
+    env = dict(os.environ)
+    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env=env)
+    try:
+        out, err = proc.communicate(timeout=max(limit, 0.1))
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)      # the worker's own process group
+        except ProcessLookupError:
+            pass
+        proc.communicate()
+        return "timeout", None, time.perf_counter() - t0, ""
+    wall = time.perf_counter() - t0
+    for line in reversed(out.splitlines()):
+        if line.startswith(MARK):
+            return "ok", json.loads(line[len(MARK):]), wall, ""
+    if proc.returncode == 3:
+        return "missing", None, wall, err.strip()
+    tail = "\n".join(err.strip().splitlines()[-5:])
+    return "error", None, wall, tail
+
+
+def fmt_s(v) -> str:
+    if v is None:
+        return "-"
+    return f"{v:.4f}" if v < 1 else f"{v:.2f}" if v < 100 else f"{v:.0f}"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="rows 2..5 (m <= 10) and a 60 s peer budget")
+    ap.add_argument("--budget", type=float, default=None,
+                    help="total seconds for the cddlib peer over all sizes (default 600, --quick 60)")
+    ap.add_argument("--mu", type=float, default=0.65)
+    ap.add_argument("--max-rows", type=int, default=None, help="largest rows (default 10, --quick 5)")
+    ap.add_argument("--ours-limit", type=float, default=1800.0,
+                    help="seconds per size for ours_enumerate and ours_run_scene (default 1800)")
+    ap.add_argument("--exact-limit", type=float, default=60.0, help="seconds per size for ours_exact")
+    ap.add_argument("--no-peer", action="store_true", help="skip the cddlib peer")
+    ap.add_argument("--out", default=os.path.join(ROOT, "results"), help="output directory")
+    ap.add_argument("--profile-m", type=int, default=None,
+                    help="also profile ours_enumerate at this m with pyinstrument "
+                         "(writes results/bench_2d_profile_m<M>.txt)")
+    ap.add_argument("--worker", help=argparse.SUPPRESS)
+    ap.add_argument("--rows", type=int, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker:
+        worker_main(args.worker, args.rows, args.mu)
+        return 0
+
+    budget = args.budget if args.budget is not None else (60.0 if args.quick else 600.0)
+    max_rows = args.max_rows or (5 if args.quick else 10)
+    sizes = list(range(2, max_rows + 1))
+    mu = args.mu
+    os.makedirs(args.out, exist_ok=True)
+    print(f"bench_2d: plug2d (cols {COLS}, taper {TAPER:g} deg, free body), mu = {mu:g}, "
+          f"mu/mu^c = {mu / math.tan(math.radians(TAPER)):.2f}, m = {2 * sizes[0]}..{2 * sizes[-1]}")
+    print("peer: full double description with cddlib in exact arithmetic of P = {x : A x >= 0}, "
+          "A = friction_rows_2d of OUR parametrisation (same lineality-free cone, rigid modes of the "
+          "free body factored out exactly; exact integer rows), then complementarity filter + "
+          f"networkx clique search. Peer budget {budget:g} s in total.")
+    if not args.no_peer:
+        try:
+            import cdd  # noqa: F401  (lazy check only, the peer runs in a subprocess)
+        except ImportError:
+            print(CDD_HELP, file=sys.stderr)
+            return 3
+
+    records: dict[tuple[str, int], dict] = {}
+    stopped = {e: False for e in ENGINES}
+    peer_used = 0.0
+    limits = {"ours_enumerate": ("ours", args.ours_limit), "ours_run_scene": ("scene", args.ours_limit),
+              "ours_exact": ("exact", args.exact_limit)}
+    for rows in sizes:
+        m = 2 * rows
+        plan = [(e, *limits[e]) for e in ("ours_enumerate", "ours_run_scene", "ours_exact")]
+        if not args.no_peer:
+            plan.append(("cdd_exact", "peer", budget - peer_used))
+        for engine, kind, limit in plan:
+            rec = {"m": m, "rows": rows, "mu": mu, "engine": engine}
+            if stopped[engine] or limit <= 0.5:
+                rec["status"] = "not_run" if stopped[engine] else "budget_exhausted"
+                stopped[engine] = True
+                records[(engine, m)] = rec
+                continue
+            status, res, wall, err = run_worker(kind, rows, mu, limit)
+            if engine == "cdd_exact":
+                peer_used += wall
+            rec["status"] = status
+            if status == "ok":
+                rec.update(res)
+                rec["rays_per_second"] = res["n_wedged_rays"] / res["seconds"] if res["seconds"] > 0 else None
+            elif status == "timeout":
+                rec["seconds_lower_bound"] = wall
+                stopped[engine] = True
+            else:
+                stopped[engine] = True
+                rec["error"] = err
+                print(f"  {engine} m={m}: {status}: {err}", file=sys.stderr)
+            records[(engine, m)] = rec
+            extra = ""
+            if status == "ok" and "breakdown" in res:
+                extra = "  [" + ", ".join(f"{k} {fmt_s(v)}" for k, v in res["breakdown"].items()) + "]"
+            shown = fmt_s(res["seconds"]) if status == "ok" else f">{wall:.0f}" if status == "timeout" else "-"
+            counts = f"{res['n_wedged_rays']} rays, {res['n_cones']} cones" if status == "ok" else status
+            print(f"  m={m:2d} {engine:15s} {shown:>8s} s  {counts}{extra}", flush=True)
+
+    # ----------------------------------------------------------------- checks
+    mismatches = []
+    for rows in sizes:
+        m = 2 * rows
+        done = [(e, records[(e, m)]) for e in ENGINES if records.get((e, m), {}).get("status") == "ok"]
+        if not done:
+            continue
+        ref_e, ref = done[0]
+        for e, r in done[1:]:
+            for key in ("n_wedged_rays", "n_cones", "fingerprint"):
+                if r[key] != ref[key]:
+                    mismatches.append(f"m={m}: {key}: {ref_e} {ref[key]} != {e} {r[key]}")
+
+    # ----------------------------------------------------------------- outputs
+    csv_path = os.path.join(args.out, "bench_2d.csv")
+    with open(csv_path + ".tmp", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["m", "rows", "mu", "engine", "seconds", "n_wedged_rays", "n_cones",
+                    "rays_per_second", "status"])
+        for rows in sizes:
+            for e in ENGINES:
+                r = records.get((e, 2 * rows))
+                if r is None:
+                    continue
+                sec = r.get("seconds", r.get("seconds_lower_bound"))
+                w.writerow([r["m"], r["rows"], r["mu"], e,
+                            "" if sec is None else f"{sec:.6g}",
+                            r.get("n_wedged_rays", ""), r.get("n_cones", ""),
+                            "" if r.get("rays_per_second") is None else f"{r['rays_per_second']:.6g}",
+                            r["status"]])
+    os.replace(csv_path + ".tmp", csv_path)
+    with open(os.path.join(args.out, "bench_2d.json"), "w") as f:
+        json.dump({"scene": {"model": "plug2d", "cols": COLS, "taper_deg": TAPER, "mu": mu},
+                   "peer_budget_s": budget, "peer_used_s": peer_used, "quick": args.quick,
+                   "records": [records[k] for k in sorted(records, key=lambda k: (k[1], ENGINES.index(k[0])))],
+                   "mismatches": mismatches}, f, indent=1, default=str)
+    plot(records, sizes, budget, os.path.join(args.out, "bench_2d.png"), mu)
+
+    # ----------------------------------------------------------------- summary
+    print()
+    hdr = (f"{'m':>3} {'wedged':>8} {'cones':>5} | {'ours enum s':>11} {'rays/s':>9} | "
+           f"{'run_scene s':>11} | {'ours exact s':>12} | {'cdd exact s':>11} | {'peer/ours':>9}")
+    print(hdr)
+    print("-" * len(hdr))
+    for rows in sizes:
+        m = 2 * rows
+        r = {e: records.get((e, m), {}) for e in ENGINES}
+
+        def cell(e, width):
+            x = r[e]
+            if x.get("status") == "ok":
+                return f"{fmt_s(x['seconds']):>{width}}"
+            if x.get("status") == "timeout":
+                return f"{'>' + format(x['seconds_lower_bound'], '.0f'):>{width}}"
+            return f"{x.get('status', '-'):>{width}}"
+        o = r["ours_enumerate"]
+        nw = next((x["n_wedged_rays"] for x in r.values() if x.get("status") == "ok"), None)
+        nc = next((x["n_cones"] for x in r.values() if x.get("status") == "ok"), None)
+        ratio = speedup(r)
+        print(f"{m:>3} {nw if nw is not None else '-':>8} {nc if nc is not None else '-':>5} | "
+              f"{cell('ours_enumerate', 11)} "
+              f"{(format(o['rays_per_second'], '.3g') if o.get('rays_per_second') else '-'):>9} | "
+              f"{cell('ours_run_scene', 11)} | {cell('ours_exact', 12)} | {cell('cdd_exact', 11)} | "
+              f"{ratio or '-':>9}")
+    print()
+    ok_m = [2 * rows for rows in sizes if records.get(("ours_enumerate", 2 * rows), {}).get("status") == "ok"]
+    if ok_m:
+        big = records[("ours_enumerate", max(ok_m))]
+        sc = records.get(("ours_run_scene", max(ok_m)), {})
+        print(f"largest m finished by ours: m = {max(ok_m)}: enumerate {fmt_s(big['seconds'])} s "
+              f"({big['n_wedged_rays']} wedged rays, {big['rays_per_second']:.3g} rays/s); "
+              f"run_scene {fmt_s(sc.get('seconds')) if sc.get('status') == 'ok' else sc.get('status')} s")
+    ex_m = [2 * rows for rows in sizes if records.get(("ours_exact", 2 * rows), {}).get("status") == "ok"]
+    if ex_m:
+        print(f"largest m finished by ours_exact within {args.exact_limit:g} s: m = {max(ex_m)} "
+              f"({fmt_s(records[('ours_exact', max(ex_m))]['seconds'])} s)")
+    pe_m = [2 * rows for rows in sizes if records.get(("cdd_exact", 2 * rows), {}).get("status") == "ok"]
+    if pe_m:
+        print(f"largest m finished by the cddlib peer (budget {budget:g} s, used {peer_used:.0f} s): "
+              f"m = {max(pe_m)} ({fmt_s(records[('cdd_exact', max(pe_m))]['seconds'])} s)")
+    sc_mu = [records[("ours_run_scene", mm)] for mm in ok_m if records.get(("ours_run_scene", mm), {}).get("status") == "ok"]
+    if sc_mu:
+        errs = [x["mu_c_rel_err"] for x in sc_mu if x.get("mu_c_rel_err") is not None]
+        if errs:
+            print(f"global mu^c vs tan(taper) = {math.tan(math.radians(TAPER)):.15g}: "
+                  f"max relative error {max(errs):.2e} over m = {', '.join(str(x['m']) for x in sc_mu)}")
+    print("targets:")
+    r8 = {e: records.get((e, 8), {}) for e in ENGINES}
+    s8 = speedup(r8)
+    if s8 is None:
+        print("  m = 8, >= 100x faster than the peer: not measured")
+    else:
+        val = float(s8.lstrip(">").rstrip("x"))
+        print(f"  m = 8, >= 100x faster than the peer: {s8} -> {'MET' if val >= 100 else 'NOT MET'}"
+              + (" (lower bound: the peer timed out)" if s8.startswith(">") else ""))
+    r20 = records.get(("ours_enumerate", 20), {})
+    s20 = records.get(("ours_run_scene", 20), {})
+    if not r20:
+        print("  m = 20 within 60 s: not measured (run without --quick)")
+    else:
+        for name, x in (("enumerate", r20), ("run_scene", s20)):
+            if x.get("status") == "ok":
+                print(f"  m = 20 within 60 s ({name}): {fmt_s(x['seconds'])} s -> "
+                      f"{'MET' if x['seconds'] <= 60 else 'NOT MET'}")
+            elif x:
+                lb = x.get("seconds_lower_bound")
+                print(f"  m = 20 within 60 s ({name}): {x['status']}"
+                      + (f" after {lb:.0f} s" if lb else "") + " -> NOT MET")
+    print(f"wrote {csv_path}, {os.path.join(args.out, 'bench_2d.png')}, {os.path.join(args.out, 'bench_2d.json')}")
+
+    if args.profile_m:
+        profile(args.profile_m, mu, args.out)
+
+    if mismatches:
+        print("\n" + "!" * 72, file=sys.stderr)
+        for s in mismatches:
+            print(f"MISMATCH {s}", file=sys.stderr)
+        print("!" * 72, file=sys.stderr)
+        return 1
+    print("counts and zero sets agree wherever two or more engines finished")
+    return 0
+
+
+def speedup(r: dict) -> str | None:
+    """peer / ours_enumerate as text ('>N x' when the peer timed out), or None."""
+    o, p = r.get("ours_enumerate", {}), r.get("cdd_exact", {})
+    if o.get("status") != "ok":
+        return None
+    if p.get("status") == "ok":
+        return f"{p['seconds'] / o['seconds']:.0f}x"
+    if p.get("status") == "timeout":
+        return f">{p['seconds_lower_bound'] / o['seconds']:.0f}x"
+    return None
+
+
+def plot(records, sizes, budget, path, mu) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    style = {"ours_enumerate": ("o-", "ours, enumerate (float)"),
+             "ours_run_scene": ("s-", "ours, run_scene (mu_c global)"),
+             "ours_exact": ("^-", "ours, exact arithmetic"),
+             "cdd_exact": ("D-", "cddlib exact DD + filter + cliques")}
+    for e in ENGINES:
+        ms, ts, lm, lt = [], [], [], []
+        for rows in sizes:
+            r = records.get((e, 2 * rows), {})
+            if r.get("status") == "ok":
+                ms.append(2 * rows)
+                ts.append(max(r["seconds"], 1e-5))
+            elif r.get("status") == "timeout":
+                lm.append(2 * rows)
+                lt.append(r["seconds_lower_bound"])
+        if not ms and not lm:
+            continue
+        mk, label = style[e]
+        line, = ax.plot(ms, ts, mk, label=label)
+        if lm:
+            ax.plot(lm, lt, linestyle="none", marker="^", mfc="none", color=line.get_color(),
+                    markersize=10, label=f"{label}: timed out (lower bound)")
+    ax.axhline(60, color="grey", lw=0.8, ls=":")
+    ax.set_yscale("log")
+    ax.set_xlabel("m (contact nodes)")
+    ax.set_ylabel("seconds")
+    ax.set_title(f"plug2d (cols {COLS}, taper {TAPER:g}°), mu = {mu:g}")
+    ax.set_xticks([2 * r for r in sizes])
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def profile(m: int, mu: float, out: str) -> None:
+    try:
+        from pyinstrument import Profiler
+    except ImportError:
+        print("pyinstrument is not installed: pip install pyinstrument", file=sys.stderr)
+        return
+    from hpcwedge.dd import complementary_rays
+    from hpcwedge.problem import friction_rows_2d, parametrize
+    problem = _problem(m // 2)
+    prof = Profiler(interval=0.005)
+    prof.start()
+    param = parametrize(problem)
+    A = friction_rows_2d(param, mu, problem.m)
+    dd = complementary_rays(A, problem.m)
+    _cones_of(dd.zero, dd.wedged())
+    prof.stop()
+    text = prof.output_text(unicode=False, color=False, show_all=False)
+    path = os.path.join(out, f"bench_2d_profile_m{m}.txt")
+    with open(path, "w") as f:
+        f.write(text)
+    print(f"profile of ours_enumerate at m = {m}: {path}")
+    print("\n".join(text.splitlines()[:40]))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,76 @@
+"""The command line on real files: run/show round trip, exit 2 on bad input with
+nothing written, and the public reference scenes."""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+
+from hpcwedge.cli import main
+
+SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
+
+
+def write(tmp_path, text, name="s.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+def test_run_show_json(tmp_path, capsys):
+    s = write(tmp_path, 'name = "n"\ndim = 2\n[model]\nkind = "stiffness"\nK = [[2.0, 0.5], [0.5, 1.0]]\n'
+                        '[friction]\nmu = [2.5, 1.5]\n')
+    out = str(tmp_path / "r.h5")
+    assert main(["run", s, "-o", out, "-q"]) == 0
+    capsys.readouterr()
+    assert main(["show", out, "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["name"] == "n" and got["m"] == 1 and got["complete"] is True
+    assert abs(got["mu_c"] - 2.0) < 1e-12
+    assert [r["mu"] for r in got["runs"]] == [1.5, 2.5]
+    r = got["runs"][1]
+    assert r["n_wedged_rays"] == 1 and r["n_cones"] == 1 and r["n_patterns"] is None
+    assert abs(sum(r["rays"][0][2:3]) - 1.0) < 1e-12          # sum r_n = 1
+    assert r["cones"][0]["zero_u"] == [0] and abs(r["cones"][0]["mu_c"] - 2.0) < 1e-12
+    assert set(got["timings"]) >= {"condense", "enumerate", "mu_c", "total"}
+    assert main(["show", out]) == 0
+
+
+@pytest.mark.parametrize("text,key", [
+    ('name = "x"\ndim = 2\n[model]\nkind = "stiffness"\nK = [[1.0, 2.0], [2.0, 1.0]]\n[friction]\nmu = [1.0]\n', "model.K"),
+    ('name = "x"\ndim = 2\n[model]\nkind = "plug2d"\n[friction]\nmu = [-1.0]\n', "friction.mu"),
+    ('name = "x"\ndim = 2\n[model\n', "not valid TOML"),
+])
+def test_bad_input_exit_2_nothing_written(tmp_path, capsys, text, key):
+    out = tmp_path / "r.h5"
+    assert main(["run", write(tmp_path, text), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert key in err and len(err.splitlines()) == 1
+    assert not out.exists() and not [p for p in os.listdir(tmp_path) if p.startswith(".tmp")]
+
+
+def test_show_missing_file(tmp_path):
+    assert main(["show", str(tmp_path / "none.h5")]) == 2
+
+
+@pytest.mark.skipif(not os.path.isdir(SHARED), reason="../shared/scenes not beside the checkout")
+def test_public_2d_scenes(tmp_path):
+    """The console script on the public scenes (the 2D ones; node3d is 3D)."""
+    exe = os.path.join(os.path.dirname(sys.executable), "hpcwedge")
+    want = json.load(open(os.path.join(SHARED, "expected.json")))
+    for name, exp in want.items():
+        if name.startswith("_") or name == "node3d.toml":
+            continue
+        out = str(tmp_path / (name + ".h5"))
+        subprocess.run([exe, "run", os.path.join(SHARED, name), "-o", out, "-q"], check=True)
+        got = json.loads(subprocess.run([exe, "show", out, "--json"], check=True,
+                                        capture_output=True, text=True).stdout)
+        if exp["mu_c"] is None:
+            assert got["mu_c"] is None
+        else:
+            assert math.isclose(got["mu_c"], exp["mu_c"], rel_tol=1e-9), name
+        for k, run in enumerate(exp["runs"]):
+            for key, v in run.items():
+                assert got["runs"][k][key] == v if key != "mu" else math.isclose(got["runs"][k][key], v)
