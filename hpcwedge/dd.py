@@ -241,14 +241,10 @@ def _adjacent_pairs(P, M, Z, done, d, bits, stats):
     deg = np.flatnonzero(~simple)
     out_p, out_q = [], []
     # simple x simple: hash join on keys
-    kp, rp = _keys(Z, P[simple[P]])
-    km, rm = _keys(Z, M[simple[M]])
-    ko, _ = _keys(Z, np.flatnonzero(simple & (sign == 0)))
-    up, ip, cp = np.unique(kp, return_index=True, return_counts=True)
-    um, im, cm = np.unique(km, return_index=True, return_counts=True)
-    both, a, b = np.intersect1d(up, um, assume_unique=True, return_indices=True)
-    ok = (cp[a] == 1) & (cm[b] == 1) & ~np.isin(both, ko)
-    pi, qi = rp[ip[a[ok]]], rm[im[b[ok]]]
+    kp, rp = _keys(Z, P[simple[P]], done)
+    km, rm = _keys(Z, M[simple[M]], done)
+    ko, _ = _keys(Z, np.flatnonzero(simple & (sign == 0)), done)
+    pi, qi = _join_keys(kp, rp, km, rm, ko)
     stats["pairs_tested"] += len(pi)
     if len(pi):
         Zc = Z[pi] & Z[qi]
@@ -275,17 +271,58 @@ def _adjacent_pairs(P, M, Z, done, d, bits, stats):
     return np.concatenate(out_p), np.concatenate(out_q)
 
 
-def _keys(Z, rows):
-    """Keys of simple rays: each zero set with one bit removed, as comparable
+def _join_keys(kp, rp, km, rm, ko):
+    """Pairs (p, q) whose key occurs exactly twice among all keys: once for p in P,
+    once for q in M (one sort of every key, labelled by side)."""
+    keys = np.concatenate([kp, km, ko])
+    side = np.concatenate([np.zeros(len(kp), np.int8), np.ones(len(km), np.int8),
+                           np.full(len(ko), 2, np.int8)])
+    owner = np.concatenate([rp, rm, np.zeros(len(ko), dtype=np.intp)])
+    order = np.argsort(keys, kind="stable")
+    ks, ss, os_ = keys[order], side[order], owner[order]
+    n = len(ks)
+    if n < 2:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    same = ks[1:] == ks[:-1]
+    # a run of exactly two: same[i] and not same[i-1] and not same[i+1]
+    prev = np.concatenate([[False], same[:-1]])
+    nxt = np.concatenate([same[1:], [False]])
+    start = np.flatnonzero(same & ~prev & ~nxt)
+    ok = (ss[start] == 0) & (ss[start + 1] == 1)
+    start = start[ok]
+    return os_[start], os_[start + 1]
+
+
+def _keys(Z, rows, done):
+    """Keys of simple rays: each zero set with one *removable* bit removed (one
+    whose loss keeps a face at every finished node: only such keys can be the
+    common zero set of a combinable pair or of its witnesses), as comparable
     scalars; returns (keys, ray index of each key)."""
     if len(rows) == 0:
         return _as_key(np.zeros((0, Z.shape[1]), dtype=np.uint64)), np.zeros(0, dtype=np.intp)
     Zr = Z[rows]
-    bitmat = np.unpackbits(Zr.view(np.uint8), axis=1, bitorder="little")   # (n, 64W)
-    r, pos = np.nonzero(bitmat)
-    K = Zr[r]
-    K[np.arange(len(r)), pos >> 6] ^= np.left_shift(np.uint64(1), (pos & 63).astype(np.uint64))
-    return _as_key(K), rows[r]
+    one, two = np.uint64(1), np.uint64(2)
+    u = Zr & done
+    f = (Zr >> one) & (Zr >> two) & done
+    wild = u & f
+    req_u, req_f = u & ~wild, f & ~wild
+    removable = Zr & ~(req_u | (req_f << one) | (req_f << two))
+    keys, owner = [], []
+    for w in range(Z.shape[1]):
+        col = removable[:, w]
+        present = np.bitwise_or.reduce(col) if len(col) else np.uint64(0)
+        for b in range(64):
+            bit = np.uint64(1) << np.uint64(b)
+            if not present & bit:
+                continue
+            sel = np.flatnonzero(col & bit)
+            K = Zr[sel]
+            K[:, w] ^= bit
+            keys.append(K)
+            owner.append(rows[sel])
+    if not keys:
+        return _as_key(np.zeros((0, Z.shape[1]), dtype=np.uint64)), np.zeros(0, dtype=np.intp)
+    return _as_key(np.concatenate(keys)), np.concatenate(owner)
 
 
 def _as_key(K):

@@ -506,16 +506,17 @@ def plot(records, sizes, budget, path, mu) -> None:
         mk, label = style[e]
         line, = ax.plot(ms, ts, mk, label=label)
         if lm:
-            ax.plot(lm, lt, linestyle="none", marker="^", mfc="none", color=line.get_color(),
-                    markersize=10, label=f"{label}: timed out (lower bound)")
+            ax.plot(lm, lt, linestyle="none", marker="$\\uparrow$", color=line.get_color(),
+                    markersize=14, label=f"{label}: timed out (lower bound)")
     ax.axhline(60, color="grey", lw=0.8, ls=":")
+    ax.text(2 * sizes[0], 60 * 1.15, "60 s", color="grey", fontsize=8)
     ax.set_yscale("log")
     ax.set_xlabel("m (contact nodes)")
     ax.set_ylabel("seconds")
     ax.set_title(f"plug2d (cols {COLS}, taper {TAPER:g}°), mu = {mu:g}")
     ax.set_xticks([2 * r for r in sizes])
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
