@@ -178,12 +178,8 @@ def _check_builtin(kind: str, params: dict) -> None:
 
 def array(value, key: str, ndim: int | None = None) -> np.ndarray:
     """A finite float array from a scene value, or a SceneError naming key."""
+    from .model import as_float_array
     try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise SceneError(f"{key}: not a numeric array (ragged rows or non-numbers)") from None
-    if ndim is not None and a.ndim != ndim:
-        raise SceneError(f"{key}: expected a {ndim}-D array, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise SceneError(f"{key}: contains NaN or infinite values")
-    return a
+        return as_float_array(value, key, ndim)
+    except ValueError as e:
+        raise SceneError(str(e)) from None

@@ -31,7 +31,7 @@ def q4_element_stiffness(Xe: np.ndarray, E, nu, t, first: int = 0, key: str = "m
     Xe: (ne, 4, 2) corner coordinates, counter-clockwise; E, nu, t: (ne,) arrays.
     ValueError if det J <= 0 at a Gauss point (element index reported as first + local index).
     """
-    J = np.einsum("eai,gaj->egij", Xe, _DN)                              # (ne, 4, 2, 2) dx_i/dxi_j
+    J = Xe.transpose(0, 2, 1)[:, None] @ _DN[None]                      # (ne, 4, 2, 2) dx_i/dxi_j
     det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]      # (ne, 4)
     size = np.ptp(Xe, axis=1).max(axis=1) ** 2                           # element scale^2
     bad = np.flatnonzero(np.any(det <= 1e-14 * size[:, None], axis=1))
@@ -39,26 +39,25 @@ def q4_element_stiffness(Xe: np.ndarray, E, nu, t, first: int = 0, key: str = "m
         e = int(bad[0])
         raise ValueError(f"{key}: element {first + e} has a non-positive Jacobian (det J = {det[e].min():.3g}); "
                          "corners must be counter-clockwise and the element convex")
-    inv = np.empty_like(J)
-    inv[..., 0, 0] = J[..., 1, 1]
-    inv[..., 1, 1] = J[..., 0, 0]
-    inv[..., 0, 1] = -J[..., 0, 1]
-    inv[..., 1, 0] = -J[..., 1, 0]
-    inv /= det[..., None, None]
-    dNx = np.einsum("gaj,egji->egai", _DN, inv)                          # (ne, 4, 4, 2) dN_a/dx_i
+    # dN_a/dx = (J11 dN_a/dxi - J10 dN_a/deta) / det,  dN_a/dy = (-J01 dN_a/dxi + J00 dN_a/deta) / det
+    d0, d1 = _DN[None, :, :, 0], _DN[None, :, :, 1]                     # (1, 4g, 4a)
+    inv = 1.0 / det[..., None]
+    Nx = (J[..., 1, 1, None] * d0 - J[..., 1, 0, None] * d1) * inv      # (ne, 4g, 4a)
+    Ny = (J[..., 0, 0, None] * d1 - J[..., 0, 1, None] * d0) * inv
+    w = det * t[:, None]                                                 # Gauss weights are 1
+    NxT, NyT = (Nx * w[..., None]).transpose(0, 2, 1), (Ny * w[..., None]).transpose(0, 2, 1)
+    Pxx, Pyy, Pxy = NxT @ Nx, NyT @ Ny, NxT @ Ny                         # (ne, 4, 4): sum_g w N?_a N?_b
+    Pyx = Pxy.transpose(0, 2, 1)
+    c = (E / (1.0 - nu ** 2))[:, None, None]
+    g = ((1.0 - nu) / 2.0)[:, None, None]
+    nu_ = nu[:, None, None]
     ne = Xe.shape[0]
-    B = np.zeros((ne, 4, 3, 8))
-    B[:, :, 0, 0::2] = dNx[..., 0]
-    B[:, :, 1, 1::2] = dNx[..., 1]
-    B[:, :, 2, 0::2] = dNx[..., 1]
-    B[:, :, 2, 1::2] = dNx[..., 0]
-    c = E / (1.0 - nu ** 2)
-    D = np.zeros((ne, 3, 3))
-    D[:, 0, 0] = D[:, 1, 1] = c
-    D[:, 0, 1] = D[:, 1, 0] = c * nu
-    D[:, 2, 2] = c * (1.0 - nu) / 2.0
-    DB = D[:, None] @ B                                                  # (ne, 4, 3, 8)
-    ke = np.einsum("egki,egkj,eg->eij", B, DB, det * t[:, None], optimize=True)
+    ke = np.empty((ne, 4, 2, 4, 2))
+    ke[:, :, 0, :, 0] = c * (Pxx + g * Pyy)
+    ke[:, :, 1, :, 1] = c * (Pyy + g * Pxx)
+    ke[:, :, 0, :, 1] = c * (nu_ * Pxy + g * Pyx)
+    ke[:, :, 1, :, 0] = c * (nu_ * Pyx + g * Pxy)
+    ke = ke.reshape(ne, 8, 8)
     return 0.5 * (ke + ke.transpose(0, 2, 1))
 
 
