@@ -486,7 +486,7 @@ def plot(records, sizes, budget, path, mu) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig, ax = plt.subplots(figsize=(10, 4.8))
     style = {"ours_enumerate": ("o-", "ours, enumerate (float)"),
              "ours_run_scene": ("s-", "ours, run_scene (mu_c global)"),
              "ours_exact": ("^-", "ours, exact arithmetic"),
@@ -516,7 +516,7 @@ def plot(records, sizes, budget, path, mu) -> None:
     ax.set_title(f"plug2d (cols {COLS}, taper {TAPER:g}°), mu = {mu:g}")
     ax.set_xticks([2 * r for r in sizes])
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
