@@ -259,13 +259,20 @@ def _adjacent_pairs(P, M, Z, done, d, bits, stats):
         out_p.append(pi[good])
         out_q.append(qi[good])
     # pairs with a degenerate ray: brute force, witnesses among all rays
-    dp, dm = P[~simple[P]], M[~simple[M]]
-    for a_, b_ in ((dp, M), (P[simple[P]], dm)):
-        if len(a_) and len(b_):
-            pi, qi = _candidates(a_, b_, Z, done, d, bits)
-            pi, qi = _adjacent(pi, qi, Z, Z, stats)
-            out_p.append(pi)
-            out_q.append(qi)
+    # (a witness of such a pair shares >= d-2 zeros with its degenerate member g)
+    for g in P[~simple[P]]:
+        pi, qi = _candidates(np.array([g]), M, Z, done, d, bits)
+        near = np.bitwise_count(Z & Z[g]).sum(axis=1, dtype=np.int64) >= d - 2
+        pi, qi = _adjacent(pi, qi, Z, Z[near], stats)
+        out_p.append(pi)
+        out_q.append(qi)
+    sp = P[simple[P]]
+    for g in M[~simple[M]]:
+        pi, qi = _candidates(sp, np.array([g]), Z, done, d, bits)
+        near = np.bitwise_count(Z & Z[g]).sum(axis=1, dtype=np.int64) >= d - 2
+        pi, qi = _adjacent(pi, qi, Z, Z[near], stats)
+        out_p.append(pi)
+        out_q.append(qi)
     if not out_p:
         return empty, empty
     return np.concatenate(out_p), np.concatenate(out_q)
