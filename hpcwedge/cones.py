@@ -43,8 +43,11 @@ def maximal_cones(gap: np.ndarray, load: np.ndarray, wedged: np.ndarray) -> list
     if R == 0:
         return []
     sig = np.hstack([gap, load])
-    classes, inverse = np.unique(sig, axis=0, return_inverse=True)
+    packed = np.ascontiguousarray(np.packbits(sig, axis=1))        # rows of bytes: a cheap unique
+    _, first, inverse = np.unique(packed.view(np.dtype((np.void, packed.shape[1]))).ravel(),
+                                  return_index=True, return_inverse=True)
     inverse = inverse.ravel()
+    classes = sig[first]
     cg, cl = classes[:, :m], classes[:, m:]
     adj = cross_complementary(cg, cl, cg, cl)
     G = nx.Graph()
