@@ -36,7 +36,7 @@ def build_model(scene: Scene) -> Model:
                 raise SceneError(f"model.nodes: {nodes.shape[1]} coordinates per node, scene dim = {scene.dim}")
             return truss.truss_model(nodes, m["bars"], m.get("EA", 1.0), m.get("supports", []),
                                      c["nodes"], c["normals"], c.get("tangents"))
-        return getattr(library, scene.kind)(**scene.model)
+        return library.builtin(scene.kind, scene.model)
     except SceneError:
         raise
     except (ValueError, TypeError, IndexError) as e:

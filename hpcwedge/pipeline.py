@@ -97,10 +97,10 @@ def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
             dd = complementary_rays(A, m, exact=scene.exact, progress=progress)
             progress.close()
             _fill_rays(run, dd, param, m, plan.cones)
-            if plan.cones:
-                stages.append("cones") if "cones" not in stages else None
             stats["dd"].append({"mu": run.mu, **dd.stats})
         timings["enumerate"] = time.perf_counter() - t
+        if plan.cones:
+            stages.append("cones")
 
     if plan.mu_c_cones or plan.mu_c_global:
         t = time.perf_counter()

@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-BUILTINS = ("vgroove_bar", "plug2d", "plug3d", "block2d")
-KINDS = ("stiffness", "truss", "mesh") + BUILTINS
-BUILTIN_DIM = {"vgroove_bar": 2, "plug2d": 2, "block2d": 2, "plug3d": 3}
+from .models.library import BUILTIN_DIM, BUILTINS  # the one table of built-ins
+
+KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 
 TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
@@ -163,8 +163,7 @@ def _unknown(table, allowed, prefix):
 
 
 def _check_builtin(kind: str, params: dict) -> None:
-    from .models import library
-    sig = inspect.signature(getattr(library, kind))
+    sig = inspect.signature(BUILTINS[kind])
     for k, v in params.items():
         if k not in sig.parameters:
             raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(sig.parameters)})")
