@@ -28,42 +28,99 @@ class BnBStats:
     extra: dict = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class Subtree:
+    """A partial sign pattern: the first `depth` nodes of the search order are
+    fixed, node i to contact when bit i of `contact` is set, to gap when bit i
+    of `gap` is set. Small and picklable: the unit of work the parallel layer
+    moves around and the checkpoint stores (three integers)."""
+
+    depth: int
+    contact: int = 0
+    gap: int = 0
+
+    def masks(self, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """(zero_u, zero_r) boolean masks over the m nodes."""
+        bits = 1 << np.arange(m, dtype=object)
+        return (np.array([bool(self.contact & b) for b in bits], dtype=bool),
+                np.array([bool(self.gap & b) for b in bits], dtype=bool))
+
+
+@dataclass
+class Explored:
+    """What one call of PatternTree.explore produced: the feasible full
+    patterns found, the roots of the subtrees left open (budget spent), stats."""
+
+    found: list[Subtree]
+    open: list[Subtree]
+    stats: BnBStats
+
+
+class PatternTree:
+    """The sign-pattern search tree of one problem at one mu, explored by
+    subtrees: a pure function of (problem, mu, order), resumable from any set
+    of open subtree roots. Node order: `order` (default 0..m-1)."""
+
+    def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
+                 order: list[int] | None = None):
+        self.param, self.m, self.mu, self.friction = param, m, mu, friction
+        self.order = list(range(m)) if order is None else list(order)
+
+    def root(self) -> Subtree:
+        return Subtree(0)
+
+    def explore(self, subtree: Subtree, budget: int | None = None,
+                first_only: bool = False) -> Explored:
+        """Depth-first from `subtree`, contact before gap, for at most `budget`
+        tree nodes (None: to the end). Returns found patterns in discovery order
+        and the open subtrees (their union with the explored part is `subtree`)."""
+        m, param = self.m, self.param
+        stats = BnBStats()
+        found: list[Subtree] = []
+        stack = [(subtree, None)]
+        while stack:
+            if budget is not None and stats.nodes >= budget:
+                break
+            node, x = stack.pop()
+            stats.nodes += 1
+            if x is None:
+                stats.solves += 1
+                zu, zr = node.masks(m)
+                status, x = lp_feasible(pattern_rows(param, m, zu, zr, self.friction),
+                                        self.mu if self.friction else 0.0)
+                if status == INFEASIBLE:
+                    continue
+                if x is None:
+                    stats.undecided += 1
+            else:
+                stats.skipped += 1
+            if node.depth == m:
+                found.append(node)
+                if first_only:
+                    stack.clear()
+                    break
+                continue
+            i = self.order[node.depth]
+            kids = []
+            for contact in (True, False):
+                kid = Subtree(node.depth + 1, node.contact | (1 << i) if contact else node.contact,
+                              node.gap if contact else node.gap | (1 << i))
+                meets = x is not None and _meets(param, m, x, i, contact)
+                kids.append((kid, x if meets else None))
+            stack.extend(reversed(kids))
+        return Explored(found, [node for node, _ in reversed(stack)], stats)
+
+
 def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = True,
                   first_only: bool = False, stats: BnBStats | None = None,
                   order: list[int] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Feasible full patterns (zero_u, zero_r) at mu, depth first; in contact-
-    before-gap order at each level (so the list is in a canonical order)."""
-    stats = stats if stats is not None else BnBStats()
-    order = list(range(m)) if order is None else list(order)
-    found = []
-    zu0, zr0 = np.zeros(m, dtype=bool), np.zeros(m, dtype=bool)
-    stack = [(0, zu0, zr0, None)]
-    while stack:
-        depth, zu, zr, x = stack.pop()
-        stats.nodes += 1
-        if x is None:
-            stats.solves += 1
-            status, x = lp_feasible(pattern_rows(param, m, zu, zr, friction), mu if friction else 0.0)
-            if status == INFEASIBLE:
-                continue
-            if x is None:
-                stats.undecided += 1
-        else:
-            stats.skipped += 1
-        if depth == m:
-            found.append((zu, zr))
-            if first_only:
-                break
-            continue
-        i = order[depth]
-        kids = []
-        for contact in (True, False):
-            czu, czr = zu.copy(), zr.copy()
-            (czu if contact else czr)[i] = True
-            meets = x is not None and _meets(param, m, x, i, contact)
-            kids.append((depth + 1, czu, czr, x if meets else None))
-        stack.extend(reversed(kids))
-    return found
+    """Feasible full patterns (zero_u, zero_r) at mu, depth first, in contact-
+    before-gap order at each level (a canonical order), serially."""
+    out = PatternTree(param, m, mu, friction, order).explore(Subtree(0), first_only=first_only)
+    if stats is not None:
+        for k in ("solves", "skipped", "undecided", "nodes"):
+            setattr(stats, k, getattr(stats, k) + getattr(out.stats, k))
+    return [node.masks(m) for node in out.found]
 
 
 def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool) -> bool:
