@@ -18,9 +18,11 @@ test: setup
 
 bench: setup-bench
 	$(PY) scripts/bench_2d.py
+	$(PY) scripts/bench_mu_c.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick
+	$(PY) scripts/bench_mu_c.py --quick
 
 check: setup
 	../shared/acceptance/check_public
