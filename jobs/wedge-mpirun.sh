@@ -25,13 +25,13 @@ on_signal() {
   if [ -z "$stop_sig" ]; then
     stop_sig=$1 stop_t=$SECONDS
     if [ -n "$child" ]; then
-      log "signal $1 received: forwarding USR1 to mpirun (pid $child); the master checkpoints"
+      log "signal $1 received: forwarding USR1 to ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints"
       kill -USR1 "$child" 2>/dev/null
     else
       log "signal $1 received before the launch"
     fi
   elif [ -n "$child" ] && [ "$term_t" = 0 ]; then
-    log "signal $1 received again: SIGTERM to mpirun now"
+    log "signal $1 received again: SIGTERM to ${LAUNCH[0]:-mpirun} now"
     term_t=$SECONDS
     kill -TERM "$child" 2>/dev/null
   fi
@@ -107,11 +107,11 @@ while kill -0 "$child" 2>/dev/null; do
     wait "$child"
   else
     if [ "$term_t" = 0 ] && [ $((SECONDS - stop_t)) -ge "$GRACE" ]; then
-      log "still running ${GRACE}s after the signal: SIGTERM to mpirun"
+      log "still running ${GRACE}s after the signal: SIGTERM to ${LAUNCH[0]}"
       term_t=$SECONDS
       kill -TERM "$child" 2>/dev/null
     elif [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge 30 ]; then
-      log "mpirun ignored SIGTERM for 30 s: SIGKILL"
+      log "${LAUNCH[0]} ignored SIGTERM for 30 s: SIGKILL"
       kill -KILL "$child" 2>/dev/null
     fi
     sleep 1 & wait $!

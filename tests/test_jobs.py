@@ -143,6 +143,17 @@ def test_sbatch_matches_direct_run(slurm, scenes, tmp_path):
     assert "already complete" in log2 and "launch: " not in log2
 
 
+def test_sbatch_with_srun_pmix(slurm, scenes, tmp_path):
+    """HPCWEDGE_MPIRUN="srun --mpi=pmix": the ranks started by SLURM itself."""
+    scene, want = scenes["small"]
+    jid = submit(slurm, tmp_path, scene, "small.h5", HPCWEDGE_MPIRUN="srun --mpi=pmix")
+    info = slurm.wait_gone(jid, timeout=300)
+    log = read(tmp_path / f"job-{jid}.out")
+    assert info.get("JobState") == "COMPLETED", log
+    assert "launch: srun --mpi=pmix -n 2 " in log and "done:" in log
+    assert_same_result(show(str(tmp_path / "small.h5")), want)
+
+
 def wait_running(slurm, jid, logpath, timeout=120):
     """Until the job's log shows the launch, then a little longer so the ranks are at work."""
     slurm.wait_for(lambda: "launch: " in read(logpath), timeout, f"job {jid} to launch mpirun")
@@ -173,6 +184,21 @@ def test_warning_signal_requeues_and_resumes(slurm, scenes, tmp_path):
     assert_same_result(show(str(tmp_path / "long.h5")), want)
     print(f"signal -> requeued: {t_requeued - t_sig:.1f} s, requeued -> done: {t_done - t_requeued:.1f} s")
     print(log)
+
+
+def test_scancel_is_not_requeued(slurm, scenes, tmp_path):
+    """A user's scancel (SIGTERM to the job) stops the run; the job does not come back."""
+    scene, _ = scenes["long"]
+    jid = submit(slurm, tmp_path, scene, "cancel.h5")
+    logpath = tmp_path / f"job-{jid}.out"
+    wait_running(slurm, jid, logpath)
+    slurm.run("scancel", jid)
+    info = slurm.wait_gone(jid, timeout=60)
+    time.sleep(1.0)
+    log = read(logpath)
+    assert info.get("JobState") == "CANCELLED" and info.get("Restarts") == "0", log
+    assert "signal TERM received" in log and "requeue:" not in log, log
+    assert not os.path.exists(tmp_path / "cancel.h5")
 
 
 def test_dependency_chain_without_requeue(slurm, scenes, tmp_path):
