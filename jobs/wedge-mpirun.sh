@@ -21,6 +21,7 @@
 
 log() { printf '%s [wedge-mpirun] %s\n' "$(date '+%F %T')" "$*" >&2; }
 stop_sig="" stop_t=0 term_t=0 child=""
+# shellcheck disable=SC2317  # called from the traps
 on_signal() {
   if [ -z "$stop_sig" ]; then
     stop_sig=$1 stop_t=$SECONDS
@@ -44,12 +45,12 @@ set -uo pipefail
 die() { log "error: $1"; exit "${2:-2}"; }
 usage="usage: jobs/wedge-mpirun.sh [-n RANKS] [--no-resume] SCENE.toml [RESULT.h5]"
 
-RANKS="" RESUME=--resume ARGS=()
+RANKS="" RESUME=(--resume) ARGS=()
 while [ $# -gt 0 ]; do
   case "$1" in
     -n|--np) [ $# -ge 2 ] || die "$usage"; RANKS=$2; shift 2 ;;
     -n*) RANKS=${1#-n}; shift ;;
-    --no-resume) RESUME=""; shift ;;
+    --no-resume) RESUME=(); shift ;;
     -h|--help) sed -n '2,20s/^# \{0,1\}//p' "$0"; exit 0 ;;
     --) shift; ARGS+=("$@"); break ;;
     -*) die "unknown option $1; $usage" ;;
@@ -94,7 +95,7 @@ GRACE=${HPCWEDGE_STOP_GRACE:-30}
 SETSID=()
 command -v setsid >/dev/null && SETSID=(setsid)
 
-CMD=("${LAUNCH[@]}" -n "$RANKS" "${EXTRA[@]}" "$PY" -m hpcwedge run "$SCENE" -o "$RESULT" $RESUME)
+CMD=("${LAUNCH[@]}" -n "$RANKS" "${EXTRA[@]}" "$PY" -m hpcwedge run "$SCENE" -o "$RESULT" "${RESUME[@]}")
 log "start: $RANKS rank(s) on $CPUS core(s); hpcwedge $PKG"
 if [ -n "$stop_sig" ]; then log "stopped by SIG$stop_sig before the launch"; exit 130; fi
 "${SETSID[@]}" "${CMD[@]}" < /dev/null &
