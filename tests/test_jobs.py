@@ -60,7 +60,7 @@ def py_env(**extra):
 
 def job_env(**extra):
     """What the scripts need to find this checkout's code with this interpreter."""
-    return {"HPCWEDGE_PYTHON": sys.executable, "HPCWEDGE_STOP_GRACE": "5", **extra}
+    return {"HPCWEDGE_PYTHON": sys.executable, "HPCWEDGE_STOP_GRACE": "3", **extra}
 
 
 def show(path):
