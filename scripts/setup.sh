@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Install what hpcwedge needs, once; a second run only checks a stamp (< 1 s).
 #
-#   scripts/setup.sh            core: Open MPI, PETSc (system), .venv, petsc4py, package
+#   scripts/setup.sh            core: Open MPI, PETSc (system), SLURM (for the job tests), .venv, petsc4py, package
 #   scripts/setup.sh bench      also the benchmark peers (pycddlib on libcdd/libgmp)
 #
 # Cluster path: if PETSC_DIR (and optionally PETSC_ARCH) is set, or petsc4py
@@ -41,6 +41,9 @@ if [ -n "${PETSC_DIR:-}" ] || have_petsc4py "$PY"; then SYSTEM_PETSC=0; fi
 if command -v apt-get >/dev/null; then
   apt_install openmpi-bin libopenmpi-dev make gcc g++ gfortran pkg-config
   [ $SYSTEM_PETSC = 1 ] && apt_install petsc-dev
+  # tests/test_jobs.py runs jobs/wedge.sbatch on a one-node SLURM it starts itself
+  # (no service is configured or started here; auth/none, so munge stays idle).
+  apt_install slurmctld slurmd slurm-client || log "SLURM not installed: the SLURM job tests will skip"
   [ "$EXTRA" = bench ] && apt_install libcdd-dev libgmp-dev
 fi
 

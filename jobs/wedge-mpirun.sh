@@ -1,0 +1,141 @@
+#!/bin/bash
+# hpcwedge on a workstation (no batch system): mpirun with sensible defaults.
+#
+#   jobs/wedge-mpirun.sh [-n RANKS] [--no-resume] SCENE.toml [RESULT.h5]
+#
+#   -n RANKS      MPI ranks (default: the number of CPUs this process may use);
+#                 --oversubscribe is added when RANKS exceeds the cores
+#   --no-resume   start from scratch even if a checkpoint exists
+#   RESULT.h5     default: SCENE's base name with .h5, in the current directory
+#
+# Runs `mpirun -n RANKS python -m hpcwedge run SCENE -o RESULT --resume`: a
+# rerun continues from the checkpoint beside RESULT (or starts fresh when there
+# is none). Ctrl-C / SIGTERM / SIGHUP: the run gets SIGUSR1 (the master writes a
+# checkpoint and stops), then SIGTERM after HPCWEDGE_STOP_GRACE seconds (default
+# 30); a second Ctrl-C sends SIGTERM at once. mpirun runs in its own session so
+# that the terminal's Ctrl-C reaches only this script: Open MPI's mpirun would
+# answer a direct SIGINT/SIGTERM by killing the ranks a second later.
+#
+# Environment: HPCWEDGE_ROOT, HPCWEDGE_PYTHON, HPCWEDGE_MPIRUN,
+# HPCWEDGE_MPIRUN_ARGS, HPCWEDGE_STOP_GRACE (as for jobs/wedge.sbatch).
+
+log() { printf '%s [wedge-mpirun] %s\n' "$(date '+%F %T')" "$*" >&2; }
+stop_sig="" stop_t=0 term_t=0 child=""
+# shellcheck disable=SC2317  # called from the traps
+on_signal() {
+  if [ -z "$stop_sig" ]; then
+    stop_sig=$1 stop_t=$SECONDS
+    if [ -n "$child" ]; then
+      log "signal $1 received: forwarding USR1 to ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints"
+      kill -USR1 "$child" 2>/dev/null
+    else
+      log "signal $1 received before the launch"
+    fi
+  elif [ -n "$child" ] && [ "$term_t" = 0 ]; then
+    log "signal $1 received again: SIGTERM to ${LAUNCH[0]:-mpirun} now"
+    term_t=$SECONDS
+    kill -TERM "$child" 2>/dev/null
+  fi
+}
+trap 'on_signal INT' INT
+trap 'on_signal TERM' TERM
+trap 'on_signal HUP' HUP
+
+set -uo pipefail
+die() { log "error: $1"; exit "${2:-2}"; }
+usage="usage: jobs/wedge-mpirun.sh [-n RANKS] [--no-resume] SCENE.toml [RESULT.h5]"
+
+RANKS="" RESUME=(--resume) ARGS=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    -n|--np) [ $# -ge 2 ] || die "$usage"; RANKS=$2; shift 2 ;;
+    -n*) RANKS=${1#-n}; shift ;;
+    --no-resume) RESUME=(); shift ;;
+    -h|--help) sed -n '2,20s/^# \{0,1\}//p' "$0"; exit 0 ;;
+    --) shift; ARGS+=("$@"); break ;;
+    -*) die "unknown option $1; $usage" ;;
+    *) ARGS+=("$1"); shift ;;
+  esac
+done
+[ ${#ARGS[@]} -ge 1 ] && [ ${#ARGS[@]} -le 2 ] || die "$usage"
+SCENE=${ARGS[0]}
+RESULT=${ARGS[1]:-$(basename "${SCENE%.toml}").h5}
+[ -r "$SCENE" ] || die "scene $SCENE: not readable"
+mkdir -p "$(dirname "$RESULT")" || die "cannot create the directory of $RESULT"
+
+CPUS=$(nproc 2>/dev/null || echo 1)
+CORES=$(lscpu -p=CORE,SOCKET 2>/dev/null | grep -v '^#' | sort -u | wc -l)
+[ "${CORES:-0}" -ge 1 ] && [ "$CORES" -lt "$CPUS" ] && CPUS=$CORES   # Open MPI counts cores, not threads
+RANKS=${RANKS:-$CPUS}
+[[ "$RANKS" =~ ^[1-9][0-9]*$ ]] || die "-n $RANKS: not a positive integer"
+
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+ROOT=${HPCWEDGE_ROOT:-}
+[ -z "$ROOT" ] && [ -f "$here/hpcwedge/__init__.py" ] && ROOT=$here
+if [ -n "$ROOT" ]; then
+  [ -f "$ROOT/hpcwedge/__init__.py" ] || die "HPCWEDGE_ROOT=$ROOT holds no hpcwedge/ package"
+  export PYTHONPATH="$ROOT${PYTHONPATH:+:$PYTHONPATH}"
+fi
+PY=${HPCWEDGE_PYTHON:-}
+if [ -z "$PY" ]; then
+  if [ -n "$ROOT" ] && [ -x "$ROOT/.venv/bin/python" ]; then PY=$ROOT/.venv/bin/python; else PY=python3; fi
+fi
+PKG=$("$PY" -c 'import hpcwedge; print(hpcwedge.__file__)' 2>&1) \
+  || die "$PY cannot import hpcwedge (set HPCWEDGE_PYTHON or HPCWEDGE_ROOT): $PKG"
+
+read -r -a LAUNCH <<< "${HPCWEDGE_MPIRUN:-mpirun}"
+command -v "${LAUNCH[0]}" >/dev/null || die "launcher ${LAUNCH[0]} not found (apt-get install openmpi-bin?)"
+read -r -a EXTRA <<< "${HPCWEDGE_MPIRUN_ARGS:-}"
+if [ "$RANKS" -gt "$CPUS" ]; then
+  EXTRA=(--oversubscribe "${EXTRA[@]}")
+fi
+[ "$(id -u)" = 0 ] && export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
+GRACE=${HPCWEDGE_STOP_GRACE:-30}
+SETSID=()
+command -v setsid >/dev/null && SETSID=(setsid)
+
+CMD=("${LAUNCH[@]}" -n "$RANKS" "${EXTRA[@]}" "$PY" -m hpcwedge run "$SCENE" -o "$RESULT" "${RESUME[@]}")
+log "start: $RANKS rank(s) on $CPUS core(s); hpcwedge $PKG"
+if [ -n "$stop_sig" ]; then log "stopped by SIG$stop_sig before the launch"; exit 130; fi
+"${SETSID[@]}" "${CMD[@]}" < /dev/null &
+child=$!
+log "launch: ${CMD[*]} (mpirun pid $child)"
+[ -n "$stop_sig" ] && kill -USR1 "$child" 2>/dev/null
+
+while kill -0 "$child" 2>/dev/null; do
+  if [ -z "$stop_sig" ]; then
+    wait "$child"
+  else
+    if [ "$term_t" = 0 ] && [ $((SECONDS - stop_t)) -ge "$GRACE" ]; then
+      log "still running ${GRACE}s after the signal: SIGTERM to ${LAUNCH[0]}"
+      term_t=$SECONDS
+      kill -TERM "$child" 2>/dev/null
+    elif [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge 30 ]; then
+      log "${LAUNCH[0]} ignored SIGTERM for 30 s: SIGKILL"
+      kill -KILL "$child" 2>/dev/null
+    fi
+    sleep 1 & wait $!
+  fi
+done
+wait "$child"; rc=$?
+
+complete=$("$PY" - "$SCENE" "$RESULT" <<'PYEOF' 2>/dev/null
+import os, sys
+from hpcwedge.results import read_result
+from hpcwedge.scene import load_scene
+scene, result = sys.argv[1:3]
+r = read_result(result, with_rays=False) if os.path.exists(result) else {}
+print(int(bool(r.get("complete")) and r.get("scene_hash") == load_scene(scene).hash))
+PYEOF
+)
+if [ $rc = 0 ] && [ "$complete" = 1 ]; then
+  log "done: $RESULT${stop_sig:+ (completed before stopping)}"; exit 0
+fi
+if [ -n "$stop_sig" ]; then
+  log "stopped by SIG$stop_sig (run exit $rc); rerun the same command to resume"
+  case "$stop_sig" in INT) exit 130 ;; HUP) exit 129 ;; *) exit 143 ;; esac
+fi
+if [ $rc = 0 ]; then log "error: the run exited 0 but $RESULT is not a complete result"; exit 1; fi
+log "error: the run failed (exit $rc)"
+exit $rc
