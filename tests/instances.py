@@ -33,3 +33,47 @@ def random_problem(rng: np.random.Generator, m: int, free: bool) -> ContactProbl
     G = rng.standard_normal((B.shape[1], B.shape[1]))
     K = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
     return ContactProblem(2, 0.5 * (K + K.T), N)
+
+
+def frames_3d(rng: np.random.Generator, m: int) -> np.ndarray:
+    """(m, 3, 3) random right-handed contact frames (n, t1, t2): normals pointing
+    roughly upward into the body, t1 at a random angle in the tangent plane."""
+    F = np.empty((m, 3, 3))
+    for i in range(m):
+        v = rng.standard_normal(3)
+        v[2] = abs(v[2]) + 0.3
+        n = v / np.linalg.norm(v)
+        a = rng.standard_normal(3)
+        t1 = a - (a @ n) * n
+        t1 /= np.linalg.norm(t1)
+        F[i] = [n, t1, np.cross(n, t1)]
+    return F
+
+
+def rigid_modes_local_3d(points: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """3D rigid modes (3 translations, 3 rotations about the origin) of contact points,
+    in the local frames, block-ordered [n.., t1.., t2..]: (3m, 6)."""
+    modes = []
+    for k in range(6):
+        e = np.zeros(3)
+        e[k % 3] = 1.0
+        v = np.tile(e, (len(points), 1)) if k < 3 else np.cross(e, points)
+        modes.append(np.concatenate([(frames[:, a, :] * v).sum(1) for a in range(3)]))
+    return np.stack(modes, axis=1)
+
+
+def random_problem_3d(rng: np.random.Generator, m: int, free: bool) -> ContactProblem:
+    """A random 3D problem: supported (K SPD) or free (K PSD whose null space is the
+    rigid modes of random contact points and frames: 6 for m >= 3, fewer below)."""
+    n = 3 * m
+    if not free:
+        G = rng.standard_normal((n, n))
+        return ContactProblem(3, G @ G.T + 0.2 * np.eye(n), np.zeros((n, 0)))
+    pts = rng.uniform(-1, 1, size=(m, 3))
+    M = rigid_modes_local_3d(pts, frames_3d(rng, m))
+    U, s, _ = np.linalg.svd(M, full_matrices=False)
+    N = U[:, s > 1e-10 * s[0]]
+    B = sla.null_space(N.T)
+    G = rng.standard_normal((B.shape[1], B.shape[1]))
+    K = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
+    return ContactProblem(3, 0.5 * (K + K.T), N)
