@@ -398,7 +398,9 @@ def decide(rows: Rows | ConeRows, mu: float, counts: dict | None = None,
         _count(counts, "eq_infeasible")          # sum r_n vanishes on the pattern's subspace
         return Decision(INFEASIBLE)
     for attempt in range(ATTEMPTS):
-        name, x, cert, positive = _clarabel(rows, mu, attempt, objective)
+        # retries are plain feasibility problems (an optimum on the boundary is the
+        # first thing to miss a verification)
+        name, x, cert, positive = _clarabel(rows, mu, attempt, objective if attempt == 0 else None)
         tag = f"retry{attempt}_" if attempt else ""
         _count(counts, tag + name)
         if x is not None:

@@ -192,15 +192,18 @@ def _mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: 
             out.undecided += 1       # conservative: taken as feasible
         return d
 
-    first = feasible_at(rows, mu_max if mu_hi is None else mu_hi)
-    if first.status == INFEASIBLE:
-        if mu_hi is None or mu_hi >= mu_max:
-            return out
-        first = feasible_at(rows, mu_max)
-        if first.status == INFEASIBLE:
-            return out
-        mu_hi = mu_max
     hi = float(mu_max if mu_hi is None else mu_hi)
+    first = feasible_at(rows, hi)
+    if first.status != FEASIBLE and hi < mu_max:
+        # mu_hi was not confirmed (a pattern taken as feasible there on a tolerance
+        # or an undecided status): start from mu_max instead
+        alt = feasible_at(rows, mu_max)
+        if alt.status == INFEASIBLE:
+            return out
+        if first.status == INFEASIBLE or alt.status == FEASIBLE:
+            first, hi = alt, float(mu_max)
+    if first.status == INFEASIBLE:
+        return out
     if method != "accurate":
         out.mu_c = _bisect(lambda mu: feasible_at(rows, mu).status != INFEASIBLE, 0.0, hi, tol)[1]
         return out
@@ -254,20 +257,37 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, feasible_at, out, depth):
         pol = kkt_polish(rows, x, mu)
         if pol is None:
             return hi, False, None
-    mu_s, support, x_s = pol
+    mu_s, support, x_s, signed = pol
     if depth >= m:
-        return mu_s, True, x_s
+        return mu_s, signed, x_s
     zr_sub = zr.copy()
     zr_sub[rows.nodes[support]] = True
     sub = pattern_rows(param, m, zu, zr_sub)
-    d = feasible_at(sub, mu_s)
+    d = feasible_at(sub, mu_s * (1 + 1e-12))
     if d.status == INFEASIBLE:
-        return mu_s, True, x_s
-    mu_sub, polished_sub, x_sub = _accurate_3d(param, m, zu, zr_sub, sub, mu_s, d, feasible_at, out, depth + 1)
+        if signed:
+            return mu_s, True, x_s
+        return _fallback_3d(rows, hi, feasible_at, out)
+    mu_sub, polished_sub, x_sub = _accurate_3d(param, m, zu, zr_sub, sub, mu_s * (1 + 1e-12), d,
+                                               feasible_at, out, depth + 1)
     _count(out.statuses, "polish_support_recursions")
+    if signed:
+        return (mu_sub, polished_sub, x_sub) if mu_sub < mu_s else (mu_s, True, x_s)
+    # unsigned apex point: accepted when the sub-pattern (apex cones unloaded) has
+    # the same value, polished
+    _count(out.statuses, "polish_apex_by_subpattern")
+    if polished_sub and abs(mu_sub - mu_s) <= 1e-10 * mu_s:
+        return min(mu_s, mu_sub), True, x_s
     if mu_sub < mu_s:
-        return mu_sub, polished_sub, x_sub
-    return mu_s, True, x_s
+        return mu_sub, False, x_sub
+    return _fallback_3d(rows, hi, feasible_at, out)
+
+
+def _fallback_3d(rows, hi, feasible_at, out):
+    """Bisection to BRACKET_RTOL: (upper end, False, None)."""
+    _count(out.statuses, "mu_c_unpolished")
+    lo, hi = _bisect(lambda mu: feasible_at(rows, mu).status != INFEASIBLE, 0.0, hi, BRACKET_RTOL)
+    return hi, False, None
 
 
 def max_ratio(rows: ConeRows, x: np.ndarray) -> float:
@@ -288,7 +308,9 @@ def max_ratio(rows: ConeRows, x: np.ndarray) -> float:
 def dinkelbach(rows: ConeRows, x: np.ndarray, mu_hi: float, out: MuC) -> tuple[float, np.ndarray]:
     """Scaled Dinkelbach iterations (module doc) from a feasible x: (mu, x) with
     mu = max_ratio(x) the least upper bound reached."""
-    mu = min(max_ratio(rows, x), mu_hi)
+    mu = max_ratio(rows, x)
+    if not math.isfinite(mu):
+        return mu_hi, x
     for _ in range(DINKELBACH_MAX):
         if mu <= 0.0:
             return 0.0, x
@@ -346,8 +368,12 @@ def _dinkelbach_step(rows: ConeRows, mu: float, weights: np.ndarray, out: MuC) -
 def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
                taus: tuple[float, ...] = (1e-6, 1e-4, 1e-8, 1e-3, 1e-2)) -> tuple | None:
     """Newton's method on the KKT system of min mu over the active set at x (module
-    doc): (mu*, support, x*) verified, or None. support: the cone nodes (indices into
-    rows.nodes) with a positive multiplier — below mu* no point loads any of them."""
+    doc): (mu*, support, x*, True) verified, or None. support: the cone nodes (indices
+    into rows.nodes) with a positive multiplier — below mu* no point loads any of them.
+    (mu*, apex nodes, x*, False): a converged point with cones at their apex whose
+    multipliers could not be signed (at an apex the constraint qualification can
+    fail, and KKT multipliers need not exist at a minimum); the caller settles it
+    through the sub-pattern with those nodes unloaded."""
     Z = rows.Z
     w0 = Z.T @ x
     a = rows.rn @ Z                     # (c, p)
@@ -359,6 +385,7 @@ def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
     rt = np.linalg.norm(rtv, axis=1)
     rsize = np.sqrt(rn ** 2 + rt ** 2)
     tried = set()
+    unsigned = None
     for tau, apex_tau in [(t, at) for t in taus for at in (APEX_RTOL, t)]:
         apex = rsize <= apex_tau * max(rsize.max(), 1e-300)
         smooth = ~apex & (rt - mu * rn >= -tau * (mu * np.abs(rn) + rt))
@@ -367,14 +394,26 @@ def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
         if key in tried or not smooth.any():
             continue
         tried.add(key)
-        res = _kkt_newton(a, T, L, nrm, w0, mu, np.flatnonzero(smooth), np.flatnonzero(apex),
-                          np.flatnonzero(lin))
+        S, Ap, Lin = np.flatnonzero(smooth), np.flatnonzero(apex), np.flatnonzero(lin)
+        # only the span V of the active rows matters to the active system: solve in
+        # w = w_perp + V c (elsewhere the Jacobian is singular along every direction
+        # that moves only inactive rows)
+        act = np.vstack([a[S], T[S].reshape(-1, a.shape[1]), a[Ap], T[Ap].reshape(-1, a.shape[1]),
+                         L[Lin], nrm[None, :]])
+        _, sv, vt = np.linalg.svd(act, full_matrices=False)
+        V = vt[:int((sv > 1e-12 * sv[0]).sum())].T
+        w_perp = w0 - V @ (V.T @ w0)
+        res = _kkt_newton(a @ V, T @ V, L @ V, nrm @ V, V.T @ w0, mu, S, Ap, Lin)
         if res is None:
             continue
-        w, mu_s, support = res
+        c, mu_s, support, signed = res
+        w = w_perp + V @ c
         if violation(rows, mu_s, Z @ w) <= POLISH3_TOL:
-            return mu_s, support, Z @ w
-    return None
+            if signed:
+                return mu_s, support, Z @ w, True
+            if unsigned is None:
+                unsigned = (mu_s, support, Z @ w, False)
+    return unsigned
 
 
 def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, iters: int = 40):
@@ -484,13 +523,11 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, iters: int = 40):
         # signed ones at the converged point (a small conic feasibility problem)
         Tw, nt, t, G = parts(w, mu)
         y = _signed_multipliers(G, a[S] @ w, E, nrm, nA, len(Lin), mu)
-        if y is None:
-            return None
-        lam, gam = y
-        support = _signed_support(lam, gam, S, Ap, nA, len(Lin), mu)
+        if y is not None:
+            support = _signed_support(y[0], y[1], S, Ap, nA, len(Lin), mu)
         if support is None:
-            return None
-    return w, float(mu), support
+            return (w, float(mu), np.asarray(Ap, dtype=int), False) if nA else None
+    return w, float(mu), support, True
 
 
 def _signed_support(lam, gam, S, Ap, nA, nL, mu, rtol: float = 1e-9):

@@ -177,6 +177,16 @@ def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = Tr
     return [node.masks(m) for node in out.found]
 
 
+def _absorb(stats: BnBStats, r) -> None:
+    """Count a mu^c computation (mu_critical.MuC) into the search statistics."""
+    stats.solves += r.lps
+    stats.undecided += r.undecided
+    for k, v in r.statuses.items():
+        stats.statuses[k] = stats.statuses.get(k, 0) + v
+    key = "mu_c_polished" if r.polished else "mu_c_unpolished"
+    stats.extra[key] = stats.extra.get(key, 0) + 1
+
+
 def _bump(counts: dict, key: str) -> None:
     counts[key] = counts.get(key, 0) + 1
 
@@ -191,7 +201,8 @@ def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool,
 
 def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: str = "accurate",
                        tol: float = 1e-6, stats: BnBStats | None = None) -> tuple[float | None, str]:
-    """Least mu with any solution, by branch and bound over patterns with an incumbent.
+    """Least mu with any solution, by branch and bound over patterns with an incumbent
+    (2D and 3D alike).
 
     Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
     r_t free has no solution) or "none_up_to_mu_max".
@@ -207,7 +218,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
             break
         zu, zr = leaf[0]
         r = mu_critical(param, m, zu, zr, mu_hi=bound, method=method, tol=tol)
-        stats.solves += r.lps
+        _absorb(stats, r)
         if r.mu_c is None or (best is not None and r.mu_c >= best):
             break
         best = r.mu_c
@@ -218,7 +229,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     top = best * (1 + 1e-9)
     for zu, zr in sign_patterns(param, m, top, stats=stats):
         r = mu_critical(param, m, zu, zr, mu_hi=top, method=method, tol=tol)
-        stats.solves += r.lps
+        _absorb(stats, r)
         if r.mu_c is not None:
             best = min(best, r.mu_c)
     return best, "found"
