@@ -234,8 +234,9 @@ def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
     return float(v)
 
 
-def _settings(attempt: int):
-    """Clarabel settings of attempts 0..3 (see ATTEMPTS). The rows are unit-scaled
+def _settings(attempt: int, tight: bool = False):
+    """Clarabel settings of attempts 0..3 (see ATTEMPTS); tight: for an optimisation
+    (objective given). The rows are unit-scaled
     already, and Ruiz equilibration on top of that measured worse: on plug3d
     (m = 10, all 1,024 partitions, mu = 0.55 / 0.65 / 1.0) 7 % non-definitive
     statuses with it, none without."""
@@ -247,6 +248,11 @@ def _settings(attempt: int):
     if attempt == 2:
         s.static_regularization_constant = 1e-7
         s.max_iter = 400
+    if tight:
+        # an optimum (the branch and bound's steered solves) lies on the boundary,
+        # where the default 1e-8 tolerances left cone rows 1e-8..4e-8 short of
+        # VERIFY_TOL relative to the reactions (66 of 945 solves on plug3d, mu = 1)
+        s.tol_feas = s.tol_gap_abs = s.tol_gap_rel = 1e-10
     return s
 
 
@@ -298,9 +304,10 @@ def _clarabel(rows: ConeRows, mu: float, attempt: int = 0, objective: np.ndarray
     p = rows.Z.shape[1]
     q = np.zeros(p) if objective is None else rows.Z.T @ objective
     P = _csc_eye(p) if objective is None and attempt == LEAST_NORM_ATTEMPT else _csc_zero(p)
-    if attempt not in _SETTINGS:
-        _SETTINGS[attempt] = _settings(attempt)
-    sol = clarabel.DefaultSolver(P, q, _csc_dense(A), b, cones, _SETTINGS[attempt]).solve()
+    key = (attempt, objective is not None)
+    if key not in _SETTINGS:
+        _SETTINGS[key] = _settings(attempt, tight=objective is not None)
+    sol = clarabel.DefaultSolver(P, q, _csc_dense(A), b, cones, _SETTINGS[key]).solve()
     name = str(sol.status)
     n_lin = rows.lin.shape[0]
     if name == "Solved":
