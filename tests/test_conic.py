@@ -3,74 +3,14 @@ bound == brute force over all 2^m partitions by the SOCP == an independent
 route (a different formulation, in (u, r) with K u = r, and a different solver:
 HiGHS on inscribed / circumscribed pyramids of the friction cones); the status
 policy's answers are verified; the 2D dispatch is the LP."""
-import math
-
 import numpy as np
 import pytest
-from scipy.optimize import linprog
 
 from hpcwedge.conic import (FEASIBLE, INFEASIBLE, UNDECIDED, VERIFY_TOL, ConeRows, Rows, decide, feasible,
                             lp_feasible, pattern_rows, pyramid_rows, violation)
 from hpcwedge.patterns import PatternTree
 from hpcwedge.problem import parametrize
-from instances import random_problem, random_problem_3d
-
-
-def ur_sandwich(prob, contact: np.ndarray, mu: float, sides: int = 64):
-    """Feasibility of the full pattern (contact nodes C, the others gap G) in the
-    variables (u, r) in R^{6m}, K u = r, by HiGHS on pyramids: FEASIBLE when the
-    inscribed pyramids admit a point, INFEASIBLE when the circumscribed ones do
-    not, None in between. Independent of parametrize() and of Clarabel."""
-    m, n = prob.m, prob.n
-    K = prob.K
-    C, G = np.flatnonzero(contact), np.flatnonzero(~contact)
-    eq, ub = [], []
-
-    def row():
-        return np.zeros(2 * n)
-
-    for i in range(n):                          # K u - r = 0
-        r_ = row()
-        r_[:n] = K[i]
-        r_[n + i] = -1.0
-        eq.append(r_)
-    for i in C:                                 # u_n,i = 0
-        r_ = row()
-        r_[i] = 1.0
-        eq.append(r_)
-    for i in G:                                 # r_i = 0, u_n,i >= 0
-        for a in range(3):
-            r_ = row()
-            r_[n + a * m + i] = 1.0
-            eq.append(r_)
-        r_ = row()
-        r_[i] = -1.0
-        ub.append(r_)
-    norm = row()
-    norm[n:n + m] = 1.0
-    th = 2 * np.pi * (np.arange(sides) + 0.5) / sides
-
-    def solve(c):
-        rows_ub = list(ub)
-        for i in C:
-            for t in th:
-                r_ = row()
-                r_[n + m + i], r_[n + 2 * m + i] = math.cos(t), math.sin(t)
-                r_[n + i] = -c * mu
-                rows_ub.append(r_)
-        A_eq = np.vstack(eq + [norm])
-        b_eq = np.zeros(len(A_eq))
-        b_eq[-1] = 1.0
-        res = linprog(np.zeros(2 * n), A_ub=np.vstack(rows_ub) if rows_ub else None,
-                      b_ub=np.zeros(len(rows_ub)) if rows_ub else None, A_eq=A_eq, b_eq=b_eq,
-                      bounds=[(None, None)] * (2 * n), method="highs")
-        return res.status
-
-    if solve(math.cos(math.pi / sides)) == 0:
-        return FEASIBLE
-    if solve(1.0) == 2:
-        return INFEASIBLE
-    return None
+from instances import random_problem, random_problem_3d, ur_sandwich
 
 
 def full_patterns(m):

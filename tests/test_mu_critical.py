@@ -179,3 +179,36 @@ def test_plug3d_global_mu_c_is_tan_taper(taper):
     allc = np.ones(10, dtype=bool)
     r = mu_critical(p, 10, allc, ~allc, mu_hi=1.0)
     assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
+
+
+def _bisect_ur(prob, contact, lo, hi, sides, inner, rtol=1e-10):
+    from instances import ur_pyramid_feasible
+    while hi - lo > rtol * hi:
+        mid = 0.5 * (lo + hi)
+        if ur_pyramid_feasible(prob, contact, mid, sides, inner):
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_3d_mu_c_inside_an_independent_bracket(seed):
+    """Bisection (to 1e-10) on the (u, r) formulation with HiGHS on circumscribed and
+    inscribed pyramids of 512 facets: mu^c lies between the two values, which
+    enclose it within a factor 1/cos(pi/512) = 1 + 1.9e-5 — a different
+    formulation, a different solver, no parametrisation."""
+    m = [2, 3][seed % 2]
+    for k in range(20):
+        prob = random_problem_3d(np.random.default_rng(8100 + 100 * seed + k), m, free=bool(seed % 2))
+        p = parametrize(prob)
+        pats = sign_patterns(p, m, 4.0)
+        if pats:
+            break
+    zu, zr = pats[len(pats) // 2]
+    r = mu_critical(p, m, zu, zr, mu_hi=4.0)
+    assert r.polished
+    lower = _bisect_ur(prob, zu, 0.0, 4.0, 512, inner=False)
+    upper = _bisect_ur(prob, zu, 0.0, 4.0 / math.cos(math.pi / 512), 512, inner=True)
+    assert lower * (1 - 1e-7) <= r.mu_c <= upper * (1 + 1e-7)
+    assert upper <= lower / math.cos(math.pi / 512) ** 2 * (1 + 1e-6)
