@@ -23,10 +23,10 @@ from .cones import maximal_cones
 from .dd import complementary_rays
 from .model import Model
 from .mu_critical import mu_critical
-from .patterns import BnBStats, PatternTree, Subtree, global_mu_critical
+from .patterns import BnBStats, PatternTree, global_mu_critical
 from .problem import ContactProblem, parametrize, friction_rows_2d, ray_vectors
 from .progress import Progress
-from .scene import Scene, SceneError
+from .scene import Scene
 
 
 @dataclass
