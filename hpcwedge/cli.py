@@ -82,6 +82,10 @@ def _show(args) -> int:
             mc = "-" if cone["mu_c"] is None else f"{cone['mu_c']:.12g}"
             print(f"         cone {j}: {len(cone['rays'])} rays, zero_u {cone['zero_u']}, "
                   f"zero_r {cone['zero_r']}, mu_c {mc}")
+        for j, pat in enumerate(run["patterns"] or []):
+            mc = "-" if pat["mu_c"] is None else f"{pat['mu_c']:.12g}"
+            flag = " (undecided)" if pat.get("undecided") else ""
+            print(f"         pattern {j}: contact {pat['contact']}, mu_c {mc}{flag}")
     t = res["timings"]
     print("timings: " + ", ".join(f"{k} {v:.3f} s" for k, v in t.items()))
     return 0

@@ -5,20 +5,67 @@ zero_u (u_n,i = 0: contact) and zero_r (r_i = 0: gap). A node in neither is
 free (u_n >= 0, r_n >= 0, no complementarity: the branch-and-bound relaxation);
 a node in both has u_n = r_n = 0. Every problem is normalised by sum(r_n) = 1.
 
-In 2D the problem is an LP (HiGHS dual simplex, which returns a vertex — the
-polish of mu^c needs its active set). mu = inf drops the friction rows
+2D: the problem is an LP (`Rows`; HiGHS dual simplex, which returns a vertex —
+the polish of mu^c needs its active set). mu = inf drops the friction rows
 (r_t free): the relaxation that decides "no wedge at any mu".
+
+3D: the problem is an SOCP (`ConeRows`) in x in R^d:
+
+    eq x = 0                 u_n,i = 0 (contact), r_i = 0 (gap)
+    lin x >= 0               u_n,i >= 0 (every node not in contact)
+    ||rt_i x|| <= mu rn_i x  every node not in gap (implies r_n,i >= 0)
+    norm x = 1               sum r_n = 1
+
+solved by Clarabel in the coordinates w of the null space of `eq` (x = Z w: the
+pattern equalities are eliminated once, by an SVD, so the solver never meets
+dependent equality rows). With friction=False (r_t free) it is the LP
+{eq, lin, r_n >= 0} (a `Rows`).
+
+Status policy (3D, `socp_feasible`), every outcome counted:
+  1. Clarabel, default tolerances. Solved -> the returned x is verified (every
+     row to VERIFY_TOL relative to the size of x); PrimalInfeasible -> its
+     certificate is verified (A^T z = 0, b^T z < 0, z in the dual cone, to
+     CERT_TOL). A verified answer is definitive.
+  2. Anything else (Almost*, MaxIterations, NumericalError, InsufficientProgress,
+     or a verification that failed): Clarabel again with other settings
+     (static regularisation; then Clarabel's defaults with equilibration).
+  3. Still unsure: LPs on polyhedral pyramids of the friction cones with
+     k = 16, 64, 256 facets per node — inner (inscribed: feasible ⇒ feasible,
+     its x verified on the circular cones) and outer (circumscribed:
+     infeasible ⇒ infeasible).
+  4. Still unsure: UNDECIDED (callers keep the subtree / report the pattern as
+     undecided; nothing is pruned on doubt).
+
+`feasible(rows, mu)` dispatches on the problem type; patterns.py and
+mu_critical.py call only it.
 """
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.optimize import linprog
 
 from .problem import Parametrization
 
 FEASIBLE, INFEASIBLE, UNDECIDED = "feasible", "infeasible", "undecided"
+
+#: relative size under which a constraint row is taken as identically zero
+ZERO_ROW_RTOL = 1e-12
+#: rank decision on the unit-scaled pattern equalities
+EQ_RANK_RTOL = 1e-10
+#: a returned x is feasible when every row holds to VERIFY_TOL * ||x|| (the order of
+#: Clarabel's own feasibility tolerance: an optimum on the boundary misses by 1e-9..3e-9;
+#: 2D: HiGHS's primal feasibility tolerance is 1e-7)
+VERIFY_TOL = 1e-8
+#: an infeasibility certificate z holds when ||A^T z|| and the dual-cone violation are
+#: <= CERT_TOL * |b^T z| (b^T z < 0 strictly)
+CERT_TOL = 1e-7
+#: facets per node of the polyhedral pyramids, tried in turn
+PYRAMID_SIDES = (16, 64, 256)
 
 
 @dataclass(frozen=True)
@@ -32,11 +79,47 @@ class Rows:
     norm: np.ndarray
 
 
+@dataclass(frozen=True)
+class ConeRows:
+    """The 3D pattern SOCP (module doc). eq (E, d), lin (L, d): unit rows;
+    rn (c, d), rt (c, 2, d): the cone nodes `nodes`, each node's three rows scaled
+    by one common factor; norm (d,): sum r_n. Z (d, p): orthonormal basis of the
+    null space of eq (the solver's coordinates, x = Z w)."""
+
+    eq: np.ndarray
+    lin: np.ndarray
+    rn: np.ndarray
+    rt: np.ndarray
+    norm: np.ndarray
+    nodes: np.ndarray
+    Z: np.ndarray
+
+    @property
+    def d(self) -> int:
+        return self.eq.shape[1]
+
+
+def problem_dim(param: Parametrization, m: int) -> int:
+    """2 or 3, from the parametrisation's row count (dim * m)."""
+    return param.U.shape[0] // m
+
+
+def _unit(A: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit norm; rows that are identically zero (relative to the
+    largest) dropped."""
+    if A.shape[0] == 0:
+        return A
+    s = np.linalg.norm(A, axis=1)
+    keep = s > ZERO_ROW_RTOL * max(s.max(), 1e-300)
+    return A[keep] / s[keep, None]
+
+
 def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
-                 friction: bool = True) -> Rows:
-    """Rows of the 2D pattern problem, x in R^d:
-    u_n,i == 0 (zero_u), r_n,i == r_t,i == 0 (zero_r), u_n,i >= 0 (others),
-    mu r_n,i +- r_t,i >= 0 (nodes not in zero_r; with friction=False: r_n,i >= 0)."""
+                 friction: bool = True) -> Rows | ConeRows:
+    """The pattern problem in x in R^d: 2D -> `Rows` (LP); 3D -> `ConeRows` (SOCP),
+    or `Rows` (LP) when friction=False."""
+    if problem_dim(param, m) == 3:
+        return _pattern_rows_3d(param, m, np.asarray(zero_u, bool), np.asarray(zero_r, bool), friction)
     U, R = param.U, param.R
     Un, Rn, Rt = U[:m], R[:m], R[m:2 * m]
     z = np.zeros_like(Un)
@@ -61,7 +144,50 @@ def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.
     return Rows(a0=A0, a1=A1, eq=E, norm=Rn.sum(axis=0))
 
 
-def lp_feasible(rows: Rows, mu: float) -> tuple[str, np.ndarray | None]:
+def _pattern_rows_3d(param, m, zu, zr, friction):
+    U, R = param.U, param.R
+    Un, Rn, Rt1, Rt2 = U[:m], R[:m], R[m:2 * m], R[2 * m:3 * m]
+    norm = Rn.sum(axis=0)
+    eq = _unit(np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]]))
+    lin = _unit(Un[~zu])
+    fr = ~zr
+    if not friction:
+        rn = _unit(Rn[fr])
+        A0 = np.vstack([eq, lin, rn])
+        E = np.concatenate([np.ones(len(eq), bool), np.zeros(len(lin) + len(rn), bool)])
+        return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=norm)
+    nodes = np.flatnonzero(fr)
+    rn, rt = Rn[fr], np.stack([Rt1[fr], Rt2[fr]], axis=1)
+    sc = np.sqrt((rn ** 2).sum(1) + (rt ** 2).sum((1, 2)))
+    sc[sc == 0] = 1.0
+    if eq.shape[0]:
+        _, s, vt = np.linalg.svd(eq)
+        rank = int((s > EQ_RANK_RTOL * s[0]).sum())
+        Z = vt[rank:].T
+    else:
+        Z = np.eye(param.d)
+    return ConeRows(eq=eq, lin=lin, rn=rn / sc[:, None], rt=rt / sc[:, None, None], norm=norm,
+                    nodes=nodes, Z=Z)
+
+
+# ----------------------------------------------------------------------- dispatch
+def feasible(rows: Rows | ConeRows, mu: float, counts: dict | None = None) -> tuple[str, np.ndarray | None]:
+    """Feasibility of the pattern problem at mu: (status, x or None), x normalised
+    to sum r_n = 1. 2D / LP -> HiGHS; 3D -> the SOCP status policy (module doc).
+    `counts` (optional) accumulates how each problem was decided."""
+    if isinstance(rows, Rows):
+        status, x = lp_feasible(rows, mu)
+        _count(counts, "lp_" + status)
+        return status, x
+    return socp_feasible(rows, mu, counts)
+
+
+def _count(counts, key, n=1):
+    if counts is not None:
+        counts[key] = counts.get(key, 0) + n
+
+
+def lp_feasible(rows: Rows, mu: float, options: dict | None = None) -> tuple[str, np.ndarray | None]:
     """Feasibility of {rows(mu) x (>=,==) 0, sum r_n = 1}: (status, x or None)."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
@@ -73,9 +199,232 @@ def lp_feasible(rows: Rows, mu: float) -> tuple[str, np.ndarray | None]:
     b_eq[-1] = 1.0
     res = linprog(np.zeros(d), A_ub=-A[~E] if (~E).any() else None,
                   b_ub=np.zeros((~E).sum()) if (~E).any() else None,
-                  A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * d, method="highs-ds")
+                  A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * d, method="highs-ds",
+                  options=options)
     if res.status == 0:
         return FEASIBLE, res.x
     if res.status == 2:
         return INFEASIBLE, None
     return UNDECIDED, None
+
+
+# ----------------------------------------------------------------------- 3D: SOCP
+def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
+    """Largest violation of the pattern problem at x (unit rows; each cone's rows
+    scaled together), x first scaled to sum r_n = 1 (sum r_n <= 0: inf).
+    Equalities and u_n rows are measured relative to ||x||; the friction cones
+    relative to the size of the reactions, ||(r_n, r_t)|| over the cone nodes —
+    not to ||x||, which a rigid lift-off (r = 0, u_n > 0) can make arbitrarily
+    large without changing any reaction."""
+    nr = rows.norm @ x
+    if not np.isfinite(nr) or nr <= 0:
+        return math.inf
+    x = x / nr
+    size = max(np.linalg.norm(x), 1e-300)
+    v = 0.0
+    if rows.eq.shape[0]:
+        v = max(v, np.abs(rows.eq @ x).max() / size)
+    if rows.lin.shape[0]:
+        v = max(v, -(rows.lin @ x).min() / size)
+    if rows.rn.shape[0]:
+        rn, rt = rows.rn @ x, np.linalg.norm(rows.rt @ x, axis=1)
+        rsize = max(np.sqrt((rn ** 2).sum() + (rt ** 2).sum()), 1e-300)
+        v = max(v, (rt - mu * rn).max() / (max(mu, 1.0) * rsize))
+    return float(v)
+
+
+def _settings(attempt: int, tight: bool = False):
+    """Clarabel settings of attempts 0..3 (see ATTEMPTS); tight: for an optimisation
+    (objective given). The rows are unit-scaled
+    already, and Ruiz equilibration on top of that measured worse: on plug3d
+    (m = 10, all 1,024 partitions, mu = 0.55 / 0.65 / 1.0) 7 % non-definitive
+    statuses with it, none without."""
+    import clarabel
+    s = clarabel.DefaultSettings()
+    s.verbose = False
+    if attempt < 3:
+        s.equilibrate_enable = False
+    if attempt == 2:
+        s.static_regularization_constant = 1e-7
+        s.max_iter = 400
+    if tight:
+        # an optimum (the branch and bound's steered solves) lies on the boundary,
+        # where the default 1e-8 tolerances left cone rows 1e-8..4e-8 short of
+        # VERIFY_TOL relative to the reactions (66 of 945 solves on plug3d, mu = 1)
+        s.tol_feas = s.tol_gap_abs = s.tol_gap_rel = 1e-10
+    return s
+
+
+#: attempt k: (settings k, least-norm objective P = I?). 0: plain; 1: the least-norm
+#: feasible point (when the plain solve returned a point that does not verify: the
+#: iterates can run off along rigid lift-offs, measured up to ||x|| ~ 1e17; P = I
+#: is not the default because it weakens the infeasibility certificates: 732 of
+#: 2,126 failed the Farkas check on plug3d + 30 random free bodies, none with
+#: P = 0); 2: static regularisation 1e-7; 3: Clarabel's defaults (equilibration on)
+ATTEMPTS = 4
+LEAST_NORM_ATTEMPT = 1
+_SETTINGS: dict = {}
+
+
+@dataclass
+class Decision:
+    """One feasibility decision. status: FEASIBLE / INFEASIBLE / UNDECIDED; x: a
+    verified point (sum r_n = 1) when feasible; positive: the objective given to
+    `decide` is proven > 0 on the whole feasible set (by a verified dual), i.e. the
+    problem with the extra equality objective . x = 0 is infeasible."""
+
+    status: str
+    x: np.ndarray | None = None
+    positive: bool = False
+
+
+def _socp_data(rows: ConeRows, mu: float):
+    """Clarabel data in w (x = Z w): rows [sum r_n = 1 | lin | cones]; A w + s = b."""
+    import clarabel
+    Z = rows.Z
+    blocks = [(rows.norm @ Z)[None, :], -(rows.lin @ Z)]
+    cones = [clarabel.ZeroConeT(1)]
+    if rows.lin.shape[0]:
+        cones.append(clarabel.NonnegativeConeT(rows.lin.shape[0]))
+    for i in range(rows.rn.shape[0]):
+        blocks.append(-np.vstack([mu * rows.rn[i], rows.rt[i]]) @ Z)
+        cones.append(clarabel.SecondOrderConeT(3))
+    A = np.vstack(blocks)
+    b = np.zeros(A.shape[0])
+    b[0] = 1.0
+    return A, b, cones
+
+
+def _clarabel(rows: ConeRows, mu: float, attempt: int = 0, objective: np.ndarray | None = None):
+    """One Clarabel solve. Returns (status name, x or None, certificate ok or None,
+    positive): positive when an objective was given and the dual proves it > 0."""
+    import clarabel
+    A, b, cones = _socp_data(rows, mu)
+    p = rows.Z.shape[1]
+    q = np.zeros(p) if objective is None else rows.Z.T @ objective
+    P = _csc_eye(p) if objective is None and attempt == LEAST_NORM_ATTEMPT else _csc_zero(p)
+    key = (attempt, objective is not None)
+    if key not in _SETTINGS:
+        _SETTINGS[key] = _settings(attempt, tight=objective is not None)
+    sol = clarabel.DefaultSolver(P, q, _csc_dense(A), b, cones, _SETTINGS[key]).solve()
+    name = str(sol.status)
+    n_lin = rows.lin.shape[0]
+    if name == "Solved":
+        positive = False
+        if objective is not None:
+            # the optimal dual z (A^T z + q = 0, z in K*) with b^T z < 0 is a Farkas
+            # certificate of {A w + s = b, q . w = 0}: check it like any other
+            positive = _certificate_ok(np.vstack([q[None, :], A]), np.concatenate([[0.0], b]),
+                                       np.concatenate([[1.0], np.asarray(sol.z)]), 2, n_lin)
+        return name, rows.Z @ np.asarray(sol.x), None, positive
+    if name == "PrimalInfeasible":
+        return name, None, _certificate_ok(A, b, np.asarray(sol.z), 1, n_lin), False
+    return name, None, None, False
+
+
+def _csc_dense(A: np.ndarray) -> sp.csc_matrix:
+    """A dense matrix as CSC with every entry stored (the from-dense conversion of
+    scipy costs more than the solve here)."""
+    r, c = A.shape
+    return sp.csc_matrix((np.ascontiguousarray(A.T).ravel(), np.tile(np.arange(r, dtype=np.int64), c),
+                          np.arange(0, r * c + 1, r, dtype=np.int64)), shape=(r, c))
+
+
+@functools.lru_cache(maxsize=256)
+def _csc_eye(n: int) -> sp.csc_matrix:
+    return sp.identity(n, format="csc")
+
+
+@functools.lru_cache(maxsize=256)
+def _csc_zero(n: int) -> sp.csc_matrix:
+    return sp.csc_matrix((np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(n + 1, dtype=np.int64)),
+                         shape=(n, n))
+
+
+def _certificate_ok(A, b, z, n_zero, n_lin) -> bool:
+    """Farkas check of {A w + s = b, s in K} infeasible, rows laid out [zero cone
+    (n_zero) | nonnegative (n_lin) | second-order cones of size 3]: with z scaled to
+    b^T z = -1, ||A^T z||_inf and z's distance from the dual cone (K* = K here; free
+    on the zero cone) must be <= CERT_TOL, i.e. no point w with ||w||_1 below about
+    1 / CERT_TOL is feasible."""
+    bz = b @ z
+    if not np.isfinite(bz) or bz >= 0:
+        return False
+    z = z / -bz
+    if np.abs(A.T @ z).max() > CERT_TOL:
+        return False
+    zl = z[n_zero:n_zero + n_lin]
+    if n_lin and zl.min() < -CERT_TOL:
+        return False
+    zc = z[n_zero + n_lin:].reshape(-1, 3)
+    if len(zc) and (np.linalg.norm(zc[:, 1:], axis=1) - zc[:, 0]).max() > CERT_TOL:
+        return False
+    return True
+
+
+def pyramid_rows(rows: ConeRows, sides: int, inner: bool, phase: np.ndarray | None = None) -> Rows:
+    """LP rows of the pattern problem with every friction cone replaced by a pyramid of
+    `sides` facets: inscribed (inner) or circumscribed (outer). phase (c,): per cone
+    node, the angle in the (t1, t2) plane of one facet normal (default: half a
+    facet off the t1 axis)."""
+    c = rows.rn.shape[0]
+    base = 2 * np.pi * np.arange(sides) / sides
+    ph = np.full(c, np.pi / sides) if phase is None else np.asarray(phase, float)
+    th = ph[:, None] + base[None, :]                                  # (c, k)
+    dirs = np.stack([np.cos(th), np.sin(th)], axis=2)                 # (c, k, 2)
+    f0 = -np.einsum("cka,cad->ckd", dirs, rows.rt).reshape(-1, rows.d)   # -(t . r_t)
+    f1 = np.repeat((math.cos(math.pi / sides) if inner else 1.0) * rows.rn, sides, axis=0)
+    d = rows.d
+    a0 = np.vstack([rows.eq, rows.lin, f0])
+    a1 = np.vstack([np.zeros((rows.eq.shape[0] + rows.lin.shape[0], d)), f1])
+    eq = np.concatenate([np.ones(rows.eq.shape[0], bool), np.zeros(a0.shape[0] - rows.eq.shape[0], bool)])
+    return Rows(a0=a0, a1=a1, eq=eq, norm=rows.norm)
+
+
+_LP_TIGHT = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
+
+
+def socp_feasible(rows: ConeRows, mu: float, counts: dict | None = None) -> tuple[str, np.ndarray | None]:
+    """The 3D status policy (module doc): (FEASIBLE, x) | (INFEASIBLE, None) | (UNDECIDED, None)."""
+    d = decide(rows, mu, counts)
+    return d.status, d.x
+
+
+def decide(rows: Rows | ConeRows, mu: float, counts: dict | None = None,
+           objective: np.ndarray | None = None) -> Decision:
+    """`feasible` with an optional objective (x-space vector; 3D only, ignored for LPs)
+    to minimise over the feasible set: the branch and bound passes the next node's
+    u_n row, so that the returned x lies on u_n = 0 when the contact child is feasible
+    (the skip-solve rule then takes it), and `positive` proves the contact child
+    infeasible when it is not."""
+    if isinstance(rows, Rows):
+        status, x = feasible(rows, mu, counts)
+        return Decision(status, x)
+    if rows.Z.shape[1] == 0 or np.abs(rows.norm @ rows.Z).max() <= ZERO_ROW_RTOL * np.linalg.norm(rows.norm):
+        _count(counts, "eq_infeasible")          # sum r_n vanishes on the pattern's subspace
+        return Decision(INFEASIBLE)
+    for attempt in range(ATTEMPTS):
+        # retries are plain feasibility problems (an optimum on the boundary is the
+        # first thing to miss a verification)
+        name, x, cert, positive = _clarabel(rows, mu, attempt, objective if attempt == 0 else None)
+        tag = f"retry{attempt}_" if attempt else ""
+        _count(counts, tag + name)
+        if x is not None:
+            if violation(rows, mu, x) <= VERIFY_TOL:
+                return Decision(FEASIBLE, x / (rows.norm @ x), positive)
+            _count(counts, tag + "verify_failed")
+        elif cert is True:
+            return Decision(INFEASIBLE)
+        elif cert is False:
+            _count(counts, tag + "certificate_failed")
+    for sides in PYRAMID_SIDES:
+        status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, _LP_TIGHT)
+        if status == FEASIBLE and violation(rows, mu, x) <= VERIFY_TOL:
+            _count(counts, "pyramid_inner_feasible")
+            return Decision(FEASIBLE, x / (rows.norm @ x))
+        status, _ = lp_feasible(pyramid_rows(rows, sides, inner=False), mu, _LP_TIGHT)
+        if status == INFEASIBLE:
+            _count(counts, "pyramid_outer_infeasible")
+            return Decision(INFEASIBLE)
+    _count(counts, "undecided")
+    return Decision(UNDECIDED)

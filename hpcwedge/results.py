@@ -7,7 +7,8 @@ Layout of RESULT.h5
     /model/          coords, contact_nodes, normals, cells_<kind> (when a model was built)
     /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
                      (an attribute absent = null); datasets rays, trivial_rays,
-                     ray_zero, cones_json (JSON list), patterns_json
+                     ray_zero, cones_json (JSON list), patterns_json (3D: JSON list of
+                     {"contact", "mu_c", "undecided"}, canonical order: contact bits)
 """
 from __future__ import annotations
 

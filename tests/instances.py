@@ -1,8 +1,12 @@
-"""Random small contact problems for the tests (supported and free bodies)."""
+"""Random small contact problems for the tests (supported and free bodies), and an
+independent feasibility route for 3D patterns."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import scipy.linalg as sla
+from scipy.optimize import linprog
 
 from hpcwedge.problem import ContactProblem
 
@@ -33,3 +37,95 @@ def random_problem(rng: np.random.Generator, m: int, free: bool) -> ContactProbl
     G = rng.standard_normal((B.shape[1], B.shape[1]))
     K = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
     return ContactProblem(2, 0.5 * (K + K.T), N)
+
+
+def frames_3d(rng: np.random.Generator, m: int) -> np.ndarray:
+    """(m, 3, 3) random right-handed contact frames (n, t1, t2): normals pointing
+    roughly upward into the body, t1 at a random angle in the tangent plane."""
+    F = np.empty((m, 3, 3))
+    for i in range(m):
+        v = rng.standard_normal(3)
+        v[2] = abs(v[2]) + 0.3
+        n = v / np.linalg.norm(v)
+        a = rng.standard_normal(3)
+        t1 = a - (a @ n) * n
+        t1 /= np.linalg.norm(t1)
+        F[i] = [n, t1, np.cross(n, t1)]
+    return F
+
+
+def rigid_modes_local_3d(points: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """3D rigid modes (3 translations, 3 rotations about the origin) of contact points,
+    in the local frames, block-ordered [n.., t1.., t2..]: (3m, 6)."""
+    modes = []
+    for k in range(6):
+        e = np.zeros(3)
+        e[k % 3] = 1.0
+        v = np.tile(e, (len(points), 1)) if k < 3 else np.cross(e, points)
+        modes.append(np.concatenate([(frames[:, a, :] * v).sum(1) for a in range(3)]))
+    return np.stack(modes, axis=1)
+
+
+def random_problem_3d(rng: np.random.Generator, m: int, free: bool) -> ContactProblem:
+    """A random 3D problem: supported (K SPD) or free (K PSD whose null space is the
+    rigid modes of random contact points and frames: 6 for m >= 3, fewer below)."""
+    n = 3 * m
+    if not free:
+        G = rng.standard_normal((n, n))
+        return ContactProblem(3, G @ G.T + 0.2 * np.eye(n), np.zeros((n, 0)))
+    pts = rng.uniform(-1, 1, size=(m, 3))
+    M = rigid_modes_local_3d(pts, frames_3d(rng, m))
+    U, s, _ = np.linalg.svd(M, full_matrices=False)
+    N = U[:, s > 1e-10 * s[0]]
+    B = sla.null_space(N.T)
+    G = rng.standard_normal((B.shape[1], B.shape[1]))
+    K = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
+    return ContactProblem(3, 0.5 * (K + K.T), N)
+
+
+def ur_pyramid_feasible(prob, contact: np.ndarray, mu: float, sides: int, inner: bool) -> bool:
+    """Is the full pattern (contact nodes C, the others gap G) feasible with every
+    friction cone replaced by an inscribed (inner) or circumscribed pyramid? In
+    the variables (u, r) in R^{6m} with K u = r, by HiGHS: independent of
+    parametrize() and of Clarabel."""
+    m, n = prob.m, prob.n
+    K = prob.K
+    C, G = np.flatnonzero(contact), np.flatnonzero(~contact)
+    eq, ub = [np.hstack([K, -np.eye(n)])], []
+    for i in C:                                 # u_n,i = 0
+        r_ = np.zeros((1, 2 * n))
+        r_[0, i] = 1.0
+        eq.append(r_)
+    for i in G:                                 # r_i = 0, u_n,i >= 0
+        r_ = np.zeros((3, 2 * n))
+        r_[np.arange(3), n + np.arange(3) * m + i] = 1.0
+        eq.append(r_)
+        r_ = np.zeros((1, 2 * n))
+        r_[0, i] = -1.0
+        ub.append(r_)
+    norm = np.zeros((1, 2 * n))
+    norm[0, n:n + m] = 1.0
+    th = 2 * np.pi * (np.arange(sides) + 0.5) / sides
+    c = math.cos(math.pi / sides) if inner else 1.0
+    for i in C:                                 # cos t r_t1 + sin t r_t2 <= c mu r_n
+        r_ = np.zeros((sides, 2 * n))
+        r_[:, n + m + i], r_[:, n + 2 * m + i] = np.cos(th), np.sin(th)
+        r_[:, n + i] = -c * mu
+        ub.append(r_)
+    A_eq = np.vstack(eq + [norm])
+    b_eq = np.zeros(len(A_eq))
+    b_eq[-1] = 1.0
+    A_ub = np.vstack(ub) if ub else None
+    res = linprog(np.zeros(2 * n), A_ub=A_ub, b_ub=np.zeros(len(A_ub)) if ub else None, A_eq=A_eq,
+                  b_eq=b_eq, bounds=[(None, None)] * (2 * n), method="highs")
+    return res.status == 0
+
+
+def ur_sandwich(prob, contact: np.ndarray, mu: float, sides: int = 64):
+    """"feasible" when the inscribed pyramids admit a point, "infeasible" when the
+    circumscribed ones do not, None in between (see ur_pyramid_feasible)."""
+    if ur_pyramid_feasible(prob, contact, mu, sides, inner=True):
+        return "feasible"
+    if not ur_pyramid_feasible(prob, contact, mu, sides, inner=False):
+        return "infeasible"
+    return None

@@ -56,12 +56,12 @@ def test_show_missing_file(tmp_path):
 
 
 @pytest.mark.skipif(not os.path.isdir(SHARED), reason="../shared/scenes not beside the checkout")
-def test_public_2d_scenes(tmp_path):
-    """The console script on the public scenes (the 2D ones; node3d is 3D)."""
+def test_public_scenes(tmp_path):
+    """The console script on every public scene (2D and 3D)."""
     exe = os.path.join(os.path.dirname(sys.executable), "hpcwedge")
     want = json.load(open(os.path.join(SHARED, "expected.json")))
     for name, exp in want.items():
-        if name.startswith("_") or name == "node3d.toml":
+        if name.startswith("_"):
             continue
         out = str(tmp_path / (name + ".h5"))
         subprocess.run([exe, "run", os.path.join(SHARED, name), "-o", out, "-q"], check=True)
@@ -74,3 +74,23 @@ def test_public_2d_scenes(tmp_path):
         for k, run in enumerate(exp["runs"]):
             for key, v in run.items():
                 assert got["runs"][k][key] == v if key != "mu" else math.isclose(got["runs"][k][key], v)
+
+
+def test_run_show_json_3d(tmp_path, capsys):
+    s = write(tmp_path, 'name = "n3"\ndim = 3\n[model]\nkind = "stiffness"\n'
+                        'K = [[3.0, 0.4, 0.2], [0.4, 2.0, 0.3], [0.2, 0.3, 1.5]]\n[friction]\nmu = [5.0, 4.0]\n')
+    out = str(tmp_path / "r.h5")
+    assert main(["run", s, "-o", out, "-q"]) == 0
+    capsys.readouterr()
+    assert main(["show", out, "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["dim"] == 3 and math.isclose(got["mu_c"], 4.784010530585897, rel_tol=1e-9)
+    r4, r5 = got["runs"]
+    assert (r4["mu"], r4["n_patterns"], r4["patterns"]) == (4.0, 0, [])
+    assert r5["n_patterns"] == 1 and r5["patterns"][0]["contact"] == [0]
+    assert math.isclose(r5["patterns"][0]["mu_c"], 4.784010530585897, rel_tol=1e-9)
+    for key in ("rays", "trivial_rays", "cones", "n_wedged_rays", "n_trivial_rays", "n_cones"):
+        assert r5[key] is None
+    assert "socp_statuses" in got["stats"]
+    assert main(["show", out]) == 0
+    assert "pattern" in capsys.readouterr().out

@@ -34,3 +34,65 @@ def test_subtree_masks():
     zu, zr = Subtree(3, contact=0b101, gap=0b010).masks(4)
     assert zu.tolist() == [True, False, True, False]
     assert zr.tolist() == [False, True, False, False]
+
+
+# ------------------------------------------------------------------ 2D vs rays
+from hpcwedge.dd import complementary_rays                      # noqa: E402
+from hpcwedge.patterns import sign_patterns                     # noqa: E402
+from hpcwedge.problem import friction_rows_2d                   # noqa: E402
+from instances import random_problem_3d                         # noqa: E402
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_2d_patterns_are_the_ones_the_rays_imply(seed):
+    """SPEC §2: (C, G) is feasible iff some wedged ray has supp(r_n) ⊆ C and
+    supp(u_n) ⊆ G — the branch and bound (LPs) against the double description."""
+    rng = np.random.default_rng(4000 + seed)
+    m = [2, 3, 4, 5][seed % 4]
+    prob = random_problem(rng, m, free=bool(seed % 2))
+    mu = float(np.exp(rng.uniform(np.log(1.0), np.log(20.0))))
+    p = parametrize(prob)
+    dd = complementary_rays(friction_rows_2d(p, mu, m), m)
+    w = dd.wedged()
+    loaded, lifted = ~dd.zero_r()[w], ~dd.zero_u()[w]          # supp(r_n), supp(u_n) per wedged ray
+    implied = set()
+    for bits in range(1 << m):
+        C = np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
+        if np.any(~(loaded & ~C).any(axis=1) & ~(lifted & C).any(axis=1)):
+            implied.add(bits)
+    got = {int(sum(1 << i for i in range(m) if zu[i])) for zu, _ in sign_patterns(p, m, mu)}
+    assert got == implied
+
+
+# ------------------------------------------------------------------ 3D tree
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("budget", [1, 4])
+def test_3d_budgeted_exploration_equals_one_pass(seed, budget):
+    rng = np.random.default_rng(950 + seed)
+    m = 4
+    tree = PatternTree(parametrize(random_problem_3d(rng, m, free=bool(seed % 2))), m, mu=2.0)
+    assert tree.dim == 3
+    whole = tree.explore(tree.root())
+    queue, found = [tree.root()], []
+    while queue:
+        out = tree.explore(queue.pop(), budget)
+        assert out.stats.nodes <= budget
+        found += out.found
+        queue += out.open
+    key = lambda s: (s.contact, s.gap)
+    assert sorted(found, key=key) == sorted(whole.found, key=key)
+
+
+def test_3d_skip_rule_and_steering_save_solves():
+    """plug3d, m = 10, mu = 1: fewer SOCPs than tree nodes and than 2^m, every
+    pattern found."""
+    from hpcwedge.build import contact_problem
+    from hpcwedge.scene import parse_scene
+    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d"}, "friction": {"mu": [1.0]}})
+    p = parametrize(contact_problem(sc))
+    tree = PatternTree(p, 10, 1.0)
+    out = tree.explore(tree.root())
+    assert len(out.found) == 131
+    s = out.stats
+    assert s.skipped > 0 and s.statuses.get("contact_child_infeasible_by_parent", 0) > 0
+    assert s.solves < 1024 and s.solves + s.skipped == s.nodes

@@ -1,0 +1,112 @@
+"""The pattern problems (conic.py): 3D feasible sign patterns by the branch and
+bound == brute force over all 2^m partitions by the SOCP == an independent
+route (a different formulation, in (u, r) with K u = r, and a different solver:
+HiGHS on inscribed / circumscribed pyramids of the friction cones); the status
+policy's answers are verified; the 2D dispatch is the LP."""
+import numpy as np
+import pytest
+
+from hpcwedge.conic import (FEASIBLE, INFEASIBLE, UNDECIDED, VERIFY_TOL, ConeRows, Rows, decide, feasible,
+                            lp_feasible, pattern_rows, pyramid_rows, violation)
+from hpcwedge.patterns import PatternTree
+from hpcwedge.problem import parametrize
+from instances import random_problem, random_problem_3d, ur_sandwich
+
+
+def full_patterns(m):
+    for bits in range(1 << m):
+        yield bits, np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
+
+
+CASES = [(seed, [2, 3, 4, 3, 2, 4][seed % 6], bool(seed % 2)) for seed in range(110)] + \
+        [(1000 + k, m, free) for k, (m, free) in enumerate([(5, False), (5, True), (6, True), (7, False)])]
+
+
+@pytest.mark.parametrize("seed,m,free", CASES)
+def test_3d_patterns_bnb_equals_brute_force_and_independent_route(seed, m, free):
+    rng = np.random.default_rng(seed)
+    prob = random_problem_3d(rng, m, free)
+    mu = float(np.exp(rng.uniform(np.log(0.3), np.log(3.0))))
+    p = parametrize(prob)
+    counts = {}
+    brute, undecided_indep = set(), 0
+    for bits, zu in full_patterns(m):
+        status, x = feasible(pattern_rows(p, m, zu, ~zu), mu, counts)
+        assert status != UNDECIDED
+        if status == FEASIBLE:
+            brute.add(bits)
+            assert violation(pattern_rows(p, m, zu, ~zu), mu, x) <= VERIFY_TOL
+        indep = ur_sandwich(prob, zu, mu)
+        if indep is None:
+            undecided_indep += 1
+        else:
+            assert (indep == FEASIBLE) == (status == FEASIBLE), (bits, status, indep)
+    assert undecided_indep <= 1
+    tree = PatternTree(p, m, mu)
+    out = tree.explore(tree.root())
+    assert {s.contact for s in out.found} == brute
+    assert out.undecided == []
+    assert all(s.depth == m and s.contact | s.gap == (1 << m) - 1 for s in out.found)
+
+
+def test_pyramids_sandwich_the_cone():
+    """inner feasible => SOCP feasible => outer feasible, on random partial patterns."""
+    rng = np.random.default_rng(7)
+    n_checked = 0
+    for _ in range(40):
+        m = 3
+        p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
+        zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
+        zr[~zu] = rng.random((~zu).sum()) < 0.4
+        rows = pattern_rows(p, m, zu, zr)
+        for mu in (0.5, 1.5):
+            s = feasible(rows, mu)[0]
+            si = lp_feasible(pyramid_rows(rows, 8, inner=True), mu)[0]
+            so = lp_feasible(pyramid_rows(rows, 8, inner=False), mu)[0]
+            if si == FEASIBLE:
+                assert s == FEASIBLE
+            if s == FEASIBLE:
+                assert so == FEASIBLE
+            n_checked += 1
+    assert n_checked == 80
+
+
+def test_decide_objective_proves_the_contact_child():
+    """The branch and bound's steered solve: min u_n,i over a node's problem; a
+    verified positive optimum means the contact child is infeasible."""
+    rng = np.random.default_rng(3)
+    agree = 0
+    for seed in range(30):
+        m = 3
+        p = parametrize(random_problem_3d(np.random.default_rng(seed), m, free=bool(seed % 2)))
+        zu, zr = np.zeros(m, bool), np.zeros(m, bool)
+        obj = p.U[0] / np.linalg.norm(p.U[0])
+        d = decide(pattern_rows(p, m, zu, zr), 2.0, objective=obj)
+        if d.status != FEASIBLE:
+            continue
+        child = feasible(pattern_rows(p, m, np.array([True, False, False]), zr), 2.0)[0]
+        if d.positive:
+            assert child == INFEASIBLE
+        agree += 1
+    assert agree > 10
+
+
+def test_3d_rows_shapes_and_friction_free_relaxation_is_an_lp():
+    p = parametrize(random_problem_3d(np.random.default_rng(0), 3, True))
+    zu = np.array([True, False, False])
+    zr = np.array([False, True, False])
+    rows = pattern_rows(p, 3, zu, zr)
+    assert isinstance(rows, ConeRows)
+    assert rows.rn.shape == (2, p.d) and rows.rt.shape == (2, 2, p.d) and rows.lin.shape == (2, p.d)
+    assert np.allclose(rows.eq @ rows.Z, 0, atol=1e-12)
+    assert isinstance(pattern_rows(p, 3, zu, zr, friction=False), Rows)
+
+
+def test_2d_dispatch_is_the_lp():
+    p = parametrize(random_problem(np.random.default_rng(1), 3, False))
+    zu = np.array([True, True, False])
+    rows = pattern_rows(p, 3, zu, ~zu)
+    assert isinstance(rows, Rows)
+    for mu in (0.3, 3.0, 30.0):
+        a, b = feasible(rows, mu), lp_feasible(rows, mu)
+        assert a[0] == b[0]
