@@ -419,10 +419,12 @@ def decide(rows: Rows | ConeRows, mu: float, counts: dict | None = None,
             _count(counts, tag + "certificate_failed")
     for sides in PYRAMID_SIDES:
         status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, _LP_TIGHT)
+        _count(counts, "lp_calls")
         if status == FEASIBLE and violation(rows, mu, x) <= VERIFY_TOL:
             _count(counts, "pyramid_inner_feasible")
             return Decision(FEASIBLE, x / (rows.norm @ x))
         status, _ = lp_feasible(pyramid_rows(rows, sides, inner=False), mu, _LP_TIGHT)
+        _count(counts, "lp_calls")
         if status == INFEASIBLE:
             _count(counts, "pyramid_outer_infeasible")
             return Decision(INFEASIBLE)

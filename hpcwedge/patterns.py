@@ -28,7 +28,8 @@ NEAR_TOL = 1e-6
 
 @dataclass
 class BnBStats:
-    """solves: feasibility problems solved; skipped: tree nodes decided by the
+    """solves: feasibility problems solved (3D: SOCPs); lps: linear programs solved
+    besides (3D: screens and pyramid fallbacks); skipped: tree nodes decided by the
     parent's solution; undecided: solves that decided nothing (kept); nodes: tree
     nodes visited; statuses: how each solve was decided (conic.feasible counts)."""
 
@@ -36,11 +37,12 @@ class BnBStats:
     skipped: int = 0
     undecided: int = 0
     nodes: int = 0
+    lps: int = 0
     extra: dict = field(default_factory=dict)
     statuses: dict = field(default_factory=dict)
 
     def add(self, other: "BnBStats") -> None:
-        for k in ("solves", "skipped", "undecided", "nodes"):
+        for k in ("solves", "skipped", "undecided", "nodes", "lps"):
             setattr(self, k, getattr(self, k) + getattr(other, k))
         for k, v in other.statuses.items():
             self.statuses[k] = self.statuses.get(k, 0) + v
@@ -48,9 +50,9 @@ class BnBStats:
 
 @dataclass(frozen=True)
 class Subtree:
-    """A partial sign pattern: the first `depth` nodes of the search order are
-    fixed, node i to contact when bit i of `contact` is set, to gap when bit i
-    of `gap` is set. Small and picklable: the unit of work the parallel layer
+    """A partial sign pattern: `depth` nodes are fixed (with a static order the
+    first `depth` of it; with dynamic branching any `depth` nodes), node i to
+    contact when bit i of `contact` is set, to gap when bit i of `gap` is set. Small and picklable: the unit of work the parallel layer
     moves around and the checkpoint stores (three integers)."""
 
     depth: int
@@ -87,17 +89,25 @@ class PatternTree:
     (ascending, descending) stay within 15 % of each other in SOCP count; reversed
     needed the fewest in total (7,910 against 8,144 natural, 8,271 coupling
     ascending, 8,641 interleaved, 9,338 coupling descending) and the fewest in 7
-    of the 10 cases. The order changes the work, never the patterns found."""
+    of the 10 cases. The order changes the work, never the patterns found.
+
+    3D with friction and `order=None` branches dynamically instead (the default):
+    on the free node whose relaxed solution violates complementarity most
+    (`_branch_node`; scripts/bench_socp_count.py, results/bench_socp_count.json).
+    A given `order` keeps the static order with steered solves."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
         self.dim = problem_dim(param, m)
+        #: 3D with friction and no order given: the node branched on is chosen from the
+        #: relaxed solution (explore); otherwise the static order below
+        self.dynamic = self.dim == 3 and friction and order is None
         if order is None:
             order = list(range(m - 1, -1, -1)) if self.dim == 3 else list(range(m))
         self.order = list(order)
-        #: 3D: each solve minimises the next node's u_n (see explore)
-        self.steer = self.dim == 3 and friction
+        #: 3D, static order: each solve minimises the next node's u_n (see explore)
+        self.steer = self.dim == 3 and friction and not self.dynamic
         U = param.U[:m]
         self._steer = U / np.maximum(np.linalg.norm(U, axis=1, keepdims=True), 1e-300)
 
@@ -129,7 +139,7 @@ class PatternTree:
             if x is None:
                 stats.solves += 1
                 zu, zr = node.masks(m)
-                steer = self._steer[self.order[node.depth]] if node.depth < m and self.steer else None
+                steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
                 dec = decide(pattern_rows(param, m, zu, zr, self.friction), mu, stats.statuses, steer)
                 if dec.status == INFEASIBLE:
                     continue
@@ -147,7 +157,7 @@ class PatternTree:
                     stack.clear()
                     break
                 continue
-            i = self.order[node.depth]
+            i = self._branch_node(node, x)
             kids = []
             for contact in (True, False):
                 if contact and no_contact:
@@ -157,7 +167,28 @@ class PatternTree:
                               node.gap if contact else node.gap | (1 << i))
                 kids.append((kid, None if x is None else self._witness(kid, x, i, contact, mu)))
             stack.extend(reversed(kids))
+        stats.lps = stats.statuses.get("lp_calls", 0)
         return Explored(found, [node for node, _ in reversed(stack)], stats, undecided)
+
+    def _static_next(self, node: Subtree) -> int:
+        """The first node of `order` not fixed in `node`."""
+        fixed = node.contact | node.gap
+        return next(i for i in self.order if not fixed >> i & 1)
+
+    def _branch_node(self, node: Subtree, x: np.ndarray | None) -> int:
+        """The free node to branch on. Static: the next one in `order`. Dynamic (3D):
+        the free node whose relaxed solution x violates complementarity most,
+        min(u_n,i / max|u_n|, |r_i| / max|r|), ties and x = None (undecided solve)
+        by `order`: a function of (node, x), so the tree is deterministic."""
+        if not self.dynamic or x is None:
+            return self._static_next(node)
+        m = self.m
+        fixed = node.contact | node.gap
+        free = [i for i in self.order if not fixed >> i & 1]
+        u = self.param.U[:m] @ x
+        r = np.linalg.norm((self.param.R[:3 * m] @ x).reshape(3, m), axis=0)
+        v = np.minimum(np.maximum(u, 0) / max(np.abs(u).max(), 1e-300), r / max(r.max(), 1e-300))
+        return max(free, key=lambda i: v[i])          # first maximum in `order`
 
     def _witness(self, kid: Subtree, x: np.ndarray, i: int, contact: bool, mu: float) -> np.ndarray | None:
         """x, or a point derived from it, that proves `kid` feasible; None if it does not."""

@@ -84,15 +84,23 @@ def test_3d_budgeted_exploration_equals_one_pass(seed, budget):
 
 
 def test_3d_skip_rule_and_steering_save_solves():
-    """plug3d, m = 10, mu = 1: fewer SOCPs than tree nodes and than 2^m, every
-    pattern found."""
+    """plug3d, m = 10, mu = 1, static order: fewer SOCPs than tree nodes and than
+    2^m, every pattern found; dynamic branching (the default): the same patterns
+    with fewer SOCPs still."""
     from hpcwedge.build import contact_problem
     from hpcwedge.scene import parse_scene
     sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d"}, "friction": {"mu": [1.0]}})
     p = parametrize(contact_problem(sc))
-    tree = PatternTree(p, 10, 1.0)
+    tree = PatternTree(p, 10, 1.0, order=list(range(9, -1, -1)))
+    assert not tree.dynamic
     out = tree.explore(tree.root())
     assert len(out.found) == 131
     s = out.stats
     assert s.skipped > 0 and s.statuses.get("contact_child_infeasible_by_parent", 0) > 0
     assert s.solves < 1024 and s.solves + s.skipped == s.nodes
+    dyn = PatternTree(p, 10, 1.0)
+    assert dyn.dynamic
+    out2 = dyn.explore(dyn.root())
+    key = lambda t: (t.contact, t.gap)
+    assert sorted(out2.found, key=key) == sorted(out.found, key=key)
+    assert out2.stats.solves < s.solves
