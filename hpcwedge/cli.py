@@ -14,7 +14,8 @@ def main(argv: list[str] | None = None) -> int:
     r = sub.add_parser("run", help="solve a scene and write RESULT.h5")
     r.add_argument("scene")
     r.add_argument("-o", "--output", required=True)
-    r.add_argument("--resume", action="store_true", help="continue from the checkpoint beside the output")
+    r.add_argument("--resume", action="store_true",
+                   help="continue from the checkpoint RESULT.h5.ckpt if it exists (else start afresh)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     s = sub.add_parser("show", help="print a result")
     s.add_argument("result")
@@ -38,16 +39,46 @@ class _UserError(Exception):
 
 
 def _run(args) -> int:
+    from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, world
+    try:
+        comm = world()
+    except ParallelError as e:
+        raise _UserError(str(e)) from None
+    if comm is not None and comm.rank != 0:
+        sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
+        Engine(comm).serve()
+        return 0
+    from .checkpoint import CheckpointError, checkpoint_path
     from .pipeline import run_scene
     from .progress import Progress
     from .results import write_result
     from .scene import SceneError, load_scene
+    progress = Progress(quiet=args.quiet)
+    engine = Engine(comm, progress=None if args.quiet else progress)
+    engine.install_signals()
+    ckpt = checkpoint_path(args.output)
     try:
-        scene = load_scene(args.scene)
-        result = run_scene(scene, Progress(quiet=args.quiet))
-    except SceneError as e:
-        raise _UserError(str(e)) from None
-    write_result(args.output, result)
+        try:
+            scene = load_scene(args.scene)
+            if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume):
+                progress.note(f"resuming from {ckpt}")
+            elif os.path.exists(ckpt):
+                print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
+                      f"({'it is missing' if args.resume else 'use --resume to continue from it'})",
+                      file=sys.stderr)
+            result = run_scene(scene, progress, engine=engine)
+            write_result(args.output, result)
+            engine.remove_checkpoint()
+        except (SceneError, CheckpointError) as e:
+            raise _UserError(str(e)) from None
+        except Interrupted as e:
+            written = engine.write_checkpoint(str(e))
+            print(f"[hpcwedge] {e}: " + (f"checkpoint written to {ckpt}; rerun with --resume to continue"
+                                         if written else "stopped before any checkpointable work"),
+                  file=sys.stderr)
+            return EXIT_INTERRUPTED
+    finally:
+        engine.close()
     if not args.quiet:
         mu_c = "null" if result.mu_c is None else f"{result.mu_c:.12g}"
         print(f"[hpcwedge] {scene.name}: mu_c = {mu_c}; wrote {args.output} "

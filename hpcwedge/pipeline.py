@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -15,7 +16,8 @@ from .cones import maximal_cones
 from .dd import complementary_rays
 from .model import Model
 from .mu_critical import mu_critical
-from .patterns import BnBStats, global_mu_critical
+from .parallel import Engine, run_mu_c, run_patterns, strip_exact
+from .patterns import BnBStats, PatternTree, global_mu_critical
 from .problem import ContactProblem, parametrize, friction_rows_2d, ray_vectors
 from .progress import Progress
 from .scene import Scene, SceneError
@@ -64,9 +66,12 @@ class Result:
     problem: ContactProblem | None = None
 
 
-def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
-    """Every answer the scene asks for (see Scene.plan)."""
+def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None) -> Result:
+    """Every answer the scene asks for (see Scene.plan). Sign patterns and mu^c
+    run as tasks of `engine` (parallel.py: in-process by default; the master of
+    an MPI run, with checkpoints, from the command line)."""
     progress = progress or Progress(quiet=True)
+    engine = engine or Engine()
     t0 = time.perf_counter()
     plan = scene.plan()
     timings = {"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0}
@@ -102,33 +107,52 @@ def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
         if plan.cones:
             stages.append("cones")
 
+    if plan.patterns:
+        t = time.perf_counter()
+        stages.append("patterns")
+        pats = run_patterns(partial(PatternTree, strip_exact(param), m), scene.mu, engine=engine,
+                            budget=scene.task_budget)
+        for run, found, doubt in zip(result.runs, pats.found, pats.undecided):
+            run.patterns = [{"contact": [i for i in range(m) if s.contact >> i & 1], "mu_c": None,
+                             **({"undecided": True} if s in doubt else {})} for s in found]
+        stats["patterns"] = {k: pats.counters.get(k, 0) for k in ("nodes", "undecided")}
+        timings["enumerate"] += time.perf_counter() - t
+
     if plan.mu_c_cones or plan.mu_c_global:
         t = time.perf_counter()
         stages.append("mu_c")
-        cache: dict = {}
 
-        def cone_mu_c(cone, mu):
-            key = (tuple(cone["zero_u"]), tuple(cone["zero_r"]))
-            if key not in cache:
-                r = mu_critical(param, m, np.isin(np.arange(m), cone["zero_u"]),
-                                np.isin(np.arange(m), cone["zero_r"]), mu_hi=mu,
-                                mu_max=scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol)
-                stats["lp_solves"] += r.lps
-                stats["lp_undecided"] += r.undecided
-                stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
-                cache[key] = r.mu_c
-            return cache[key]
+        def mask(nodes):
+            return np.isin(np.arange(m), nodes)
 
-        with_cones = [r for r in result.runs if r.cones]
-        if plan.mu_c_cones:
-            for run in result.runs:
-                for cone in run.cones or []:
-                    cone["mu_c"] = cone_mu_c(cone, run.mu)
+        def keyed(run):       # (key, zero_u, zero_r) of the run's cones and patterns
+            for c in run.cones or []:
+                yield (tuple(c["zero_u"]), tuple(c["zero_r"])), mask(c["zero_u"]), mask(c["zero_r"]), c
+            for p in run.patterns or []:
+                gap = [i for i in range(m) if i not in p["contact"]]
+                yield (tuple(p["contact"]), tuple(gap)), mask(p["contact"]), mask(gap), p
+
+        listed = [r for r in result.runs if r.cones or r.patterns]
+        wanted = result.runs if plan.mu_c_cones else listed[:1]
+        items: dict = {}      # one task per zero-set pair, at the least mu that lists it
+        for run in wanted:
+            for key, zu, zr, _ in keyed(run):
+                items.setdefault(key, (zu, zr, run.mu))
+        solve = partial(mu_critical, strip_exact(param), m, mu_max=scene.mu_max,
+                        method=scene.mu_c_method, tol=scene.mu_c_tol)
+        cache = dict(zip(items, run_mu_c(solve, list(items.values()), engine=engine)))
+        for r in cache.values():
+            stats["lp_solves"] += r.lps
+            stats["lp_undecided"] += r.undecided
+            stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
+        for run in wanted:
+            for key, _, _, item in keyed(run):
+                if plan.mu_c_cones:
+                    item["mu_c"] = cache[key].mu_c
         if plan.mu_c_global:
-            if with_cones:
-                # any pattern feasible below the smallest such mu lies in one of its cones
-                run = with_cones[0]
-                values = [cone_mu_c(c, run.mu) for c in run.cones]
+            if listed:
+                # any pattern feasible below the smallest such mu lies in one of its cones/patterns
+                values = [cache[key].mu_c for key, *_ in keyed(listed[0])]
                 values = [v for v in values if v is not None]
                 result.mu_c, result.mu_c_status = (min(values), "found") if values else (None, None)
             if result.mu_c is None:
@@ -142,6 +166,7 @@ def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
         progress.note(f"warning: {stats['mu_c_unpolished']} mu^c value(s) not polished "
                       f"(accurate to the bracket, {1e-7:g} relative)")
     timings["total"] = time.perf_counter() - t0
+    stats["parallel"] = engine.summary()
     result.stats = stats
     return result
 
