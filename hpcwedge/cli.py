@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 
 
@@ -26,12 +27,24 @@ def main(argv: list[str] | None = None) -> int:
     pl.add_argument("-o", "--output", required=True)
     pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     pl.add_argument("--ray", type=int, default=0, help="wedged ray to draw")
-    args = p.parse_args(argv)
+    # a checkpoint request (SIGUSR1, forwarded by mpirun to every rank) that arrives
+    # during start-up must not kill a rank: ignored until the master's handler is in;
+    # every handler is put back on return (main may be called in-process)
+    import threading
+    main_thread = threading.current_thread() is threading.main_thread()
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT)
+             } if main_thread else {}
+    if main_thread:
+        signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     try:
+        args = p.parse_args(argv)
         return {"run": _run, "show": _show, "plot": _plot}[args.cmd](args)
     except _UserError as e:
         print(f"hpcwedge: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
 
 
 class _UserError(Exception):
@@ -69,6 +82,7 @@ def _run(args) -> int:
             result = run_scene(scene, progress, engine=engine)
             write_result(args.output, result)
             engine.remove_checkpoint()
+            engine.mark_done()
         except (SceneError, CheckpointError) as e:
             raise _UserError(str(e)) from None
         except Interrupted as e:
@@ -76,9 +90,10 @@ def _run(args) -> int:
             print(f"[hpcwedge] {e}: " + (f"checkpoint written to {ckpt}; rerun with --resume to continue"
                                          if written else "stopped before any checkpointable work"),
                   file=sys.stderr)
+            engine.close(timeout=5.0)
             return EXIT_INTERRUPTED
     finally:
-        engine.close()
+        engine.close(restore_signals=False)
     if not args.quiet:
         mu_c = "null" if result.mu_c is None else f"{result.mu_c:.12g}"
         print(f"[hpcwedge] {scene.name}: mu_c = {mu_c}; wrote {args.output} "

@@ -50,6 +50,7 @@ import json
 import math
 import os
 import signal
+import socket
 import sys
 import time
 import traceback
@@ -75,7 +76,9 @@ BUDGET_SCALE = 16
 #: default node budget of a subtree task (scene key run.task_budget)
 DEFAULT_BUDGET = 64
 
-_TASK, _RESULT, _ERROR, _STOP = 1, 2, 3, 4
+_TASK, _RESULT, _ERROR, _STOP, _HELLO = 1, 2, 3, 4, 5
+#: how often an idle worker checks that its master (same host) is still alive
+MASTER_CHECK_S = 0.2
 
 
 class ParallelError(RuntimeError):
@@ -190,7 +193,9 @@ def _bits_to_words(values, words: int) -> np.ndarray:
 
 
 def _words_to_bits(arr: np.ndarray) -> list[int]:
-    arr = np.asarray(arr, dtype=np.uint64).reshape(len(arr), -1)
+    arr = np.asarray(arr, dtype=np.uint64)
+    if arr.ndim == 1:
+        arr = arr[:, None]
     return [sum(int(x) << (64 * w) for w, x in enumerate(row)) for row in arr]
 
 
@@ -408,6 +413,7 @@ class Engine:
         self._in_loop = False
         self._old_handlers: dict = {}
         self._stopped = False
+        self._done = False
         self._ckpt = None                # (path, scene_hash, scene_text, every_s)
         self._next_ckpt = math.inf
         self._t0 = time.monotonic()
@@ -415,6 +421,11 @@ class Engine:
         self.resumes = 0
         self.checkpoints_written = 0
         self.checkpoint_reason = None
+        self.tasks_per_rank = [0] * self.size  # this session, merged tasks by the rank that ran them
+        if comm is not None and self.rank == 0:
+            me = (socket.gethostname(), os.getpid())
+            for w in self.workers:              # small: an eager send, returns at once
+                comm.send(me, dest=w, tag=_HELLO)
 
     @property
     def is_master(self) -> bool:
@@ -490,12 +501,22 @@ class Engine:
     # ---- signals
 
     def install_signals(self) -> None:
-        """Master: SIGUSR1 = checkpoint and go on; SIGTERM/SIGINT = checkpoint and stop."""
+        """Master: SIGUSR1 = checkpoint and go on; SIGTERM/SIGINT = checkpoint and stop.
+        (Main thread only; elsewhere signals stay as they are.)"""
+        import threading
+        if threading.current_thread() is not threading.main_thread():
+            return
         for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
             self._old_handlers[sig] = signal.signal(sig, self._on_signal)
 
+    def mark_done(self) -> None:
+        """The result is written: from now on signals change nothing (exit 0)."""
+        self._done = True
+
     def _on_signal(self, signum, frame):
         name = signal.Signals(signum).name
+        if self._done:
+            return
         if signum == signal.SIGUSR1:
             self._flags.add(name)
             return
@@ -564,6 +585,7 @@ class Engine:
             result = handler(job.context, payload)
             job.merge(token, result)           # done: in the master's state
             del self._inflight[0]
+            self.tasks_per_rank[0] += 1
             last_note = self._note(job, last_note)
 
     def _run_master(self, job) -> None:
@@ -591,6 +613,7 @@ class Engine:
                 w, tag, msg = got
                 token = self._inflight.pop(w)
                 idle.append(w)
+                self.tasks_per_rank[w] += 1
                 if tag == _ERROR:
                     raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task:\n{msg}")
                 job.merge(token, msg)          # done: in the master's state
@@ -621,7 +644,7 @@ class Engine:
 
     def summary(self) -> dict:
         """How the work was split: depends on ranks and resumes (answers do not)."""
-        return {"ranks": self.size, "resumes": self.resumes,
+        return {"ranks": self.size, "resumes": self.resumes, "tasks_per_rank": list(self.tasks_per_rank),
                 "checkpoints_written": self.checkpoints_written,
                 "elapsed_s_all_sessions": self.elapsed(),
                 "jobs": {name: dict(job.counters) for name, job in self._jobs.items()}}
@@ -629,9 +652,17 @@ class Engine:
     # ---- workers
 
     def serve(self) -> None:
-        """Worker loop (ranks >= 1): run tasks until the master says stop. Signals
-        are the master's business (SIGUSR1, forwarded by mpirun to every rank,
-        would otherwise kill a worker); a worker whose parent (mpirun) is gone exits."""
+        """Worker loop (ranks >= 1): run tasks until the master says stop.
+
+        SIGUSR1, SIGTERM and SIGINT are ignored: the master acts on them. (mpirun
+        forwards SIGUSR1 to every rank, whose default action is to die. On
+        SIGTERM, mpirun sends SIGCONT to every rank, SIGTERM 1 s later and
+        SIGKILL ~1 s after that; a worker that died at once would make it kill
+        the master before its checkpoint is written.)
+
+        A worker exits when its parent (mpirun) is gone, or when its master runs
+        on the same host and has died (kill -9): mpirun would otherwise take
+        ~2 s (SIGCONT, SIGTERM, SIGKILL) to tear the job down."""
         from mpi4py import MPI
         for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, signal.SIG_IGN)
@@ -640,16 +671,23 @@ class Engine:
             importlib.import_module(mod)
         ctx_id, ctx = None, None
         status = MPI.Status()
+        master_pid, host = None, socket.gethostname()
         while True:
-            t0 = time.monotonic()
+            t0 = checked = time.monotonic()
             while not _probe(comm, 0, MPI.ANY_TAG, status):
-                if os.getppid() != ppid:
-                    os._exit(3)
-                time.sleep(_backoff(time.monotonic() - t0, POLL_MAX))
+                now = time.monotonic()
+                if now - checked >= MASTER_CHECK_S:
+                    checked = now
+                    if os.getppid() != ppid or (master_pid is not None and not _pid_alive(master_pid)):
+                        os._exit(3)
+                time.sleep(_backoff(now - t0, POLL_MAX))
             tag = status.Get_tag()
             msg = comm.recv(source=0, tag=tag)
             if tag == _STOP:
                 return
+            if tag == _HELLO:
+                master_pid = msg[1] if msg[0] == host else None
+                continue
             job_id, kind, payload, fresh, new_ctx = msg
             if fresh:
                 ctx_id, ctx = job_id, new_ctx
@@ -662,14 +700,18 @@ class Engine:
             else:
                 comm.send(result, dest=0, tag=_RESULT)
 
-    def close(self) -> None:
+    def close(self, timeout: float = 60.0, restore_signals: bool = True) -> None:
         """Master: collect the results still in flight (a worker blocked in a large
-        send would never see the stop), then stop every worker; restore signals."""
+        send would never see the stop; at most `timeout` seconds), then stop every
+        worker; restore the signal handlers (the command line keeps its own to
+        the end: a signal after mark_done() must not turn a finished run into a
+        failed one)."""
         if self.comm is not None and self.is_master and not self._stopped:
             from mpi4py import MPI
             self._stopped = True
             status = MPI.Status()
-            while self._inflight:
+            end = time.monotonic() + timeout
+            while self._inflight and time.monotonic() < end:
                 if _probe(self.comm, MPI.ANY_SOURCE, MPI.ANY_TAG, status):
                     src, tag = status.Get_source(), status.Get_tag()
                     self.comm.recv(source=src, tag=tag)
@@ -678,9 +720,25 @@ class Engine:
                     time.sleep(0.005)
             for w in self.workers:
                 self.comm.send(None, dest=w, tag=_STOP)
-        for sig, h in self._old_handlers.items():
-            signal.signal(sig, h)
-        self._old_handlers = {}
+        if restore_signals:
+            for sig, h in self._old_handlers.items():
+                signal.signal(sig, h)
+            self._old_handlers = {}
+
+
+def _pid_alive(pid: int) -> bool:
+    """False once the process is gone or a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except (OSError, IndexError):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except OSError:
+            pass
+        return True
 
 
 def _backoff(waited: float, cap: float) -> float:
