@@ -292,8 +292,8 @@ class SubtreeJob:
     def output(self) -> "Patterns":
         key = lambda s: canonical_key(s, self.m)
         return Patterns(mus=self.mus, m=self.m,
-                        found=[sorted(set(lst), key=key) for lst in self.found],
-                        undecided=[sorted(set(lst), key=key) for lst in self.undecided],
+                        found=[sorted(lst, key=key) for lst in self.found],
+                        undecided=[sorted(lst, key=key) for lst in self.undecided],
                         counters=dict(self.counters))
 
 
@@ -410,7 +410,7 @@ class Engine:
         self._ctx_sent: dict = {}        # worker -> job id whose context it holds
         self._job_id = 0
         self._flags: set = set()
-        self._in_loop = False
+        self._defer = False              # signals only set flags (inside run())
         self._old_handlers: dict = {}
         self._stopped = False
         self._done = False
@@ -469,7 +469,7 @@ class Engine:
         jobs = []
         for name, job in self._jobs.items():
             jobs.append((name, self._state(job, [], finished=True)))
-        if self._current is not None:
+        if self._current is not None and self._current.name not in self._jobs:
             jobs.append((self._current.name,
                          self._state(self._current, list(self._inflight.values()), finished=False)))
         names = {n for n, _ in jobs}
@@ -521,8 +521,8 @@ class Engine:
             self._flags.add(name)
             return
         self._flags.add("STOP:" + name)
-        if not self._in_loop:
-            self._in_loop = True      # a second signal must not interrupt the checkpoint write
+        if not self._defer:
+            self._defer = True        # a second signal must not interrupt the checkpoint write
             raise Interrupted(name)
 
     def _stop_flag(self):
@@ -547,27 +547,28 @@ class Engine:
             raise RuntimeError("Engine.run is for the master; workers call serve()")
         if job.name in self._jobs:
             raise ValueError(f"job name {job.name!r} used twice")
-        state = self._restored.pop(job.name, None)
-        if state is not None:
-            if state["attrs"].get("kind") != job.kind:
-                raise CheckpointError(f"job {job.name!r}: checkpoint kind {state['attrs'].get('kind')!r}, "
-                                      f"this run {job.kind!r}")
-            job.load(state)
-            job.counters.update(json.loads(state["attrs"]["counters"]))
-        self._job_id += 1
-        self._current, self._inflight = job, {}
-        self._in_loop = True
+        self._defer = True            # from here on, signals act at safe points only
         try:
+            state = self._restored.get(job.name)
+            if state is not None:
+                if state["attrs"].get("kind") != job.kind:
+                    raise CheckpointError(f"job {job.name!r}: checkpoint kind {state['attrs'].get('kind')!r}, "
+                                          f"this run {job.kind!r}")
+                job.load(state)
+                job.counters.update(json.loads(state["attrs"]["counters"]))
+            self._job_id += 1
+            self._current, self._inflight = job, {}
+            self._restored.pop(job.name, None)
             if self._stop_flag():
                 raise Interrupted(self._stop_flag())
             if self.size == 1:
                 self._run_serial(job)
             else:
                 self._run_master(job)
+            self._jobs[job.name] = job
+            self._current, self._inflight = None, {}
         finally:
-            self._in_loop = False
-        self._jobs[job.name] = job
-        self._current, self._inflight = None, {}
+            self._defer = False
         if self._stop_flag():
             raise Interrupted(self._stop_flag())
         return job

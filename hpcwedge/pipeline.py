@@ -115,7 +115,8 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         for run, found, doubt in zip(result.runs, pats.found, pats.undecided):
             run.patterns = [{"contact": [i for i in range(m) if s.contact >> i & 1], "mu_c": None,
                              **({"undecided": True} if s in doubt else {})} for s in found]
-        stats["patterns"] = {k: pats.counters.get(k, 0) for k in ("nodes", "undecided")}
+        stats["patterns"] = {"nodes": pats.counters.get("nodes", 0),       # the same for any split
+                             "undecided_patterns": sum(len(u) for u in pats.undecided)}
         timings["enumerate"] += time.perf_counter() - t
 
     if plan.mu_c_cones or plan.mu_c_global:

@@ -5,6 +5,7 @@ SLURM_NTASKS check."""
 import itertools
 import json
 import os
+import signal
 import subprocess
 import sys
 
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from hpcwedge import parallel
+from hpcwedge.checkpoint import CheckpointError
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.patterns import PatternTree, Subtree, sign_patterns
 from hpcwedge.pipeline import run_scene
@@ -73,6 +75,48 @@ def test_subtree_job_checkpoint_state_round_trip():
     out = parallel.Engine().run(again).output()
     assert out.found == ref.found
     assert out.counters["nodes"] == ref.counters["nodes"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
+def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
+    """A signal in the middle of a job (sent by a task to its own process):
+    SIGTERM -> Interrupted at the next safe point, checkpoint, a new engine
+    resumes; SIGUSR1 -> a checkpoint and the job goes on. Same patterns, every
+    tree node counted once."""
+    make, _ = _tree_factory(41, m=6)
+    mus = [1.0, 4.0]
+    ref = parallel.run_patterns(make, mus, budget=2)
+    ckpt = str(tmp_path / "x.ckpt")
+    calls = []
+
+    def task(ctx, payload):
+        calls.append(1)
+        if len(calls) == 5:
+            os.kill(os.getpid(), sig)
+        return parallel.explore_task(ctx, payload)
+
+    monkeypatch.setitem(parallel.KINDS, "subtree", task)
+    eng = parallel.Engine()
+    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
+    eng.install_signals()
+    try:
+        if sig == signal.SIGTERM:
+            with pytest.raises(parallel.Interrupted):
+                parallel.run_patterns(make, mus, engine=eng, budget=2)
+            assert eng.write_checkpoint("SIGTERM")
+        else:
+            out = parallel.run_patterns(make, mus, engine=eng, budget=2)
+            assert eng.checkpoints_written == 1 and eng.checkpoint_reason == "SIGUSR1"
+    finally:
+        eng.close()
+    if sig == signal.SIGTERM:
+        assert len(calls) == 5                          # stopped at the safe point after the 5th task
+        eng = parallel.Engine()
+        assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True)
+        out = parallel.run_patterns(make, mus, engine=eng, budget=2)
+        with pytest.raises(CheckpointError, match="another scene"):
+            parallel.Engine().use_checkpoint(ckpt, "other", "scene", 1000.0, resume=True)
+    assert out.found == ref.found and out.counters["nodes"] == ref.counters["nodes"]
 
 
 def test_bit_words_beyond_64_nodes():
