@@ -48,7 +48,7 @@ def _finish(scene, out, ranks=None):
 
 def test_kill9_at_random_moments_then_resume(tmp_path, reference):
     """Ten kill -9 of the (serial) master, each at a random moment after the
-    engine's first checkpoint of that run (sometimes mid-write), each followed by
+    engine's first checkpoint of that run (possibly mid-write), each followed by
     --resume: the final answers equal the uninterrupted run's."""
     scene, out, kills, codes = interrupt_cycles(tmp_path, None, 10, _kill9_master(None), random.Random(1))
     assert kills == 10 and all(c == -signal.SIGKILL for c in codes)

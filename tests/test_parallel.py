@@ -262,3 +262,17 @@ def test_slurm_ntasks_mismatch_fails_clearly(tmp_path):
     assert p.returncode == 2
     assert "SLURM_NTASKS=3" in p.stderr and "srun" in p.stderr and len(p.stderr.strip().splitlines()) == 1
     assert not out.exists()
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_bad_scene_under_mpirun_exit_2_once(tmp_path):
+    """Input errors under mpirun: one message (from the master), status 2, nothing
+    written, the workers stopped (no hang)."""
+    bad = write_scene(tmp_path, name="bad.toml",
+                      text='name = "x"\ndim = 2\n[model]\nkind = "plug2d"\n[friction]\nmu = [-1.0]\n')
+    out = tmp_path / "r.h5"
+    p = run(3, "run", bad, "-o", str(out), timeout=60, check=False)
+    assert p.returncode == 2
+    assert p.stderr.count("hpcwedge: error: friction.mu") == 1 and p.stdout == ""
+    assert not out.exists() and not os.path.exists(str(out) + ".ckpt")
