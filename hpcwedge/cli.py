@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 
 
@@ -14,7 +15,8 @@ def main(argv: list[str] | None = None) -> int:
     r = sub.add_parser("run", help="solve a scene and write RESULT.h5")
     r.add_argument("scene")
     r.add_argument("-o", "--output", required=True)
-    r.add_argument("--resume", action="store_true", help="continue from the checkpoint beside the output")
+    r.add_argument("--resume", action="store_true",
+                   help="continue from the checkpoint RESULT.h5.ckpt if it exists (else start afresh)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     s = sub.add_parser("show", help="print a result")
     s.add_argument("result")
@@ -25,12 +27,24 @@ def main(argv: list[str] | None = None) -> int:
     pl.add_argument("-o", "--output", required=True)
     pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     pl.add_argument("--ray", type=int, default=0, help="wedged ray to draw")
-    args = p.parse_args(argv)
+    # a checkpoint request (SIGUSR1, forwarded by mpirun to every rank) that arrives
+    # during start-up must not kill a rank: ignored until the master's handler is in;
+    # every handler is put back on return (main may be called in-process)
+    import threading
+    main_thread = threading.current_thread() is threading.main_thread()
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT)
+             } if main_thread else {}
+    if main_thread:
+        signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     try:
+        args = p.parse_args(argv)
         return {"run": _run, "show": _show, "plot": _plot}[args.cmd](args)
     except _UserError as e:
         print(f"hpcwedge: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
 
 
 class _UserError(Exception):
@@ -38,16 +52,48 @@ class _UserError(Exception):
 
 
 def _run(args) -> int:
+    from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, world
+    try:
+        comm = world()
+    except ParallelError as e:
+        raise _UserError(str(e)) from None
+    if comm is not None and comm.rank != 0:
+        sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
+        Engine(comm).serve()
+        return 0
+    from .checkpoint import CheckpointError, checkpoint_path
     from .pipeline import run_scene
     from .progress import Progress
     from .results import write_result
     from .scene import SceneError, load_scene
+    progress = Progress(quiet=args.quiet)
+    engine = Engine(comm, progress=None if args.quiet else progress)
+    engine.install_signals()
+    ckpt = checkpoint_path(args.output)
     try:
-        scene = load_scene(args.scene)
-        result = run_scene(scene, Progress(quiet=args.quiet))
-    except SceneError as e:
-        raise _UserError(str(e)) from None
-    write_result(args.output, result)
+        try:
+            scene = load_scene(args.scene)
+            if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume):
+                progress.note(f"resuming from {ckpt}")
+            elif os.path.exists(ckpt):
+                print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
+                      f"({'it is missing' if args.resume else 'use --resume to continue from it'})",
+                      file=sys.stderr)
+            result = run_scene(scene, progress, engine=engine)
+            write_result(args.output, result)
+            engine.remove_checkpoint()
+            engine.mark_done()
+        except (SceneError, CheckpointError) as e:
+            raise _UserError(str(e)) from None
+        except Interrupted as e:
+            written = engine.write_checkpoint(str(e))
+            print(f"[hpcwedge] {e}: " + (f"checkpoint written to {ckpt}; rerun with --resume to continue"
+                                         if written else "stopped before any checkpointable work"),
+                  file=sys.stderr)
+            engine.close(timeout=5.0)
+            return EXIT_INTERRUPTED
+    finally:
+        engine.close(restore_signals=False)
     if not args.quiet:
         mu_c = "null" if result.mu_c is None else f"{result.mu_c:.12g}"
         print(f"[hpcwedge] {scene.name}: mu_c = {mu_c}; wrote {args.output} "

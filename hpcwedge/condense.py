@@ -100,8 +100,15 @@ def schur_dense(model: Model) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _petsc():
+    import sys
     import petsc4py
-    petsc4py.init()
+    if "mpi4py.MPI" in sys.modules:
+        # under mpirun only the master condenses: PETSc's world must be this rank
+        # alone (PetscInitialize is collective over its world)
+        from mpi4py import MPI
+        petsc4py.init(comm=MPI.COMM_SELF)
+    else:
+        petsc4py.init()
     from petsc4py import PETSc
     return PETSc
 

@@ -5,16 +5,16 @@ Result whose lists are in canonical order (SPEC §4).
 
 2D: rays (double description), cones, mu^c per cone and global.
 3D: feasible sign patterns per listed mu (branch and bound over SOCPs),
-mu^c per pattern and global. The two units of work the parallel layer
-distributes are pure calls made here: `feasible_patterns` (explore the
-pattern tree at one mu; the parallel layer splits it into
-PatternTree.explore calls over subtrees) and `pattern_mu_c` (mu^c of one
-pattern).
+mu^c per pattern and global (2D too with enumerate = "patterns"). The units
+of work the parallel layer distributes (parallel.run_patterns: budgeted
+PatternTree.explore calls over subtrees; parallel.run_mu_c: mu^c of one
+cone or pattern) are the same in both dimensions.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from .cones import maximal_cones
 from .dd import complementary_rays
 from .model import Model
 from .mu_critical import mu_critical
+from .parallel import Engine, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, global_mu_critical
 from .problem import ContactProblem, parametrize, friction_rows_2d, ray_vectors
 from .progress import Progress
@@ -72,9 +73,12 @@ class Result:
     problem: ContactProblem | None = None
 
 
-def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
-    """Every answer the scene asks for (see Scene.plan)."""
+def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None) -> Result:
+    """Every answer the scene asks for (see Scene.plan). Sign patterns and mu^c
+    run as tasks of `engine` (parallel.py: in-process by default; the master of
+    an MPI run, with checkpoints, from the command line)."""
     progress = progress or Progress(quiet=True)
+    engine = engine or Engine()
     t0 = time.perf_counter()
     plan = scene.plan()
     timings = {"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0}
@@ -92,10 +96,6 @@ def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
     param = parametrize(problem, exact=scene.exact)
     result = Result(scene=scene, m=m, runs=[Run(mu=mu) for mu in scene.mu], model=model,
                     problem=problem, stages=stages, timings=timings)
-    if scene.dim == 3:
-        _run_3d(scene, plan, param, m, result, progress)
-        timings["total"] = time.perf_counter() - t0
-        return result
     stats = {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
 
     if plan.rays:
@@ -112,33 +112,60 @@ def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
         if plan.cones:
             stages.append("cones")
 
+    if plan.patterns:
+        t = time.perf_counter()
+        stages.append("enumerate")
+        pats = run_patterns(partial(PatternTree, strip_exact(param), m), scene.mu, engine=engine,
+                            budget=scene.task_budget)
+        for run, found, doubt in zip(result.runs, pats.found, pats.undecided):
+            run.patterns = [{"contact": [i for i in range(m) if s.contact >> i & 1], "mu_c": None,
+                             "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)]
+        c = pats.counters
+        stats["patterns_undecided"] = sum(len(u) for u in pats.undecided)
+        stats["bnb"] = {k: c.get(k, 0) for k in ("nodes", "solves", "skipped", "undecided")}
+        stats["bnb"]["partitions"] = 2 ** m * len(scene.mu)       # what brute force would solve
+        if scene.dim == 3:
+            stats["socp_statuses"] = {k[7:]: v for k, v in c.items() if k.startswith("status_")}
+        if stats["patterns_undecided"]:
+            progress.note(f"warning: {stats['patterns_undecided']} pattern(s) undecided by every "
+                          "solver (kept, flagged \"undecided\")")
+        timings["enumerate"] += time.perf_counter() - t
+
     if plan.mu_c_cones or plan.mu_c_global:
         t = time.perf_counter()
         stages.append("mu_c")
-        cache: dict = {}
 
-        def cone_mu_c(cone, mu):
-            key = (tuple(cone["zero_u"]), tuple(cone["zero_r"]))
-            if key not in cache:
-                r = mu_critical(param, m, np.isin(np.arange(m), cone["zero_u"]),
-                                np.isin(np.arange(m), cone["zero_r"]), mu_hi=mu,
-                                mu_max=scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol)
-                stats["lp_solves"] += r.lps
-                stats["lp_undecided"] += r.undecided
-                stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
-                cache[key] = r.mu_c
-            return cache[key]
+        def mask(nodes):
+            return np.isin(np.arange(m), nodes)
 
-        with_cones = [r for r in result.runs if r.cones]
-        if plan.mu_c_cones:
-            for run in result.runs:
-                for cone in run.cones or []:
-                    cone["mu_c"] = cone_mu_c(cone, run.mu)
+        def keyed(run):       # (key, zero_u, zero_r) of the run's cones and patterns
+            for c in run.cones or []:
+                yield (tuple(c["zero_u"]), tuple(c["zero_r"])), mask(c["zero_u"]), mask(c["zero_r"]), c
+            for p in run.patterns or []:
+                gap = [i for i in range(m) if i not in p["contact"]]
+                yield (tuple(p["contact"]), tuple(gap)), mask(p["contact"]), mask(gap), p
+
+        listed = [r for r in result.runs if r.cones or r.patterns]
+        wanted = result.runs if plan.mu_c_cones else listed[:1]
+        items: dict = {}      # one task per zero-set pair, at the least mu that lists it
+        for run in wanted:
+            for key, zu, zr, _ in keyed(run):
+                items.setdefault(key, (zu, zr, run.mu))
+        solve = partial(mu_critical, strip_exact(param), m, mu_max=scene.mu_max,
+                        method=scene.mu_c_method, tol=scene.mu_c_tol)
+        cache = dict(zip(items, run_mu_c(solve, list(items.values()), engine=engine)))
+        for r in cache.values():
+            stats["lp_solves"] += r.lps
+            stats["lp_undecided"] += r.undecided
+            stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
+        for run in wanted:
+            for key, _, _, item in keyed(run):
+                if plan.mu_c_cones:
+                    item["mu_c"] = cache[key].mu_c
         if plan.mu_c_global:
-            if with_cones:
-                # any pattern feasible below the smallest such mu lies in one of its cones
-                run = with_cones[0]
-                values = [cone_mu_c(c, run.mu) for c in run.cones]
+            if listed:
+                # any pattern feasible below the smallest such mu lies in one of its cones/patterns
+                values = [cache[key].mu_c for key, *_ in keyed(listed[0])]
                 values = [v for v in values if v is not None]
                 result.mu_c, result.mu_c_status = (min(values), "found") if values else (None, None)
             if result.mu_c is None:
@@ -152,6 +179,7 @@ def run_scene(scene: Scene, progress: Progress | None = None) -> Result:
         progress.note(f"warning: {stats['mu_c_unpolished']} mu^c value(s) not polished "
                       f"(accurate to the bracket, {1e-7:g} relative)")
     timings["total"] = time.perf_counter() - t0
+    stats["parallel"] = engine.summary()
     result.stats = stats
     return result
 
@@ -176,93 +204,3 @@ def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
                           "zero_u": np.flatnonzero(cone.zero_u).tolist(),
                           "zero_r": np.flatnonzero(cone.zero_r).tolist(),
                           "mu_c": None})
-
-
-# ---------------------------------------------------------------------------- 3D
-def feasible_patterns(param, m: int, mu: float, order: list[int] | None = None):
-    """The feasible sign patterns at mu, serially: (found, undecided, stats), found
-    and undecided as lists of Subtree (full depth), undecided ⊆ found."""
-    tree = PatternTree(param, m, mu, order=order)
-    out = tree.explore(tree.root())
-    return out.found, out.undecided, out.stats
-
-
-def pattern_mu_c(param, m: int, contact: int, mu_hi: float | None, scene: Scene):
-    """mu^c of the full pattern with contact bits `contact` (the others gap)."""
-    zu = np.array([(contact >> i) & 1 for i in range(m)], dtype=bool)
-    return mu_critical(param, m, zu, ~zu, mu_hi=mu_hi, mu_max=scene.mu_max,
-                       method=scene.mu_c_method, tol=scene.mu_c_tol)
-
-
-def _run_3d(scene: Scene, plan, param, m: int, result: Result, progress: Progress) -> None:
-    """Feasible sign patterns per mu, their mu^c and the global mu^c (SPEC §2, 3D)."""
-    timings, stages = result.timings, result.stages
-    stats = {"bnb": [], "socp_statuses": {}, "mu_c_solves": 0, "mu_c_polished": 0,
-             "mu_c_unpolished": 0, "mu_c_undecided": 0, "patterns_undecided": 0}
-
-    def absorb(counts: dict) -> None:
-        for k, v in counts.items():
-            stats["socp_statuses"][k] = stats["socp_statuses"].get(k, 0) + v
-
-    found_at: dict[float, list[int]] = {}
-    if plan.patterns:
-        t = time.perf_counter()
-        stages.append("enumerate")
-        for run in result.runs:
-            progress.stage(f"patterns mu={run.mu:g}")
-            found, undecided, bnb = feasible_patterns(param, m, run.mu)
-            progress.close()
-            doubt = {s.contact for s in undecided}
-            bits = sorted(s.contact for s in found)
-            found_at[run.mu] = bits
-            run.patterns = [{"contact": [i for i in range(m) if (b >> i) & 1], "mu_c": None,
-                             "undecided": b in doubt} for b in bits]
-            stats["patterns_undecided"] += len(doubt)
-            stats["bnb"].append({"mu": run.mu, "solves": bnb.solves, "skipped": bnb.skipped,
-                                 "undecided": bnb.undecided, "nodes": bnb.nodes,
-                                 "partitions": 2 ** m})
-            absorb(bnb.statuses)
-        timings["enumerate"] = time.perf_counter() - t
-
-    if plan.mu_c_cones or plan.mu_c_global:
-        t = time.perf_counter()
-        stages.append("mu_c")
-        cache: dict[int, float | None] = {}
-
-        def mu_c_of(bits: int, mu: float):
-            if bits not in cache:
-                r = pattern_mu_c(param, m, bits, mu, scene)
-                stats["mu_c_solves"] += r.lps
-                stats["mu_c_undecided"] += r.undecided
-                stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
-                absorb(r.statuses)
-                cache[bits] = r.mu_c
-            return cache[bits]
-
-        if plan.mu_c_cones:
-            for run in result.runs:
-                for pat, bits in zip(run.patterns or [], found_at.get(run.mu, [])):
-                    pat["mu_c"] = mu_c_of(bits, run.mu)
-        if plan.mu_c_global:
-            with_patterns = [r for r in result.runs if found_at.get(r.mu)]
-            if with_patterns:
-                # every pattern feasible below the smallest such mu is among its patterns
-                run = with_patterns[0]
-                values = [v for v in (mu_c_of(b, run.mu) for b in found_at[run.mu]) if v is not None]
-                if values:
-                    result.mu_c, result.mu_c_status = min(values), "found"
-            if result.mu_c is None:
-                bnb = BnBStats()
-                result.mu_c, result.mu_c_status = global_mu_critical(
-                    param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb)
-                stats["global_bnb"] = {"solves": bnb.solves, "skipped": bnb.skipped,
-                                       "undecided": bnb.undecided, "nodes": bnb.nodes, **bnb.extra}
-                absorb(bnb.statuses)
-        timings["mu_c"] = time.perf_counter() - t
-    if stats["mu_c_unpolished"]:
-        progress.note(f"warning: {stats['mu_c_unpolished']} mu^c value(s) not polished "
-                      f"(accurate to the bracket, {1e-7:g} relative)")
-    if stats["patterns_undecided"]:
-        progress.note(f"warning: {stats['patterns_undecided']} pattern(s) undecided by every solver "
-                      "(kept, flagged \"undecided\")")
-    result.stats = stats

@@ -23,24 +23,42 @@ import numpy as np
 from . import __version__
 
 
-def write_atomic(path: str, fill) -> None:
+def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> None:
     """Write an HDF5 file through `fill(h5file)`: temp file in the same folder,
-    flush + fsync, then os.replace, so a crash never leaves a half-written file."""
+    flush + fsync, optionally `verify(tmp)` (raises if the file is bad), then
+    os.replace and an fsync of the folder, so a crash never leaves a half-written
+    file and a bad file never replaces a good one. tmp_path: a fixed temp name
+    (a stale one from a killed writer is simply overwritten); default: a fresh one."""
     folder = os.path.dirname(os.path.abspath(path)) or "."
     os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=folder)
-    os.close(fd)
+    if tmp_path is None:
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=folder)
+        os.close(fd)
+    else:
+        tmp = tmp_path
     try:
         with h5py.File(tmp, "w") as f:
             fill(f)
             f.flush()
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
+        if verify is not None:
+            verify(tmp)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+    try:
+        dfd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(dfd)
+    except OSError:
+        pass
+    finally:
+        os.close(dfd)
 
 
 def write_result(path: str, result) -> None:

@@ -21,7 +21,7 @@ KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
-RUN_DEFAULTS = {"checkpoint_every_s": 60.0}
+RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64}
 
 
 class SceneError(ValueError):
@@ -35,7 +35,7 @@ class Plan:
     condense: bool       # a model to assemble and condense (not a raw K)
     rays: bool           # 2D: complementary extreme rays per listed mu
     cones: bool          # 2D: cross-complementarity cliques
-    patterns: bool       # 3D: feasible sign patterns per listed mu
+    patterns: bool       # 3D (2D with enumerate = "patterns"): feasible sign patterns per listed mu
     mu_c_cones: bool     # mu^c of every cone / pattern
     mu_c_global: bool
 
@@ -57,6 +57,7 @@ class Scene:
     checkpoint_every_s: float
     text: str = field(repr=False, default="")
     base_dir: str = "."
+    task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
 
     @property
     def hash(self) -> str:
@@ -64,11 +65,12 @@ class Scene:
 
     def plan(self) -> Plan:
         enum = self.enumerate is not False
-        cones = self.dim == 2 and enum and self.enumerate != "rays"
+        patterns = enum and (self.dim == 3 or self.enumerate == "patterns")
+        rays = self.dim == 2 and enum and not patterns
         return Plan(condense=self.kind != "stiffness",
-                    rays=self.dim == 2 and enum,
-                    cones=cones,
-                    patterns=self.dim == 3 and enum,
+                    rays=rays,
+                    cones=rays and self.enumerate != "rays",
+                    patterns=patterns,
                     mu_c_cones=self.mu_c == "cones",
                     mu_c_global=self.mu_c in ("global", "cones"))
 
@@ -120,8 +122,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     given = data.get("compute", {})
     _unknown(given, set(COMPUTE_DEFAULTS), "compute.")
     compute.update(given)
-    if compute["enumerate"] not in (True, False, "rays"):
-        raise SceneError(f"compute.enumerate: true, false or \"rays\", got {compute['enumerate']!r}")
+    if compute["enumerate"] not in (True, False, "rays", "patterns"):
+        raise SceneError(f"compute.enumerate: true, false, \"rays\" or \"patterns\", "
+                         f"got {compute['enumerate']!r}")
     if compute["mu_c"] not in ("none", "global", "cones"):
         raise SceneError(f"compute.mu_c: \"none\", \"global\" or \"cones\", got {compute['mu_c']!r}")
     if compute["mu_c_method"] not in ("accurate", "bisection"):
@@ -140,6 +143,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     v = run["checkpoint_every_s"]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or v <= 0:
         raise SceneError(f"run.checkpoint_every_s: must be a number > 0, got {v!r}")
+    v = run["task_budget"]
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
     contact = data.get("contact", {})
     if not isinstance(contact, dict):
         raise SceneError("contact: must be a table")
@@ -151,7 +157,7 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  mu_c=compute["mu_c"], mu_c_method=compute["mu_c_method"],
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
-                 text=text, base_dir=base_dir)
+                 text=text, base_dir=base_dir, task_budget=run["task_budget"])
 
 
 def _unknown(table, allowed, prefix):

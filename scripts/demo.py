@@ -4,7 +4,7 @@
 Writes results/demo/<scene>.toml, <scene>.h5, <scene>.png and table.md, and
 prints the tables: wedged rays, cones and mu^c per 2D scene; feasible sign
 patterns per mu and the global mu^c of plug3d (m = 10), run under mpirun
-with --ranks ranks (default 2, oversubscribed if the machine has fewer cores).
+with --ranks ranks (default 3: a master and 2 workers, oversubscribed if the machine has fewer cores).
 """
 from __future__ import annotations
 
@@ -117,7 +117,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", default=os.path.join(ROOT, "results", "demo"))
     ap.add_argument("--only", nargs="*", help="scene names to run (default: all; plug3d is one)")
-    ap.add_argument("--ranks", type=int, default=2, help="MPI ranks for plug3d (1: no mpirun)")
+    ap.add_argument("--ranks", type=int, default=3, help="MPI ranks for plug3d (1: no mpirun)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     rows = []

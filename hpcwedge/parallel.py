@@ -1,0 +1,804 @@
+"""Master/worker engine over mpi4py, and the checkpoints of its state (SPEC §5).
+
+Vocabulary
+- *task* = (kind, payload). A kind names a handler ``handler(context, payload)
+  -> result``; ``context`` is the job's shared read-only data (a picklable
+  object: the parametrisation, the mu list, ...), sent once to each worker.
+  The engines (patterns.py, mu_critical.py, dd.py) know nothing of MPI.
+- *job*: a pool of tasks and the merge of their results. ``SubtreeJob``
+  (branch and bound: a task explores a subtree with a node budget and gives
+  back the subtrees it left open, which return to the pool) and ``TaskJob``
+  (a fixed list of independent tasks: mu^c, faces).
+- ``Engine`` runs jobs. One process (no MPI launcher, or size 1): the same
+  task loop in-process. Under mpirun: rank 0 is the master — it holds the
+  pool, hands a task to each worker that is free, merges results and alone
+  writes files; ranks >= 1 call ``Engine.serve()`` and only run tasks.
+
+Budgets (after mplrs): a subtree task gets ``budget`` tree nodes while the
+pool is short (fewer than 2 tasks per worker), so work is split and handed
+back as open subtrees; ``budget * BUDGET_SCALE`` when the pool is long. Tasks
+are always bounded, so a checkpoint never waits long and loses little.
+
+Idle ranks sleep: Open MPI's blocking receive busy-polls a core, so every
+wait here is a burst of ``Iprobe`` calls + ``time.sleep`` with a back-off
+(10% of the time waited so far, at most POLL_MAX seconds) (an idle worker costs well under 1% of a core;
+see tests). The burst matters: Open MPI's Iprobe sees a message that is
+already there only after ~10 progress calls, so one probe per sleep made
+every round trip cost ~140 ms instead of ~0.2 ms.
+
+Checkpoints (checkpoint.py has the file layout): every ``checkpoint_every_s``
+seconds, at SIGUSR1 (then the run goes on) and at SIGTERM/SIGINT (then the
+master stops the workers and the command exits with EXIT_INTERRUPTED). Signal
+handlers only set a flag inside the task loop, which acts on it between two
+merges (a task is done only once its result is merged into the master's
+state; tasks in flight are saved as open). Outside the loop, SIGTERM raises
+``Interrupted`` at once: the state is then the finished jobs.
+
+Resume: a job whose name is in the checkpoint starts from the saved state
+(a finished job returns its saved results at once). The pipeline is
+deterministic, so it asks for the same jobs in the same order.
+
+Adding a task kind is one line in KINDS (a ``"module:function"`` string is
+imported on first use, on every rank), or ``register(kind, handler)`` in a
+module that every rank imports.
+"""
+from __future__ import annotations
+
+import heapq
+import importlib
+import json
+import math
+import os
+import signal
+import socket
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .checkpoint import CheckpointError, read_checkpoint, write_checkpoint
+
+#: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
+EXIT_INTERRUPTED = 75
+#: longest sleep between two probes of an idle worker / of the master (seconds);
+#: a rank that has waited t seconds sleeps min(cap, POLL_FRACTION * t), so a
+#: result is noticed within ~10% of the task's duration
+POLL_MAX = 0.05
+POLL_MAX_MASTER = 0.01
+POLL_FRACTION = 0.1
+#: probes per wake-up: Open MPI's Iprobe reports a message that has arrived only
+#: after several progress calls (~10 measured here), so each wake-up probes in a burst
+PROBE_BURST = 32
+#: budget multiplier when the pool holds enough tasks for every worker
+BUDGET_SCALE = 16
+#: default node budget of a subtree task (scene key run.task_budget)
+DEFAULT_BUDGET = 64
+
+_TASK, _RESULT, _ERROR, _STOP, _HELLO = 1, 2, 3, 4, 5
+#: how often an idle worker checks that its master (same host) is still alive
+MASTER_CHECK_S = 0.2
+
+
+class ParallelError(RuntimeError):
+    """A launch problem the user must fix (one line; exit status 2)."""
+
+
+class Interrupted(Exception):
+    """SIGTERM/SIGINT reached the master: write the checkpoint and stop."""
+
+
+# ---------------------------------------------------------------- task kinds
+
+KINDS: dict = {
+    "subtree": "hpcwedge.parallel:explore_task",
+    "mu_c": "hpcwedge.parallel:mu_c_task",
+    # "face": "hpcwedge.dd:face_task",      # the 2D split over faces (SPEC §5) goes here
+}
+
+
+#: modules a worker imports before its first task (the engines' heavy imports)
+WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical"]
+
+
+def register(kind: str, handler) -> None:
+    """handler: callable(context, payload) -> result, or a "module:function" string."""
+    KINDS[kind] = handler
+
+
+def handler_for(kind: str):
+    h = KINDS.get(kind, kind if ":" in kind else None)
+    if h is None:
+        raise KeyError(f"unknown task kind {kind!r}")
+    if isinstance(h, str):
+        mod, name = h.split(":")
+        h = getattr(importlib.import_module(mod), name)
+        KINDS[kind] = h
+    return h
+
+
+# ---------------------------------------------------------------- the communicator
+
+_MPI_ENV = ("OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK", "PMI_SIZE", "MPI_LOCALNRANKS")
+
+
+def world():
+    """The MPI world communicator when launched by an MPI launcher (mpirun, srun
+    --mpi=pmix) with more than one rank, else None (no MPI is initialised).
+
+    Set HPCWEDGE_MPI=0 to never use MPI, =1 to always initialise it. When
+    SLURM_NTASKS is set, the world size must equal it: srun without a working
+    PMIx starts N independent single-rank copies, which would each redo the
+    whole run and race on the output (ParallelError; HPCWEDGE_IGNORE_SLURM_NTASKS=1
+    skips the check)."""
+    mode = os.environ.get("HPCWEDGE_MPI", "")
+    if mode == "0":
+        return None
+    ntasks = os.environ.get("SLURM_NTASKS", "")
+    ntasks = int(ntasks) if ntasks.isdigit() else None
+    launched = any(k in os.environ for k in _MPI_ENV)
+    if not (launched or mode == "1" or (ntasks or 0) > 1):
+        return None
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD
+    if ntasks is not None and comm.size != ntasks and not os.environ.get("HPCWEDGE_IGNORE_SLURM_NTASKS"):
+        raise ParallelError(
+            f"SLURM_NTASKS={ntasks} but this process is rank {comm.rank} of an MPI world of "
+            f"{comm.size}: the launcher started independent copies (srun without PMIx?); use "
+            f"`srun --mpi=pmix` or `mpirun -n {ntasks}`, or set HPCWEDGE_IGNORE_SLURM_NTASKS=1")
+    return comm if comm.size > 1 else None
+
+
+# ---------------------------------------------------------------- sign-pattern subtrees
+
+
+class PatternContext:
+    """What a worker needs to explore subtrees: make_tree(mu) -> a tree with
+    root() and explore(subtree, budget) (patterns.PatternTree), and the mu list."""
+
+    def __init__(self, make_tree, mus):
+        self.make_tree, self.mus = make_tree, list(mus)
+        self._trees = {}
+
+    def tree(self, i: int):
+        if i not in self._trees:
+            self._trees[i] = self.make_tree(self.mus[i])
+        return self._trees[i]
+
+    def __getstate__(self):
+        return {"make_tree": self.make_tree, "mus": self.mus, "_trees": {}}
+
+
+STAT_KEYS = ("nodes", "solves", "skipped", "undecided")
+
+
+def explore_task(ctx: PatternContext, payload):
+    """Task "subtree": payload (mu index, Subtree, budget) ->
+    (found, open, stats dict, undecided found)."""
+    i, subtree, budget = payload
+    out = ctx.tree(i).explore(subtree, budget)
+    stats = {k: getattr(out.stats, k) for k in STAT_KEYS}
+    for k, v in (getattr(out.stats, "statuses", None) or {}).items():
+        stats[f"status_{k}"] = v
+    return out.found, out.open, stats, list(getattr(out, "undecided", []))
+
+
+def _bits_to_words(values, words: int) -> np.ndarray:
+    out = np.zeros((len(values), words), dtype=np.uint64)
+    for r, v in enumerate(values):
+        for w in range(words):
+            out[r, w] = (v >> (64 * w)) & 0xFFFFFFFFFFFFFFFF
+    return out
+
+
+def _words_to_bits(arr: np.ndarray) -> list[int]:
+    arr = np.asarray(arr, dtype=np.uint64)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    return [sum(int(x) << (64 * w) for w, x in enumerate(row)) for row in arr]
+
+
+def canonical_key(subtree, m: int) -> int:
+    """Patterns sort by their gap set read as a binary word with node 0 first:
+    the serial depth-first order (contact before gap, node 0 decided first)."""
+    return int(format(subtree.gap, f"0{m}b")[::-1], 2)
+
+
+class SubtreeJob:
+    """The sign-pattern trees of every mu, explored by budgeted subtree tasks.
+
+    Checkpoint data: mus, m; found_mu, found_depth, found_contact, found_gap,
+    found_undecided (one row per found pattern); open_mu, open_depth,
+    open_contact, open_gap (the pool and the tasks in flight). Bit sets are
+    (rows, ceil(m/64)) uint64 words, bit i of word w = node 64 w + i."""
+
+    kind = "subtree"
+
+    def __init__(self, name: str, make_tree, mus, budget: int = DEFAULT_BUDGET):
+        self.name, self.mus, self.budget = name, [float(v) for v in mus], int(budget)
+        self.context = PatternContext(make_tree, self.mus)
+        trees = [self.context.tree(i) for i in range(len(self.mus))]
+        self.m = trees[0].m if trees else 0
+        self.found = [[] for _ in self.mus]
+        self.undecided = [[] for _ in self.mus]
+        self.counters = {"tasks": 0, "handed_back": 0, **{k: 0 for k in STAT_KEYS}}
+        self._pool: list = []
+        self._seq = 0
+        for i, tree in enumerate(trees):
+            self._push(i, tree.root())
+
+    def _push(self, i, subtree):
+        heapq.heappush(self._pool, (subtree.depth, self._seq, i, subtree))
+        self._seq += 1
+
+    def pending(self) -> int:
+        return len(self._pool)
+
+    def take(self, n_workers: int):
+        if not self._pool:
+            return None
+        _, _, i, subtree = heapq.heappop(self._pool)
+        budget = self.budget if len(self._pool) < 2 * n_workers else self.budget * BUDGET_SCALE
+        return (i, subtree), (i, subtree, budget)
+
+    def merge(self, token, result) -> None:
+        i = token[0]
+        found, open_, stats, undecided = result
+        self.found[i].extend(found)
+        self.undecided[i].extend(undecided)
+        for s in open_:
+            self._push(i, s)
+        self.counters["tasks"] += 1
+        self.counters["handed_back"] += len(open_)
+        for k, v in stats.items():
+            self.counters[k] = self.counters.get(k, 0) + v
+
+    def save(self, in_flight) -> dict:
+        words = max(1, math.ceil(self.m / 64))
+        doubt = [set(u) for u in self.undecided]
+        found = [(i, s) for i, lst in enumerate(self.found) for s in lst]
+        opens = [(i, s) for _, _, i, s in self._pool] + list(in_flight)
+        data = {"mus": np.array(self.mus, dtype=float),
+                "found_mu": np.array([i for i, _ in found], dtype=np.int32),
+                "found_depth": np.array([s.depth for _, s in found], dtype=np.int32),
+                "found_contact": _bits_to_words([s.contact for _, s in found], words),
+                "found_gap": _bits_to_words([s.gap for _, s in found], words),
+                "found_undecided": np.array([s in doubt[i] for i, s in found], dtype=bool),
+                "open_mu": np.array([i for i, _ in opens], dtype=np.int32),
+                "open_depth": np.array([s.depth for _, s in opens], dtype=np.int32),
+                "open_contact": _bits_to_words([s.contact for _, s in opens], words),
+                "open_gap": _bits_to_words([s.gap for _, s in opens], words)}
+        return {"attrs": {"m": self.m, "budget": self.budget}, "data": data}
+
+    def load(self, state: dict) -> None:
+        from .patterns import Subtree
+        a, d = state["attrs"], state["data"]
+        if int(a["m"]) != self.m or list(np.asarray(d["mus"], dtype=float)) != self.mus:
+            raise CheckpointError(f"job {self.name!r}: the checkpoint was taken on other mu values or m")
+        self.found = [[] for _ in self.mus]
+        self.undecided = [[] for _ in self.mus]
+        for i, depth, c, g, u in zip(d["found_mu"], d["found_depth"], _words_to_bits(d["found_contact"]),
+                                     _words_to_bits(d["found_gap"]), d["found_undecided"]):
+            s = Subtree(int(depth), c, g)
+            self.found[int(i)].append(s)
+            if u:
+                self.undecided[int(i)].append(s)
+        self._pool, self._seq = [], 0
+        for i, depth, c, g in zip(d["open_mu"], d["open_depth"], _words_to_bits(d["open_contact"]),
+                                  _words_to_bits(d["open_gap"])):
+            self._push(int(i), Subtree(int(depth), c, g))
+
+    def output(self) -> "Patterns":
+        key = lambda s: canonical_key(s, self.m)
+        return Patterns(mus=self.mus, m=self.m,
+                        found=[sorted(lst, key=key) for lst in self.found],
+                        undecided=[sorted(lst, key=key) for lst in self.undecided],
+                        counters=dict(self.counters))
+
+
+@dataclass
+class Patterns:
+    """run_patterns' answer: per mu (in the given order) the feasible full
+    patterns (patterns.Subtree, depth m) in canonical order, the ones among
+    them no solver decided, and the job's counters (nodes is the number of
+    tree nodes visited: the same for every split, rank count or resume)."""
+
+    mus: list
+    m: int
+    found: list
+    undecided: list
+    counters: dict = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------- independent tasks
+
+
+def mu_c_task(solve, payload) -> dict:
+    """Task "mu_c": payload (zero_u, zero_r, mu_hi) -> MuC fields (mu_c NaN = None)."""
+    zero_u, zero_r, mu_hi = payload
+    r = solve(np.asarray(zero_u, dtype=bool), np.asarray(zero_r, dtype=bool), mu_hi=mu_hi)
+    return {"mu_c": np.nan if r.mu_c is None else float(r.mu_c), "polished": bool(r.polished),
+            "lps": int(r.lps), "undecided": int(r.undecided)}
+
+
+class TaskJob:
+    """A fixed list of independent tasks of one kind; results are dicts whose
+    values are numbers/bools (stored as one column per key) or arrays (stored
+    concatenated along axis 0, with <key>_offsets). Checkpoint data: done (the
+    indices whose result is in), the result columns."""
+
+    def __init__(self, name: str, kind: str, context, payloads: list):
+        self.name, self.kind, self.context = name, kind, context
+        self.payloads = list(payloads)
+        self.results: list = [None] * len(self.payloads)
+        self._todo = list(range(len(self.payloads)))[::-1]
+        self.counters = {"tasks": 0}
+
+    def pending(self) -> int:
+        return len(self._todo)
+
+    def take(self, n_workers: int):
+        if not self._todo:
+            return None
+        k = self._todo.pop()
+        return k, self.payloads[k]
+
+    def merge(self, token, result) -> None:
+        self.results[token] = result
+        self.counters["tasks"] += 1
+
+    def save(self, in_flight) -> dict:
+        done = [k for k, r in enumerate(self.results) if r is not None]
+        data = {"done": np.array(done, dtype=np.int64)}
+        keys = sorted(self.results[done[0]]) if done else []
+        for key in keys:
+            vals = [self.results[k][key] for k in done]
+            if all(np.ndim(v) == 0 for v in vals):
+                data[key] = np.array(vals)
+            else:
+                arrs = [np.atleast_1d(np.asarray(v)) for v in vals]
+                data[key] = np.concatenate(arrs, axis=0)
+                data[key + "_offsets"] = np.cumsum([0] + [len(a) for a in arrs])
+        return {"attrs": {"n_tasks": len(self.payloads), "result_keys": json.dumps(keys)}, "data": data}
+
+    def load(self, state: dict) -> None:
+        a, d = state["attrs"], state["data"]
+        if int(a["n_tasks"]) != len(self.payloads):
+            raise CheckpointError(f"job {self.name!r}: the checkpoint has {a['n_tasks']} tasks, "
+                                  f"this run {len(self.payloads)}")
+        keys = json.loads(a["result_keys"])
+        done = [int(k) for k in d["done"]]
+        self.results = [None] * len(self.payloads)
+        for row, k in enumerate(done):
+            res = {}
+            for key in keys:
+                if key + "_offsets" in d:
+                    off = d[key + "_offsets"]
+                    res[key] = d[key][off[row]:off[row + 1]]
+                else:
+                    res[key] = d[key][row].item()
+            self.results[k] = res
+        self._todo = [k for k in range(len(self.payloads)) if self.results[k] is None][::-1]
+        self.counters["tasks"] = len(done)
+
+    def output(self) -> list:
+        return self.results
+
+
+# ---------------------------------------------------------------- the engine
+
+
+class Engine:
+    """Runs jobs serially (comm None) or as the master of a world of workers.
+
+    checkpoint: set with use_checkpoint(); signals: install_signals() (master,
+    command line only). summary(): how the work was split (depends on the rank
+    count and on resumes, unlike every answer)."""
+
+    def __init__(self, comm=None, progress=None):
+        self.comm = comm
+        self.size = comm.size if comm is not None else 1
+        self.rank = comm.rank if comm is not None else 0
+        self.progress = progress
+        self.workers = list(range(1, self.size))
+        self._jobs: dict = {}            # finished jobs, by name, in order
+        self._restored: dict = {}        # name -> saved state
+        self._restored_order: list = []
+        self._current = None             # the job being run
+        self._inflight: dict = {}        # worker -> token (master)
+        self._ctx_sent: dict = {}        # worker -> job id whose context it holds
+        self._job_id = 0
+        self._flags: set = set()
+        self._defer = False              # signals only set flags (inside run())
+        self._old_handlers: dict = {}
+        self._stopped = False
+        self._done = False
+        self._ckpt = None                # (path, scene_hash, scene_text, every_s)
+        self._next_ckpt = math.inf
+        self._t0 = time.monotonic()
+        self._elapsed_before = 0.0
+        self.resumes = 0
+        self.checkpoints_written = 0
+        self.checkpoint_reason = None
+        self.tasks_per_rank = [0] * self.size  # this session, merged tasks by the rank that ran them
+        if comm is not None and self.rank == 0:
+            me = (socket.gethostname(), os.getpid())
+            for w in self.workers:              # small: an eager send, returns at once
+                comm.send(me, dest=w, tag=_HELLO)
+
+    @property
+    def is_master(self) -> bool:
+        return self.rank == 0
+
+    # ---- checkpoints
+
+    def use_checkpoint(self, path: str, scene_hash: str, scene_text: str, every_s: float,
+                       resume: bool) -> bool:
+        """Write checkpoints to `path`; with resume, continue from it if it exists
+        (CheckpointError on a damaged file or another scene; the file is left
+        untouched). Returns True when a checkpoint was loaded."""
+        self._ckpt = (path, scene_hash, scene_text, float(every_s))
+        self._next_ckpt = time.monotonic() + float(every_s)
+        if not (resume and os.path.exists(path)):
+            return False
+        from . import __version__
+        ck = read_checkpoint(path)
+        a = ck["attrs"]
+        if a["scene_hash"] != scene_hash:
+            raise CheckpointError(f"{path}: the checkpoint belongs to another scene (scene hash "
+                                  f"{a['scene_hash'][:12]}..., this scene {scene_hash[:12]}...); "
+                                  f"use the scene it was started with, or remove it to start afresh")
+        if a["version"] != __version__:
+            raise CheckpointError(f"{path}: written by hpcwedge {a['version']}, this is {__version__}; "
+                                  f"finish the run with that version, or remove it to start afresh")
+        self._restored = ck["jobs"]
+        self._restored_order = list(ck["order"])
+        self._elapsed_before = float(a["elapsed_s"])
+        self.resumes = int(a["resumes"]) + 1
+        return True
+
+    def elapsed(self) -> float:
+        return self._elapsed_before + time.monotonic() - self._t0
+
+    def write_checkpoint(self, reason: str = "timer") -> bool:
+        """Write the master's state now (no-op without a checkpoint path)."""
+        if self._ckpt is None or not self.is_master:
+            return False
+        path, scene_hash, text, every = self._ckpt
+        jobs = []
+        for name, job in self._jobs.items():
+            jobs.append((name, self._state(job, [], finished=True)))
+        if self._current is not None and self._current.name not in self._jobs:
+            jobs.append((self._current.name,
+                         self._state(self._current, list(self._inflight.values()), finished=False)))
+        names = {n for n, _ in jobs}
+        for name in self._restored_order:       # restored jobs this session has not reached yet
+            if name not in names and name in self._restored:
+                jobs.append((name, self._restored[name]))
+        header = {"scene_hash": scene_hash, "elapsed_s": self.elapsed(), "resumes": self.resumes,
+                  "ranks": self.size, "reason": reason}
+        write_checkpoint(path, header, text, jobs)
+        self.checkpoints_written += 1
+        self.checkpoint_reason = reason
+        self._next_ckpt = time.monotonic() + every
+        return True
+
+    def remove_checkpoint(self) -> None:
+        """The result is written: the checkpoint (and a stale temp) are no longer needed."""
+        if self._ckpt is None:
+            return
+        for p in (self._ckpt[0], self._ckpt[0] + ".tmp"):
+            if os.path.exists(p):
+                os.unlink(p)
+
+    @staticmethod
+    def _state(job, in_flight, finished: bool) -> dict:
+        st = job.save(in_flight)
+        st["attrs"].update({"kind": job.kind, "finished": finished, "counters": json.dumps(job.counters)})
+        return st
+
+    # ---- signals
+
+    def install_signals(self) -> None:
+        """Master: SIGUSR1 = checkpoint and go on; SIGTERM/SIGINT = checkpoint and stop.
+        (Main thread only; elsewhere signals stay as they are.)"""
+        import threading
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
+            self._old_handlers[sig] = signal.signal(sig, self._on_signal)
+
+    def mark_done(self) -> None:
+        """The result is written: from now on signals change nothing (exit 0)."""
+        self._done = True
+
+    def _on_signal(self, signum, frame):
+        name = signal.Signals(signum).name
+        if self._done:
+            return
+        if signum == signal.SIGUSR1:
+            self._flags.add(name)
+            return
+        self._flags.add("STOP:" + name)
+        if not self._defer:
+            self._defer = True        # a second signal must not interrupt the checkpoint write
+            raise Interrupted(name)
+
+    def _stop_flag(self):
+        return next((f[5:] for f in self._flags if f.startswith("STOP:")), None)
+
+    def _safe_point(self) -> None:
+        """Between merges: act on signals and the checkpoint timer."""
+        stop = self._stop_flag()
+        if stop:
+            raise Interrupted(stop)
+        if "SIGUSR1" in self._flags:
+            self._flags.discard("SIGUSR1")
+            self.write_checkpoint("SIGUSR1")
+        elif time.monotonic() >= self._next_ckpt:
+            self.write_checkpoint("timer")
+
+    # ---- running jobs
+
+    def run(self, job):
+        """Run `job` to the end (resuming it from the checkpoint if it is there); returns it."""
+        if not self.is_master:
+            raise RuntimeError("Engine.run is for the master; workers call serve()")
+        if job.name in self._jobs:
+            raise ValueError(f"job name {job.name!r} used twice")
+        self._defer = True            # from here on, signals act at safe points only
+        try:
+            state = self._restored.get(job.name)
+            if state is not None:
+                if state["attrs"].get("kind") != job.kind:
+                    raise CheckpointError(f"job {job.name!r}: checkpoint kind {state['attrs'].get('kind')!r}, "
+                                          f"this run {job.kind!r}")
+                job.load(state)
+                job.counters.update(json.loads(state["attrs"]["counters"]))
+            self._job_id += 1
+            self._current, self._inflight = job, {}
+            self._restored.pop(job.name, None)
+            if self._stop_flag():
+                raise Interrupted(self._stop_flag())
+            if self.size == 1:
+                self._run_serial(job)
+            else:
+                self._run_master(job)
+            self._jobs[job.name] = job
+            self._current, self._inflight = None, {}
+        finally:
+            self._defer = False
+        if self._stop_flag():
+            raise Interrupted(self._stop_flag())
+        return job
+
+    def _run_serial(self, job) -> None:
+        handler = handler_for(job.kind)
+        last_note = time.monotonic()
+        while True:
+            self._safe_point()
+            taken = job.take(1)
+            if taken is None:
+                return
+            token, payload = taken
+            self._inflight[0] = token
+            result = handler(job.context, payload)
+            job.merge(token, result)           # done: in the master's state
+            del self._inflight[0]
+            self.tasks_per_rank[0] += 1
+            last_note = self._note(job, last_note)
+
+    def _run_master(self, job) -> None:
+        from mpi4py import MPI
+        comm = self.comm
+        idle = [w for w in self.workers if w not in self._inflight][::-1]
+        n_workers = len(self.workers)
+        last_note = time.monotonic()
+        while True:
+            while idle:
+                taken = job.take(n_workers)
+                if taken is None:
+                    break
+                token, payload = taken
+                w = idle.pop()
+                fresh = self._ctx_sent.get(w) != self._job_id
+                self._ctx_sent[w] = self._job_id
+                self._inflight[w] = token
+                comm.send((self._job_id, job.kind, payload, fresh, job.context if fresh else None),
+                          dest=w, tag=_TASK)
+            if not self._inflight:
+                return                         # pool empty, nothing in flight: done
+            got = self._wait_any(MPI, deadline=self._next_ckpt)
+            if got is not None:
+                w, tag, msg = got
+                token = self._inflight.pop(w)
+                idle.append(w)
+                self.tasks_per_rank[w] += 1
+                if tag == _ERROR:
+                    raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task:\n{msg}")
+                job.merge(token, msg)          # done: in the master's state
+            self._safe_point()
+            last_note = self._note(job, last_note)
+
+    def _wait_any(self, MPI, deadline: float):
+        """The next message from any worker, or None at the deadline or on a signal."""
+        status = MPI.Status()
+        t0 = time.monotonic()
+        while True:
+            if _probe(self.comm, MPI.ANY_SOURCE, MPI.ANY_TAG, status):
+                src, tag = status.Get_source(), status.Get_tag()
+                return src, tag, self.comm.recv(source=src, tag=tag)
+            now = time.monotonic()
+            if self._flags or now >= deadline:
+                return None
+            time.sleep(_backoff(now - t0, POLL_MAX_MASTER))
+
+    def _note(self, job, last: float) -> float:
+        now = time.monotonic()
+        if self.progress is None or now - last < 10.0:
+            return last
+        self.progress.note(f"{job.name}: {job.counters.get('tasks', 0)} tasks done, "
+                           f"{job.pending()} pending, {len(self._inflight)} running "
+                           f"({self.size} rank(s), {self.elapsed():.0f} s)")
+        return now
+
+    def summary(self) -> dict:
+        """How the work was split: depends on ranks and resumes (answers do not)."""
+        return {"ranks": self.size, "resumes": self.resumes, "tasks_per_rank": list(self.tasks_per_rank),
+                "checkpoints_written": self.checkpoints_written,
+                "elapsed_s_all_sessions": self.elapsed(),
+                "jobs": {name: dict(job.counters) for name, job in self._jobs.items()}}
+
+    # ---- workers
+
+    def serve(self) -> None:
+        """Worker loop (ranks >= 1): run tasks until the master says stop.
+
+        SIGUSR1, SIGTERM and SIGINT are ignored: the master acts on them. (mpirun
+        forwards SIGUSR1 to every rank, whose default action is to die. On
+        SIGTERM, mpirun sends SIGCONT to every rank, SIGTERM 1 s later and
+        SIGKILL ~1 s after that; a worker that died at once would make it kill
+        the master before its checkpoint is written.)
+
+        A worker exits when its parent (mpirun) is gone, or when its master runs
+        on the same host and has died (kill -9): mpirun would otherwise take
+        ~2 s (SIGCONT, SIGTERM, SIGKILL) to tear the job down."""
+        from mpi4py import MPI
+        for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, signal.SIG_IGN)
+        comm, ppid = self.comm, os.getppid()
+        for mod in WARM_UP:            # while the master condenses, not at the first task
+            importlib.import_module(mod)
+        ctx_id, ctx = None, None
+        status = MPI.Status()
+        master_pid, host = None, socket.gethostname()
+        while True:
+            t0 = checked = time.monotonic()
+            while not _probe(comm, 0, MPI.ANY_TAG, status):
+                now = time.monotonic()
+                if now - checked >= MASTER_CHECK_S:
+                    checked = now
+                    if os.getppid() != ppid or (master_pid is not None and not _pid_alive(master_pid)):
+                        os._exit(3)
+                time.sleep(_backoff(now - t0, POLL_MAX))
+            tag = status.Get_tag()
+            msg = comm.recv(source=0, tag=tag)
+            if tag == _STOP:
+                return
+            if tag == _HELLO:
+                master_pid = msg[1] if msg[0] == host else None
+                continue
+            job_id, kind, payload, fresh, new_ctx = msg
+            if fresh:
+                ctx_id, ctx = job_id, new_ctx
+            try:
+                if ctx_id != job_id:
+                    raise RuntimeError(f"task of job {job_id} without its context")
+                result = handler_for(kind)(ctx, payload)
+            except Exception:
+                comm.send(traceback.format_exc(), dest=0, tag=_ERROR)
+            else:
+                comm.send(result, dest=0, tag=_RESULT)
+
+    def close(self, timeout: float = 60.0, restore_signals: bool = True) -> None:
+        """Master: collect the results still in flight (a worker blocked in a large
+        send would never see the stop; at most `timeout` seconds), then stop every
+        worker; restore the signal handlers (the command line keeps its own to
+        the end: a signal after mark_done() must not turn a finished run into a
+        failed one)."""
+        if self.comm is not None and self.is_master and not self._stopped:
+            from mpi4py import MPI
+            self._stopped = True
+            status = MPI.Status()
+            end = time.monotonic() + timeout
+            while self._inflight and time.monotonic() < end:
+                if _probe(self.comm, MPI.ANY_SOURCE, MPI.ANY_TAG, status):
+                    src, tag = status.Get_source(), status.Get_tag()
+                    self.comm.recv(source=src, tag=tag)
+                    self._inflight.pop(src, None)
+                else:
+                    time.sleep(0.005)
+            for w in self.workers:
+                self.comm.send(None, dest=w, tag=_STOP)
+        if restore_signals:
+            for sig, h in self._old_handlers.items():
+                signal.signal(sig, h)
+            self._old_handlers = {}
+
+
+def _pid_alive(pid: int) -> bool:
+    """False once the process is gone or a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except (OSError, IndexError):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except OSError:
+            pass
+        return True
+
+
+def _backoff(waited: float, cap: float) -> float:
+    return min(cap, max(1e-4, POLL_FRACTION * waited))
+
+
+def _probe(comm, source, tag, status) -> bool:
+    for _ in range(PROBE_BURST):
+        if comm.Iprobe(source=source, tag=tag, status=status):
+            return True
+    return False
+
+
+# ---------------------------------------------------------------- what the pipeline calls
+
+
+def run_patterns(make_tree, mus, engine: Engine | None = None, budget: int = DEFAULT_BUDGET,
+                 name: str = "patterns") -> Patterns:
+    """Feasible sign patterns at every mu in `mus`, through the engine.
+
+    make_tree: a picklable callable, make_tree(mu) -> a tree with root(), m and
+    explore(subtree, budget) -> (found, open, stats[, undecided]) — e.g.
+    functools.partial(patterns.PatternTree, param, m) — for 2D and 3D alike."""
+    engine = engine or Engine()
+    return engine.run(SubtreeJob(name, make_tree, mus, budget)).output()
+
+
+def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> list:
+    """mu^c of every (zero_u, zero_r, mu_hi) in `items`, through the engine.
+
+    solve: a picklable callable solve(zero_u, zero_r, mu_hi=...) -> mu_critical.MuC,
+    e.g. functools.partial(mu_critical.mu_critical, param, m, mu_max=..., method=..., tol=...).
+    Returns the MuC list in the order of items."""
+    from .mu_critical import MuC
+    engine = engine or Engine()
+    payloads = [(np.asarray(zu, dtype=bool), np.asarray(zr, dtype=bool), float(mu_hi))
+                for zu, zr, mu_hi in items]
+    out = engine.run(TaskJob(name, "mu_c", solve, payloads)).output()
+    return [MuC(mu_c=None if math.isnan(r["mu_c"]) else float(r["mu_c"]), polished=bool(r["polished"]),
+                lps=int(r["lps"]), undecided=int(r["undecided"])) for r in out]
+
+
+def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, name: str | None = None) -> list:
+    """Results of independent tasks of a registered kind (e.g. "face"), in order.
+    Results must be dicts of numbers/bools/arrays (so that checkpoints can hold them)."""
+    engine = engine or Engine()
+    return engine.run(TaskJob(name or kind, kind, context, payloads)).output()
+
+
+def strip_exact(param):
+    """A parametrisation without its exact (flint) copies: the float engines'
+    context, cheap to pickle."""
+    if getattr(param, "Uq", None) is None and getattr(param, "Rq", None) is None:
+        return param
+    return replace(param, Uq=None, Rq=None)
+
+
+def quiet_workers() -> None:
+    """Ranks >= 1 print nothing (stdout and stderr to /dev/null, except tracebacks
+    of a crash, which go to stderr through the master)."""
+    devnull = open(os.devnull, "w")
+    sys.stdout = devnull

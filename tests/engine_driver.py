@@ -1,0 +1,61 @@
+"""Run under mpirun by test_parallel.py: measure, from /proc, the CPU time of idle
+ranks while (A) the master is busy and no worker has a task, (B) one worker
+runs a long task and the others have nothing, and (C, the control) a worker
+waits in a plain blocking comm.recv, which Open MPI busy-polls. Prints one
+JSON line: seconds of CPU per rank and phase, and each phase's length."""
+import json
+import os
+import sys
+import time
+
+from hpcwedge import parallel
+
+
+def spin(ctx, seconds):
+    t = time.perf_counter()
+    while time.perf_counter() - t < seconds:
+        pass
+    return {"pid": os.getpid()}
+
+
+parallel.register("spin", spin)
+
+
+def cpu(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def main(period):
+    comm = parallel.world()
+    for mod in parallel.WARM_UP:     # the workers' start-up imports, done before measuring
+        __import__(mod)
+    pids = comm.gather(os.getpid(), root=0)
+    engine = parallel.Engine(comm)
+    if comm.rank:
+        engine.serve()
+        comm.recv(source=0)          # phase C: a blocking receive (busy-polls)
+        return
+    time.sleep(0.3)                  # let the workers settle into their idle wait
+    out = {"pids": pids, "period": period}
+
+    def measure(phase, action):
+        before = [cpu(p) for p in pids]
+        t = time.perf_counter()
+        action()
+        out[phase] = {"seconds": time.perf_counter() - t,
+                      "cpu": [cpu(p) - b for p, b in zip(pids, before)]}
+
+    measure("master_busy", lambda: spin(None, period))
+    measure("one_task", lambda: parallel.run_tasks("spin", None, [period], engine=engine))
+    engine.close()
+    time.sleep(0.2)
+    measure("blocking_recv", lambda: time.sleep(period / 2))
+    for w in range(1, comm.size):
+        comm.send(None, dest=w)
+    print(json.dumps(out), flush=True)
+
+
+if __name__ == "__main__":
+    main(float(sys.argv[1]))

@@ -1,0 +1,227 @@
+"""Running the real command line (serially and under the real mpirun) for the
+parallel and checkpoint tests: launch, find the ranks' pids, kill at chosen
+moments, compare results."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+MPIRUN = shutil.which("mpirun")
+needs_mpirun = pytest.mark.skipif(MPIRUN is None, reason="mpirun not found")
+
+#: a 2D scene whose sign-pattern trees (m = 8, two mu) have 268 nodes; budget 4
+#: so that subtrees really move between ranks and come back as open subtrees
+PATTERN_SCENE = """name = "plug8-patterns"
+dim = 2
+[model]
+{model}
+[friction]
+mu = [0.65, 1.0]
+[compute]
+enumerate = "patterns"
+mu_c = "cones"
+[run]
+checkpoint_every_s = {every}
+task_budget = 4
+"""
+PLUG_MODEL = 'kind = "plug2d"\nrows = 4'
+#: the same plug as a raw condensed K (no PETSc start-up: quicker kill/resume cycles)
+RAW_MODEL = 'kind = "stiffness"\nfile = "plug8.npz"'
+_RAW = {}
+
+
+def scene_text(every: float = 0.1, raw: bool = True) -> str:
+    return PATTERN_SCENE.format(every=every, model=RAW_MODEL if raw else PLUG_MODEL)
+
+
+def write_scene(tmp_path, every: float = 0.1, name: str = "scene.toml", text: str | None = None,
+                raw: bool = True) -> str:
+    """The pattern scene in tmp_path (with plug8.npz, the condensed K and rigid modes)."""
+    import numpy as np
+    if not _RAW:
+        from hpcwedge.build import contact_problem
+        from hpcwedge.scene import parse_scene
+        sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 4}, "friction": {"mu": 1.0}})
+        prob = contact_problem(sc)
+        _RAW.update(K=prob.K, null_space=prob.N)
+    np.savez(tmp_path / "plug8.npz", **_RAW)
+    p = tmp_path / name
+    p.write_text(text if text is not None else scene_text(every, raw))
+    return str(p)
+
+
+def env() -> dict:
+    e = dict(os.environ)
+    e["PYTHONPATH"] = ROOT + (os.pathsep + e["PYTHONPATH"] if e.get("PYTHONPATH") else "")
+    for k in ("SLURM_NTASKS", "HPCWEDGE_MPI"):
+        e.pop(k, None)
+    return e
+
+
+def command(ranks: int | None, *args: str) -> list[str]:
+    """`hpcwedge ...` in-process (ranks None) or under mpirun -n ranks."""
+    py = [sys.executable, "-m", "hpcwedge", *args]
+    if ranks is None:
+        return py
+    return [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), "-x", "PYTHONPATH", *py]
+
+
+def run(ranks, *args, timeout=120, check=True) -> subprocess.CompletedProcess:
+    p = subprocess.run(command(ranks, *args), env=env(), capture_output=True, text=True, timeout=timeout)
+    if check and p.returncode != 0:
+        raise AssertionError(f"exit {p.returncode}\nstdout:\n{p.stdout}\nstderr:\n{p.stderr}")
+    return p
+
+
+def launch(ranks, *args) -> subprocess.Popen:
+    return subprocess.Popen(command(ranks, *args), env=env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def show_json(path: str) -> dict:
+    """The object `hpcwedge show PATH --json` prints (run in-process: the same code)."""
+    import contextlib
+    import io
+
+    from hpcwedge.cli import main
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["show", path, "--json"]) == 0
+    return json.loads(buf.getvalue())
+
+
+def answers(d: dict) -> dict:
+    """A `show --json` object minus what may differ between splits of the work:
+    the timings, stats.parallel (ranks, tasks, resumes; see README) and the
+    solver-call counters (a handed-back subtree re-solves its root); the
+    number of tree nodes visited stays."""
+    d = json.loads(json.dumps(d))
+    d.pop("timings")
+    d["stats"].pop("parallel")
+    d["stats"].pop("socp_statuses", None)
+    d["stats"]["bnb"] = {k: v for k, v in d["stats"].get("bnb", {}).items() if k in ("nodes", "partitions")}
+    return d
+
+
+def show(path: str) -> dict:
+    return answers(show_json(path))
+
+
+def parallel_stats(path: str) -> dict:
+    return show_json(path)["stats"]["parallel"]
+
+
+def rank_pids(launcher_pid: int, ranks: int, timeout: float = 30.0) -> dict[int, int]:
+    """{rank: pid} of the processes mpirun started (children with OMPI_COMM_WORLD_RANK)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        found = {}
+        for d in os.listdir("/proc"):
+            if not d.isdigit():
+                continue
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+                if ppid != launcher_pid:
+                    continue
+                with open(f"/proc/{d}/environ", "rb") as f:
+                    envs = dict(kv.split(b"=", 1) for kv in f.read().split(b"\0") if b"=" in kv)
+            except (OSError, ValueError, IndexError):
+                continue
+            if b"OMPI_COMM_WORLD_RANK" in envs:
+                found[int(envs[b"OMPI_COMM_WORLD_RANK"])] = int(d)
+        if len(found) == ranks:
+            return found
+        time.sleep(0.02)
+    raise AssertionError(f"mpirun {launcher_pid}: ranks not found")
+
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime of a process, from /proc/PID/stat."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def wait_for_checkpoint(ckpt: str, since: float, proc: subprocess.Popen, timeout: float = 60.0) -> bool:
+    """Wait until `ckpt` has been (re)written after `since` (the engine is at work);
+    False if the process ended first."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            return False
+        try:
+            if os.stat(ckpt).st_mtime >= since:
+                return True
+        except FileNotFoundError:
+            pass
+        time.sleep(0.01)
+    raise AssertionError("no checkpoint written in time")
+
+
+def alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def usr1_handled(pid: int) -> bool:
+    """SIGUSR1 is ignored or caught by the process (/proc/PID/status masks)."""
+    bit = 1 << (signal.SIGUSR1 - 1)
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            masks = {k: int(v, 16) for k, v in (line.split(":") for line in f) if k in ("SigIgn", "SigCgt")}
+    except OSError:
+        return False
+    return bool((masks.get("SigIgn", 0) | masks.get("SigCgt", 0)) & bit)
+
+
+def all_gone(pids, timeout: float = 10.0) -> bool:
+    end = time.monotonic() + timeout
+    while any(alive(pid) for pid in pids) and time.monotonic() < end:
+        time.sleep(0.05)
+    return not any(alive(pid) for pid in pids)
+
+
+def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float = 0.4):
+    """Run the scene with --resume again and again; in each run, once the engine
+    has written a checkpoint, wait a random moment and interrupt it with
+    how(proc) (which returns the pids that must be gone afterwards). A run that
+    finishes first is simply restarted (from scratch: its checkpoint is gone).
+    Returns (interruptions, exit statuses of the interrupted runs)."""
+    scene = write_scene(tmp_path)
+    out = str(tmp_path / "r.h5")
+    ckpt = out + ".ckpt"
+    done, codes = 0, []
+    while done < n_cycles:
+        since = time.time()
+        p = launch(ranks, "run", scene, "-o", out, "-q", "--resume")
+        if not wait_for_checkpoint(ckpt, since, p):
+            assert p.wait() == 0, p.stderr.read()
+            continue
+        time.sleep(rng.uniform(0.0, max_delay))
+        if p.poll() is not None:
+            assert p.returncode == 0, p.stderr.read()
+            continue
+        gone = how(p) or []
+        code = p.wait(timeout=60)
+        err = p.stderr.read()
+        p.stdout.close()
+        p.stderr.close()
+        assert all_gone(gone), "ranks left behind"
+        if code == 0:                 # it had finished: a signal after the result changes nothing
+            assert os.path.exists(out) and not os.path.exists(ckpt), err
+            continue
+        codes.append(code)
+        done += 1
+    return scene, out, done, codes

@@ -1,0 +1,281 @@
+"""Checkpoints and --resume (SPEC §5) on the real command line: kill -9 of the
+master at random moments (serially and under mpirun), SIGTERM, SIGUSR1, a
+killed worker — then --resume gives exactly the uninterrupted answers; a
+checkpoint of another scene or a damaged one is refused (exit 2) and left as is."""
+import os
+import random
+import signal
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from hpcwedge.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
+from hpcwedge.parallel import EXIT_INTERRUPTED
+from mpi_helpers import (all_gone, answers, interrupt_cycles, launch, needs_mpirun, rank_pids, run, scene_text,
+                         show, show_json, usr1_handled, wait_for_checkpoint, write_scene)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """show --json (minus timings and stats.parallel) of the uninterrupted serial run."""
+    tmp = tmp_path_factory.mktemp("ref")
+    out = str(tmp / "ref.h5")
+    run(None, "run", write_scene(tmp), "-o", out, "-q")
+    return show(out)
+
+
+def _kill9_master(ranks):
+    def how(p):
+        if ranks is None:
+            p.send_signal(signal.SIGKILL)
+            return [p.pid]
+        pids = rank_pids(p.pid, ranks)
+        os.kill(pids[0], signal.SIGKILL)
+        return list(pids.values())
+    return how
+
+
+def _finish(scene, out, ranks=None):
+    run(ranks, "run", scene, "-o", out, "-q", "--resume")
+    assert not os.path.exists(checkpoint_path(out)) and not os.path.exists(checkpoint_path(out) + ".tmp")
+    return show_json(out)
+
+
+# ---------------------------------------------------------------- kill -9
+
+
+def test_kill9_at_random_moments_then_resume(tmp_path, reference):
+    """Ten kill -9 of the (serial) master, each at a random moment after the
+    engine's first checkpoint of that run (possibly mid-write), each followed by
+    --resume: the final answers equal the uninterrupted run's."""
+    scene, out, kills, codes = interrupt_cycles(tmp_path, None, 10, _kill9_master(None), random.Random(1))
+    assert kills == 10 and all(c == -signal.SIGKILL for c in codes)
+    got = _finish(scene, out)
+    assert got["stats"]["parallel"]["resumes"] >= 1
+    assert answers(got) == reference
+
+
+@pytest.mark.mpi
+@needs_mpirun
+@pytest.mark.parametrize("ranks,seed", [(3, 2), (2, 3)])
+def test_kill9_master_under_mpirun_then_resume(tmp_path, reference, ranks, seed):
+    """kill -9 of rank 0 under mpirun, three times per rank count (each mpirun
+    start costs ~3 s here), the workers go (they notice the dead master), and
+    --resume under mpirun continues to the same answers."""
+    scene, out, kills, codes = interrupt_cycles(tmp_path, ranks, 3, _kill9_master(ranks), random.Random(seed))
+    assert kills == 3 and all(c != 0 for c in codes)
+    assert answers(_finish(scene, out, ranks)) == reference
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_killed_worker_then_resume(tmp_path, reference):
+    """kill -9 of a worker: Open MPI aborts the job (the master writes its
+    checkpoint in mpirun's grace period or not at all); resume gives the same answers."""
+    def how(p):
+        pids = rank_pids(p.pid, 3)
+        os.kill(pids[1], signal.SIGKILL)
+        return list(pids.values())
+    scene, out, kills, codes = interrupt_cycles(tmp_path, 3, 1, how, random.Random(4))
+    assert all(c != 0 for c in codes)
+    assert answers(_finish(scene, out)) == reference          # resumed serially: any rank count
+
+
+# ---------------------------------------------------------------- signals
+
+
+def test_sigterm_writes_checkpoint_and_exits_75(tmp_path, reference):
+    def how(p):
+        p.send_signal(signal.SIGTERM)
+        return [p.pid]
+    scene, out, n, codes = interrupt_cycles(tmp_path, None, 4, how, random.Random(5))
+    assert codes == [EXIT_INTERRUPTED] * 4
+    assert answers(_finish(scene, out)) == reference
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigterm_to_master_under_mpirun(tmp_path, reference):
+    """SIGTERM to rank 0 (as SLURM sends it to every process of the job): the
+    master writes its checkpoint, tells the workers to stop, and mpirun exits
+    with the master's status 75, no rank left. Resume under mpirun: same answers."""
+    def how(p):
+        pids = rank_pids(p.pid, 3)
+        os.kill(pids[0], signal.SIGTERM)
+        return list(pids.values())
+    scene, out, n, codes = interrupt_cycles(tmp_path, 3, 1, how, random.Random(6))
+    assert codes == [EXIT_INTERRUPTED]
+    with h5py.File(checkpoint_path(out)) as f:
+        assert f.attrs["reason"] == "SIGTERM" and f.attrs["ranks"] == 3
+    assert answers(_finish(scene, out, 2)) == reference
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigterm_to_mpirun(tmp_path):
+    """SIGTERM to mpirun: it sends SIGCONT to every rank, SIGTERM 1 s later and
+    SIGKILL ~1 s after that; the master writes its checkpoint in that grace.
+    (A scene with four mu values, so that the run cannot end within the second
+    mpirun waits; a run that does is simply started again.)"""
+    text = scene_text().replace("mu = [0.65, 1.0]", "mu = [0.65, 1.0, 2.0, 4.0]")
+    scene = write_scene(tmp_path, text=text)
+    out = str(tmp_path / "r.h5")
+    ckpt = checkpoint_path(out)
+    for attempt in range(3):
+        since = time.time()
+        p = launch(3, "run", scene, "-o", out, "-q")
+        pids = rank_pids(p.pid, 3)
+        assert wait_for_checkpoint(ckpt, since, p)
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(timeout=60) != 0
+        assert all_gone(pids.values())
+        with h5py.File(ckpt) as f:
+            if f.attrs["reason"] == "SIGTERM":
+                break
+        assert os.path.exists(out), "neither a SIGTERM checkpoint nor a result"
+        os.unlink(ckpt)
+    else:
+        pytest.fail("the run always ended before mpirun passed SIGTERM on")
+    got = _finish(scene, out)                           # resumed serially
+    assert got["stats"]["parallel"]["resumes"] == 1
+    from hpcwedge.pipeline import run_scene             # the uninterrupted answers, in-process
+    from hpcwedge.results import write_result
+    from hpcwedge.scene import load_scene
+    ref = str(tmp_path / "ref.h5")
+    write_result(ref, run_scene(load_scene(scene)))
+    assert answers(got) == answers(show_json(ref))
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigusr1_checkpoints_and_goes_on(tmp_path, reference):
+    """SIGUSR1 to mpirun is forwarded to every rank: the master writes a
+    checkpoint and the run (workers included) goes on to the same answers."""
+    scene = write_scene(tmp_path, every=1000)        # no timer checkpoints: only the signal's
+    out = str(tmp_path / "r.h5")
+    ckpt = checkpoint_path(out)
+    p = launch(3, "run", scene, "-o", out, "-q")
+    pids = rank_pids(p.pid, 3)
+    # a rank that has not yet reached hpcwedge's first line dies of SIGUSR1, as any program would
+    deadline = time.monotonic() + 60
+    while not all(usr1_handled(pid) for pid in pids.values()) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    since = time.time()
+    while not os.path.exists(ckpt) and p.poll() is None and time.monotonic() < deadline:
+        p.send_signal(signal.SIGUSR1)
+        time.sleep(0.3)
+    assert os.path.exists(ckpt), "no checkpoint after SIGUSR1"
+    with h5py.File(ckpt) as f:
+        assert f.attrs["reason"] == "SIGUSR1" and f.attrs["written_unix"] >= since - 1
+    assert p.wait(timeout=120) == 0, p.stderr.read()
+    assert all_gone(pids.values())
+    got = show_json(out)
+    assert got["stats"]["parallel"]["checkpoints_written"] >= 1
+    want = dict(reference, scene_hash=got["scene_hash"])   # the scene differs in checkpoint_every_s only
+    assert answers(got) == want and not os.path.exists(ckpt)
+
+
+# ---------------------------------------------------------------- refusing bad checkpoints
+
+
+def _some_checkpoint(tmp_path):
+    """A real checkpoint (a run stopped by SIGTERM once the engine has written one)."""
+    scene = write_scene(tmp_path)
+    out = str(tmp_path / "r.h5")
+    since = time.time()
+    p = launch(None, "run", scene, "-o", out, "-q")
+    assert wait_for_checkpoint(checkpoint_path(out), since, p)
+    p.send_signal(signal.SIGTERM)
+    assert p.wait(timeout=60) == EXIT_INTERRUPTED
+    return scene, out
+
+
+def test_resume_with_another_scene_exit_2(tmp_path):
+    scene, out = _some_checkpoint(tmp_path)
+    ckpt = checkpoint_path(out)
+    before = open(ckpt, "rb").read()
+    other = write_scene(tmp_path, name="other.toml", text=scene_text().replace("1.0]", "1.5]"))
+    p = run(None, "run", other, "-o", out, "--resume", check=False)
+    assert p.returncode == 2
+    err = p.stderr.strip()
+    assert len(err.splitlines()) == 1 and "another scene" in err and ckpt in err
+    assert open(ckpt, "rb").read() == before and not os.path.exists(out)
+    # the right scene still resumes
+    p = run(None, "run", scene, "-o", out, "-q", "--resume")
+    assert os.path.exists(out) and not os.path.exists(ckpt)
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garbage", "empty"])
+def test_damaged_checkpoint_exit_2_left_untouched(tmp_path, damage):
+    if damage == "truncate":
+        scene, out = _some_checkpoint(tmp_path)
+        ckpt = checkpoint_path(out)
+        data = open(ckpt, "rb").read()
+        open(ckpt, "wb").write(data[: len(data) // 2])
+    else:
+        scene = write_scene(tmp_path)
+        out = str(tmp_path / "r.h5")
+        ckpt = checkpoint_path(out)
+        open(ckpt, "wb").write(b"" if damage == "empty" else b"\x89HDF\r\n\x1a\n" + os.urandom(3000))
+    before = open(ckpt, "rb").read()
+    p = run(None, "run", scene, "-o", out, "--resume", check=False)
+    assert p.returncode == 2, p.stderr
+    err = p.stderr.strip()
+    assert len(err.splitlines()) == 1 and ckpt in err and "unreadable checkpoint" in err
+    assert open(ckpt, "rb").read() == before and not os.path.exists(out)
+
+
+def test_resume_without_checkpoint_starts_fresh(tmp_path, reference):
+    """SLURM requeue / job chains: `run --resume` is always safe to repeat."""
+    scene = write_scene(tmp_path)
+    out = str(tmp_path / "r.h5")
+    run(None, "run", scene, "-o", out, "-q", "--resume")
+    assert answers(show_json(out)) == reference and not os.path.exists(checkpoint_path(out))
+
+
+# ---------------------------------------------------------------- the file itself
+
+
+def _state(n):
+    return {"attrs": {"kind": "subtree", "finished": False, "counters": "{}"},
+            "data": {"x": np.arange(n), "w": np.ones((n, 2), dtype=np.uint64)}}
+
+
+def test_write_read_round_trip(tmp_path):
+    path = str(tmp_path / "c.h5.ckpt")
+    write_checkpoint(path, {"scene_hash": "h", "elapsed_s": 1.5, "resumes": 2, "ranks": 3, "reason": "timer"},
+                     "name = 'x'\n", [("a", _state(4)), ("b", _state(0))])
+    ck = read_checkpoint(path)
+    assert ck["order"] == ["a", "b"] and ck["scene_text"] == "name = 'x'\n"
+    assert ck["attrs"]["scene_hash"] == "h" and ck["attrs"]["resumes"] == 2
+    assert ck["jobs"]["a"]["data"]["x"].tolist() == [0, 1, 2, 3]
+    assert ck["jobs"]["b"]["data"]["w"].shape == (0, 2)
+
+
+def test_failed_write_keeps_the_good_checkpoint(tmp_path, monkeypatch):
+    path = str(tmp_path / "c.h5.ckpt")
+    header = {"scene_hash": "h", "elapsed_s": 1.0, "resumes": 0, "ranks": 1, "reason": "timer"}
+    write_checkpoint(path, header, "s", [("a", _state(3))])
+    good = open(path, "rb").read()
+
+    class Boom(Exception):
+        pass
+
+    bad = _state(3)
+    bad["data"]["x"] = object()          # h5py cannot store it: the write fails half-way
+    with pytest.raises(Exception):
+        write_checkpoint(path, header, "s", [("a", bad)])
+    assert open(path, "rb").read() == good and not os.path.exists(path + ".tmp")
+    # a temp file that does not read back (verify fails) never replaces the good one
+    import hpcwedge.checkpoint as ck
+
+    def broken(p):
+        raise CheckpointError("x")
+    monkeypatch.setattr(ck, "read_checkpoint", broken)
+    with pytest.raises(CheckpointError):
+        write_checkpoint(path, header, "s", [("a", _state(5))])
+    monkeypatch.undo()
+    assert open(path, "rb").read() == good
+    assert read_checkpoint(path)["jobs"]["a"]["data"]["x"].tolist() == [0, 1, 2]

@@ -1,0 +1,279 @@
+"""The master/worker engine: the same answers serially, in-process and under the
+real mpirun with 1-4 ranks; subtrees really move (budgets, hand-backs); idle
+ranks sleep (CPU time from /proc); 2D sign patterns agree with the rays; the
+SLURM_NTASKS check."""
+import itertools
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from hpcwedge import parallel
+from hpcwedge.checkpoint import CheckpointError
+from hpcwedge.mu_critical import mu_critical
+from hpcwedge.patterns import PatternTree, Subtree, sign_patterns
+from hpcwedge.pipeline import run_scene
+from hpcwedge.problem import parametrize
+from hpcwedge.scene import parse_scene
+from instances import random_problem
+from mpi_helpers import (MPIRUN, ROOT, answers, env, needs_mpirun, run, show, show_json,
+                         write_scene)
+
+
+def _tree_factory(seed, m=5, free=False):
+    prob = random_problem(np.random.default_rng(seed), m, free=free)
+    from functools import partial
+    return partial(PatternTree, parametrize(prob), m), prob
+
+
+# ---------------------------------------------------------------- in-process
+
+
+@pytest.mark.parametrize("seed,budget", [(0, 1), (1, 3), (2, 1000)])
+def test_run_patterns_equals_serial_search(seed, budget):
+    make, prob = _tree_factory(700 + seed, free=bool(seed % 2))
+    mus = [0.5, 2.0, 8.0]
+    out = parallel.run_patterns(make, mus, budget=budget)
+    for k, mu in enumerate(mus):
+        tree = make(mu)
+        whole = tree.explore(tree.root())
+        # canonical order = the serial depth-first order (contact before gap, node 0 first)
+        assert out.found[k] == whole.found
+        masks = [s.masks(tree.m) for s in out.found[k]]
+        ref = sign_patterns(tree.param, tree.m, mu)
+        assert [(a.tolist(), b.tolist()) for a, b in masks] == [(a.tolist(), b.tolist()) for a, b in ref]
+    # every tree node is visited exactly once, however the work is split
+    nodes = sum(make(mu).explore(make(mu).root()).stats.nodes for mu in mus)
+    assert out.counters["nodes"] == nodes
+    if budget == 1:
+        assert out.counters["handed_back"] > 0
+
+
+def test_subtree_job_checkpoint_state_round_trip():
+    """Stop a job half-way with tasks 'in flight', save, load into a fresh job,
+    finish: the same patterns and node count as one pass."""
+    make, _ = _tree_factory(31, m=6)
+    mus = [1.0, 4.0]
+    ref = parallel.run_patterns(make, mus, budget=2)
+    job = parallel.SubtreeJob("p", make, mus, budget=2)
+    handler = parallel.handler_for("subtree")
+    in_flight = []
+    for _ in range(7):
+        token, payload = job.take(1)
+        job.merge(token, handler(job.context, payload))
+    for _ in range(2):                                    # taken, never merged
+        token, _ = job.take(1)
+        in_flight.append(token)
+    state = job.save(in_flight)
+    again = parallel.SubtreeJob("p", make, mus, budget=2)
+    again.load(state)
+    again.counters.update({k: v for k, v in job.counters.items()})
+    out = parallel.Engine().run(again).output()
+    assert out.found == ref.found
+    assert out.counters["nodes"] == ref.counters["nodes"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
+def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
+    """A signal in the middle of a job (sent by a task to its own process):
+    SIGTERM -> Interrupted at the next safe point, checkpoint, a new engine
+    resumes; SIGUSR1 -> a checkpoint and the job goes on. Same patterns, every
+    tree node counted once."""
+    make, _ = _tree_factory(41, m=6)
+    mus = [1.0, 4.0]
+    ref = parallel.run_patterns(make, mus, budget=2)
+    ckpt = str(tmp_path / "x.ckpt")
+    calls = []
+
+    def task(ctx, payload):
+        calls.append(1)
+        if len(calls) == 5:
+            os.kill(os.getpid(), sig)
+        return parallel.explore_task(ctx, payload)
+
+    monkeypatch.setitem(parallel.KINDS, "subtree", task)
+    eng = parallel.Engine()
+    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
+    eng.install_signals()
+    try:
+        if sig == signal.SIGTERM:
+            with pytest.raises(parallel.Interrupted):
+                parallel.run_patterns(make, mus, engine=eng, budget=2)
+            assert eng.write_checkpoint("SIGTERM")
+        else:
+            out = parallel.run_patterns(make, mus, engine=eng, budget=2)
+            assert eng.checkpoints_written == 1 and eng.checkpoint_reason == "SIGUSR1"
+    finally:
+        eng.close()
+    if sig == signal.SIGTERM:
+        assert len(calls) == 5                          # stopped at the safe point after the 5th task
+        eng = parallel.Engine()
+        assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True)
+        out = parallel.run_patterns(make, mus, engine=eng, budget=2)
+        with pytest.raises(CheckpointError, match="another scene"):
+            parallel.Engine().use_checkpoint(ckpt, "other", "scene", 1000.0, resume=True)
+    assert out.found == ref.found and out.counters["nodes"] == ref.counters["nodes"]
+
+
+def test_bit_words_beyond_64_nodes():
+    vals = [0, 1, (1 << 64) | 5, (1 << 130) - 1, 1 << 127]
+    words = parallel._bits_to_words(vals, 3)
+    assert words.shape == (5, 3) and words.dtype == np.uint64
+    assert parallel._words_to_bits(words) == vals
+    assert parallel._words_to_bits(np.zeros((0, 1), dtype=np.uint64)) == []
+
+
+def test_run_mu_c_equals_direct_calls():
+    rng = np.random.default_rng(5)
+    m = 4
+    param = parametrize(random_problem(rng, m, free=False))
+    from functools import partial
+    items = []
+    for zu_bits in range(1, 1 << m, 3):
+        zu = np.array([(zu_bits >> i) & 1 for i in range(m)], dtype=bool)
+        items.append((zu, ~zu, 50.0))
+    got = parallel.run_mu_c(partial(mu_critical, param, m, mu_max=100.0), items)
+    for (zu, zr, mu_hi), r in zip(items, got):
+        want = mu_critical(param, m, zu, zr, mu_hi=mu_hi, mu_max=100.0)
+        assert (r.mu_c, r.polished, r.lps, r.undecided) == (want.mu_c, want.polished, want.lps, want.undecided)
+
+
+def test_task_job_state_round_trip_with_arrays():
+    job = parallel.TaskJob("t", "x", None, list(range(5)))
+    for k, res in [(0, {"a": 1.5, "v": np.arange(3.0)}), (3, {"a": -2.0, "v": np.zeros((0,))}),
+                   (4, {"a": 7.0, "v": np.ones(2)})]:
+        job.merge(k, res)
+    again = parallel.TaskJob("t", "x", None, list(range(5)))
+    again.load({"attrs": job.save([])["attrs"], "data": job.save([])["data"]})
+    assert again.pending() == 2 and [again.take(1)[0], again.take(1)[0]] == [1, 2]
+    assert again.results[0]["a"] == 1.5 and again.results[0]["v"].tolist() == [0, 1, 2]
+    assert again.results[3]["v"].tolist() == [] and again.results[4]["v"].tolist() == [1, 1]
+
+
+def test_worker_error_in_serial_mode_propagates():
+    parallel.register("boom", lambda ctx, p: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        parallel.run_tasks("boom", None, [1])
+
+
+@pytest.mark.parametrize("rows,taper,mus", [(2, 10.0, [0.2, 0.65]), (3, 10.0, [0.65]),
+                                            (3, 31.0, [0.62, 2.0]), (4, 20.0, [0.5])])
+def test_2d_patterns_agree_with_rays(rows, taper, mus):
+    """SPEC §2: (C, G) is feasible iff some wedged ray has supp(r_n) in C and
+    supp(u_n) in G — the engine's patterns against the double description's rays."""
+    def scene(enum):
+        return parse_scene({"name": "t", "dim": 2, "model": {"kind": "plug2d", "rows": rows, "taper_deg": taper},
+                            "friction": {"mu": mus}, "compute": {"enumerate": enum, "mu_c": "cones"},
+                            "run": {"task_budget": 3}})
+    pat, ray = run_scene(scene("patterns")), run_scene(scene(True))
+    m = pat.m
+    assert pat.stages == ["condense", "enumerate", "mu_c"]
+    assert abs(pat.mu_c - ray.mu_c) <= 1e-9 * ray.mu_c
+    for rp, rr in zip(pat.runs, ray.runs):
+        assert rp.rays is None and rp.cones is None and rr.patterns is None
+        un, rn = rr.rays[:, :m], rr.rays[:, 2 * m:3 * m]
+        scale = np.abs(rr.rays).max(axis=1, keepdims=True)
+        supp_u, supp_r = np.abs(un) > 1e-9 * scale, np.abs(rn) > 1e-9 * scale
+        want = []
+        for bits in itertools.product([True, False], repeat=m):     # contact first, node 0 first
+            c = np.array(bits)
+            if np.any(~(supp_r & ~c).any(axis=1) & ~(supp_u & c).any(axis=1)):
+                want.append(np.flatnonzero(c).tolist())
+        want.sort(key=lambda c: sum(1 << i for i in c))                  # canonical: by contact bits
+        assert [p["contact"] for p in rp.patterns] == want
+        for p in rp.patterns:               # a pattern's mu^c: at most the run's mu, at least the global one
+            assert ray.mu_c * (1 - 1e-9) <= p["mu_c"] <= rp.mu * (1 + 1e-9)
+
+
+def test_plan_patterns_2d():
+    s = parse_scene({"name": "t", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": [1.0]},
+                     "compute": {"enumerate": "patterns"}})
+    p = s.plan()
+    assert p.patterns and not p.rays and not p.cones and s.task_budget == 64
+
+
+# ---------------------------------------------------------------- the real mpirun
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The uninterrupted serial run of the pattern scene: (scene path, show JSON)."""
+    tmp = tmp_path_factory.mktemp("ref")
+    scene = write_scene(tmp, raw=False)          # plug2d: condensation (PETSc) under mpirun too
+    out = str(tmp / "ref.h5")
+    run(None, "run", scene, "-o", out, "-q")
+    return scene, show(out)
+
+
+@pytest.mark.mpi
+@needs_mpirun
+@pytest.mark.parametrize("ranks", [(1, 2), (3, 4)])
+def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
+    scene, want = reference
+    for n in ranks:
+        out = str(tmp_path / f"r{n}.h5")
+        p = run(n, "run", scene, "-o", out)
+        assert p.stdout == ""                                  # nobody prints on stdout
+        assert p.stderr.count("wrote") == 1                    # only the master reports
+        got = show_json(out)
+        assert answers(got) == want, f"{n} ranks"
+        st = got["stats"]["parallel"]
+        jobs = st["jobs"]
+        assert st["ranks"] == n and jobs["patterns"]["nodes"] == want["stats"]["bnb"]["nodes"]
+        assert jobs["patterns"]["handed_back"] > 0 and jobs["patterns"]["tasks"] > 10
+        assert not os.path.exists(out + ".ckpt")
+        if n >= 3:
+            assert all(t > 0 for t in st["tasks_per_rank"][1:])   # work reached every worker
+            assert st["tasks_per_rank"][0] == 0                   # the master only dispatches
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_idle_ranks_do_not_spin():
+    """CPU time from /proc/PID/stat over 2 s in which (A) the master computes and
+    no worker has a task, (B) one worker runs the only task. Control (C): a
+    worker in a plain blocking comm.recv burns CPU, so the measure sees spinning."""
+    period = 2.0
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
+                        sys.executable, os.path.join(ROOT, "tests", "engine_driver.py"), str(period)],
+                       env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    a, b, c = got["master_busy"], got["one_task"], got["blocking_recv"]
+    print(json.dumps(got))
+    idle = [a["cpu"][1], a["cpu"][2], b["cpu"][2]]
+    assert max(idle) <= 0.03 * period, got            # idle workers: < 3% of a core
+    assert b["cpu"][0] <= 0.05 * period, got          # the waiting master: < 5%
+    assert min(c["cpu"][1:]) >= 0.1 * c["seconds"], got   # control: a blocking recv spins
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_slurm_ntasks_mismatch_fails_clearly(tmp_path):
+    scene = write_scene(tmp_path)
+    out = tmp_path / "r.h5"
+    e = env()
+    e["SLURM_NTASKS"] = "3"
+    p = subprocess.run([sys.executable, "-m", "hpcwedge", "run", scene, "-o", str(out)], env=e,
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert "SLURM_NTASKS=3" in p.stderr and "srun" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_bad_scene_under_mpirun_exit_2_once(tmp_path):
+    """Input errors under mpirun: one message (from the master), status 2, nothing
+    written, the workers stopped (no hang)."""
+    bad = write_scene(tmp_path, name="bad.toml",
+                      text='name = "x"\ndim = 2\n[model]\nkind = "plug2d"\n[friction]\nmu = [-1.0]\n')
+    out = tmp_path / "r.h5"
+    p = run(3, "run", bad, "-o", str(out), timeout=60, check=False)
+    assert p.returncode == 2
+    assert p.stderr.count("hpcwedge: error: friction.mu") == 1 and p.stdout == ""
+    assert not out.exists() and not os.path.exists(str(out) + ".ckpt")
