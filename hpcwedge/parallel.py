@@ -510,8 +510,14 @@ class Engine:
             self._old_handlers[sig] = signal.signal(sig, self._on_signal)
 
     def mark_done(self) -> None:
-        """The result is written: from now on signals change nothing (exit 0)."""
+        """Nothing is left to save (the result or the final checkpoint is written):
+        from now on SIGTERM/SIGINT/SIGUSR1 change nothing, up to the process's exit.
+        They are set to SIG_IGN: CPython's finalisation resets signals that have a
+        Python handler to their default action, and a SIGTERM during the seconds
+        of interpreter shutdown would turn a finished run into a killed one."""
         self._done = True
+        for sig in self._old_handlers:
+            signal.signal(sig, signal.SIG_IGN)
 
     def _on_signal(self, signum, frame):
         name = signal.Signals(signum).name
