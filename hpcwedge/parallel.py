@@ -51,7 +51,6 @@ import math
 import os
 import signal
 import socket
-import sys
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -801,10 +800,3 @@ def strip_exact(param):
     if getattr(param, "Uq", None) is None and getattr(param, "Rq", None) is None:
         return param
     return replace(param, Uq=None, Rq=None)
-
-
-def quiet_workers() -> None:
-    """Ranks >= 1 print nothing (stdout and stderr to /dev/null, except tracebacks
-    of a crash, which go to stderr through the master)."""
-    devnull = open(os.devnull, "w")
-    sys.stdout = devnull
