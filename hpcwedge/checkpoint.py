@@ -21,7 +21,6 @@ fill them, this module never interprets them):
 from __future__ import annotations
 
 import json
-import os
 import time
 
 import h5py

@@ -9,6 +9,17 @@ import sys
 
 
 def main(argv: list[str] | None = None) -> int:
+    # a checkpoint request (SIGUSR1, forwarded by mpirun to every rank) that arrives
+    # during start-up must not kill a rank: ignored until the master's handler is in.
+    # Called in-process (argv given), every handler is put back on return; as the
+    # program (argv None), the handlers stay to the exit: a signal after the result
+    # is written must not turn a finished run into a failed one.
+    import threading
+    main_thread = threading.current_thread() is threading.main_thread()
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT)
+             } if main_thread and argv is not None else {}
+    if main_thread:
+        signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     p = argparse.ArgumentParser(prog="hpcwedge", description="Wedged configurations and critical friction "
                                 "coefficients of elastic bodies in frictional contact.")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -27,15 +38,6 @@ def main(argv: list[str] | None = None) -> int:
     pl.add_argument("-o", "--output", required=True)
     pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     pl.add_argument("--ray", type=int, default=0, help="wedged ray to draw")
-    # a checkpoint request (SIGUSR1, forwarded by mpirun to every rank) that arrives
-    # during start-up must not kill a rank: ignored until the master's handler is in;
-    # every handler is put back on return (main may be called in-process)
-    import threading
-    main_thread = threading.current_thread() is threading.main_thread()
-    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT)
-             } if main_thread else {}
-    if main_thread:
-        signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     try:
         args = p.parse_args(argv)
         return {"run": _run, "show": _show, "plot": _plot}[args.cmd](args)
@@ -87,6 +89,7 @@ def _run(args) -> int:
             raise _UserError(str(e)) from None
         except Interrupted as e:
             written = engine.write_checkpoint(str(e))
+            engine.mark_done()
             print(f"[hpcwedge] {e}: " + (f"checkpoint written to {ckpt}; rerun with --resume to continue"
                                          if written else "stopped before any checkpointable work"),
                   file=sys.stderr)

@@ -51,7 +51,6 @@ import math
 import os
 import signal
 import socket
-import sys
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -510,8 +509,14 @@ class Engine:
             self._old_handlers[sig] = signal.signal(sig, self._on_signal)
 
     def mark_done(self) -> None:
-        """The result is written: from now on signals change nothing (exit 0)."""
+        """Nothing is left to save (the result or the final checkpoint is written):
+        from now on SIGTERM/SIGINT/SIGUSR1 change nothing, up to the process's exit.
+        They are set to SIG_IGN: CPython's finalisation resets signals that have a
+        Python handler to their default action, and a SIGTERM during the seconds
+        of interpreter shutdown would turn a finished run into a killed one."""
         self._done = True
+        for sig in self._old_handlers:
+            signal.signal(sig, signal.SIG_IGN)
 
     def _on_signal(self, signum, frame):
         name = signal.Signals(signum).name
@@ -795,10 +800,3 @@ def strip_exact(param):
     if getattr(param, "Uq", None) is None and getattr(param, "Rq", None) is None:
         return param
     return replace(param, Uq=None, Rq=None)
-
-
-def quiet_workers() -> None:
-    """Ranks >= 1 print nothing (stdout and stderr to /dev/null, except tracebacks
-    of a crash, which go to stderr through the master)."""
-    devnull = open(os.devnull, "w")
-    sys.stdout = devnull

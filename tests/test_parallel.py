@@ -15,7 +15,7 @@ import pytest
 from hpcwedge import parallel
 from hpcwedge.checkpoint import CheckpointError
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import PatternTree, Subtree, sign_patterns
+from hpcwedge.patterns import PatternTree, sign_patterns
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
 from hpcwedge.scene import parse_scene
