@@ -173,14 +173,14 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
         stats["face"] = _canonical_face(face)
     total = len(rest)
     for step, h in enumerate(rest, 1):
-        X, Z = _add_constraint(A[h], h, X, Z, done, fixed, nz1, bits, exact, stats)
         added.add(h)
         i = h // 3
+        done_after = done.copy()
         if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
             w, b = divmod(i, NODES_PER_WORD)
-            done[w] |= np.uint64(1) << np.uint64(3 * b)
-            keep = bits.complementary_at(Z, done)
-            X, Z = X[keep], Z[keep]
+            done_after[w] |= np.uint64(1) << np.uint64(3 * b)
+        X, Z = _add_constraint(A[h], h, X, Z, done, done_after, fixed, nz1, bits, exact, stats)
+        done = done_after
         stats["max_rays"] = max(stats["max_rays"], int(X.shape[0]))
         if progress is not None:
             progress({"done": step, "total": total, "rays": int(X.shape[0]),
@@ -302,8 +302,12 @@ def _initial_rays(AS, exact) -> np.ndarray:
     return X / np.linalg.norm(X, axis=1, keepdims=True)
 
 
-def _add_constraint(a, h, X, Z, done, fixed, nz1, bits, exact, stats):
-    """One DD step with complementarity-restricted, exactly tested adjacency."""
+def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats):
+    """One DD step with complementarity-restricted, exactly tested adjacency.
+
+    Returns the rays of the new cone (old rays with a >= 0 in their order, then the
+    new ones), minus those that are not complementary at the nodes of done_after
+    (dropped before they are copied)."""
     s = X.dot(a)
     if exact:
         pos = np.array([v > 0 for v in s], dtype=bool)
@@ -314,31 +318,62 @@ def _add_constraint(a, h, X, Z, done, fixed, nz1, bits, exact, stats):
     P, M = np.flatnonzero(pos), np.flatnonzero(neg)
     w, bit = bits.pos(h)
     pi, qi = _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats)
+    Z = Z.copy()
+    Z[zer, w] |= bit
     Zn = Z[pi] & Z[qi]
     Zn[:, w] |= bit
+    keep = ~neg
+    if np.any(done_after != done):
+        keep &= bits.complementary_at(Z, done_after)
+        new_ok = bits.complementary_at(Zn, done_after)
+        pi, qi, Zn = pi[new_ok], qi[new_ok], Zn[new_ok]
+    n0 = int(keep.sum())
+    Xo = np.empty((n0 + len(pi), X.shape[1]), dtype=X.dtype)
+    Xo[:n0] = X[keep]
     if exact:
-        Xn = np.empty((len(pi), X.shape[1]), dtype=object)
         for k, (p, q) in enumerate(zip(pi, qi)):
-            Xn[k] = xq.primitive(s[p] * X[q] - s[q] * X[p])
+            Xo[n0 + k] = xq.primitive(s[p] * X[q] - s[q] * X[p])
     else:
-        Xn = s[pi, None] * X[qi] - s[qi, None] * X[pi]
-        Xn /= np.linalg.norm(Xn, axis=1, keepdims=True)
-    Zz = Z[zer].copy()
-    Zz[:, w] |= bit
-    return np.concatenate([X[pos], X[zer], Xn]), np.concatenate([Z[pos], Zz, Zn])
+        tmp = np.empty((min(CHUNK, len(pi)), X.shape[1]))
+        for c in range(0, len(pi), CHUNK):
+            p, q = pi[c:c + CHUNK], qi[c:c + CHUNK]
+            o, t = Xo[n0 + c:n0 + c + len(p)], tmp[:len(p)]
+            np.take(X, q, axis=0, out=o)
+            o *= s[p][:, None]
+            np.take(X, p, axis=0, out=t)
+            t *= s[q][:, None]
+            o -= t
+            o /= np.sqrt(np.einsum("ij,ij->i", o, o))[:, None]
+    return Xo, np.concatenate([Z[keep], Zn])
+
+
+CHUNK = 1 << 16
+HASH_MUL = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), np.uint64(0x165667B19E3779F9))
+P_SIDE, M_SIDE, O_SIDE, PROBE = 0, 1, 2, 3
 
 
 def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats):
     """Pairs (p in P, q in M) that share a face at every finished node, have
     |Z(p) & Z(q)| >= nz1 - 1, and are adjacent (combinatorial test, exact).
 
-    Simple rays (exactly nz1 = d - 1 (+ implied face rows) zeros) are joined by
-    hashing: for simple p and q, Z(p) & Z(q) has nz1 - 1 elements and equals Z(p) minus one bit and Z(q) minus
-    one bit, and every simple witness has that set among its own "keys"
-    (its zero set minus one bit). So (p, q) is adjacent iff its key occurs once
-    among the keys of P, once among those of M, never among the other rays'
-    keys, and no degenerate ray (more than nz1 zeros) contains it. Pairs with a
-    degenerate ray are searched by brute force (they are few).
+    Simple rays (exactly nz1 = d - 1 (+ implied face rows) zeros). The *keys* of a
+    simple ray are its zero set minus one removable bit (one whose loss keeps a face
+    at every finished node). For simple p and q, C = Z(p) & Z(q) has nz1 - 1
+    elements iff it is a key of both, and then every simple witness (a third ray
+    whose zero set contains C) has C among its keys too. So (p, q) is adjacent iff
+    C occurs once among the keys of P, once among those of M, never among those of
+    the other simple rays, and no degenerate ray (more than nz1 zeros) contains C.
+    For a degenerate g and a simple q, C = Z(g) & Z(q) with |C| >= nz1 - 1 is a key
+    of q (C is not Z(q): two extreme rays never have nested zero sets), so the pair
+    is adjacent iff C occurs exactly once among the simple rays' keys (q's own) and
+    no degenerate ray but g contains C: C is looked up as a "probe" in the same join.
+    Pairs of two degenerate rays are tested by brute force (they are rare).
+
+    The join: the keys of the side with fewer keys are hashed into a bit table; the
+    other side's keys are generated bit by bit and only those whose hash is in the
+    table are kept; the small side is then filtered by a table of the survivors.
+    Every occurrence of a key present on both sides (or probed) survives, so the
+    exact join by sorting, run on the survivors only, counts occurrences exactly.
     """
     empty = np.zeros(0, dtype=np.intp)
     if len(P) == 0 or len(M) == 0:
@@ -348,97 +383,195 @@ def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats):
     sign = np.zeros(R, dtype=np.int8)
     sign[P], sign[M] = 1, -1
     deg = np.flatnonzero(~simple)
+    sP, sM = P[simple[P]], M[simple[M]]
+    gP, gM = P[~simple[P]], M[~simple[M]]
     out_p, out_q = [], []
-    # simple x simple: hash join on keys
-    kp, rp = _keys(Z, P[simple[P]], done, fixed)
-    km, rm = _keys(Z, M[simple[M]], done, fixed)
-    ko, _ = _keys(Z, np.flatnonzero(simple & (sign == 0)), done, fixed)
-    pi, qi = _join_keys(kp, rp, km, rm, ko)
-    stats["pairs_tested"] += len(pi)
-    if len(pi):
-        Zc = Z[pi] & Z[qi]
-        good = bits.complementary_at(Zc, done)
-        if len(deg):
-            Zd = Z[deg]
-            for c0 in range(0, len(pi), 4096):
-                zc = Zc[c0:c0 + 4096]
-                hit = np.all((Zd[None, :, :] & zc[:, None, :]) == zc[:, None, :], axis=-1).any(axis=1)
-                good[c0:c0 + 4096] &= ~hit
-        stats["pairs_adjacent"] += int(good.sum())
-        out_p.append(pi[good])
-        out_q.append(qi[good])
-    # pairs with a degenerate ray: brute force, witnesses among all rays
-    # (a witness of such a pair shares >= nz1-1 zeros with its degenerate member g)
-    for g in P[~simple[P]]:
-        pi, qi = _candidates(np.array([g]), M, Z, done, nz1, bits)
-        near = np.bitwise_count(Z & Z[g]).sum(axis=1, dtype=np.int64) >= nz1 - 1
-        pi, qi = _adjacent(pi, qi, Z, Z[near], stats)
-        out_p.append(pi)
-        out_q.append(qi)
-    sp = P[simple[P]]
-    for g in M[~simple[M]]:
-        pi, qi = _candidates(sp, np.array([g]), Z, done, nz1, bits)
-        near = np.bitwise_count(Z & Z[g]).sum(axis=1, dtype=np.int64) >= nz1 - 1
-        pi, qi = _adjacent(pi, qi, Z, Z[near], stats)
-        out_p.append(pi)
-        out_q.append(qi)
-    if not out_p:
-        return empty, empty
+    # degenerate x simple: candidate pairs, probed in the join
+    cand_p, cand_q, cand_g = [empty], [empty], [empty]
+    for g in gP:
+        pi, qi = _candidates(np.array([g]), sM, Z, done, nz1, bits)
+        cand_p.append(pi), cand_q.append(qi), cand_g.append(pi)
+    for g in gM:
+        pi, qi = _candidates(sP, np.array([g]), Z, done, nz1, bits)
+        cand_p.append(pi), cand_q.append(qi), cand_g.append(qi)
+    cand_p, cand_q, cand_g = np.concatenate(cand_p), np.concatenate(cand_q), np.concatenate(cand_g)
+    probes = Z[cand_p] & Z[cand_q]
+    pi, qi, probe_ok = _join(Z, sP, sM, np.flatnonzero(simple & (sign == 0)), probes, done, fixed)
+    stats["pairs_tested"] += len(pi) + len(cand_p)
+    if len(deg):
+        Zd = Z[deg]
+        good = _contained_count(Z[pi] & Z[qi], Zd) == 0
+        pi, qi = pi[good], qi[good]
+        probe_ok &= _contained_count(probes, Zd) == 1          # g itself only
+    stats["pairs_adjacent"] += len(pi) + int(probe_ok.sum())
+    out_p += [pi, cand_p[probe_ok]]
+    out_q += [qi, cand_q[probe_ok]]
+    # degenerate x degenerate: brute force, witnesses among the rays sharing
+    # >= nz1 - 1 zeros with the degenerate p
+    for g in gP:
+        pi, qi = _candidates(np.array([g]), gM, Z, done, nz1, bits)
+        if len(pi):
+            near = np.bitwise_count(Z & Z[g]).sum(axis=1, dtype=np.int64) >= nz1 - 1
+            pi, qi = _adjacent(pi, qi, Z, Z[near], stats)
+            out_p.append(pi)
+            out_q.append(qi)
     return np.concatenate(out_p), np.concatenate(out_q)
 
 
-def _join_keys(kp, rp, km, rm, ko):
-    """Pairs (p, q) whose key occurs exactly twice among all keys: once for p in P,
-    once for q in M (one sort of every key, labelled by side)."""
-    keys = np.concatenate([kp, km, ko])
-    side = np.concatenate([np.zeros(len(kp), np.int8), np.ones(len(km), np.int8),
-                           np.full(len(ko), 2, np.int8)])
-    owner = np.concatenate([rp, rm, np.zeros(len(ko), dtype=np.intp)])
-    order = np.argsort(keys, kind="stable")
-    ks, ss, os_ = keys[order], side[order], owner[order]
-    n = len(ks)
-    if n < 2:
-        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
-    same = ks[1:] == ks[:-1]
-    # a run of exactly two: same[i] and not same[i-1] and not same[i+1]
-    prev = np.concatenate([[False], same[:-1]])
-    nxt = np.concatenate([same[1:], [False]])
-    start = np.flatnonzero(same & ~prev & ~nxt)
-    ok = (ss[start] == 0) & (ss[start + 1] == 1)
-    start = start[ok]
-    return os_[start], os_[start + 1]
+def _contained_count(C, Zd):
+    """(n, W) sets C, (k, W) sets Zd -> (n,) number of rows of Zd containing each C."""
+    out = np.zeros(len(C), dtype=np.int64)
+    step = max(1, (1 << 22) // max(1, Zd.shape[0] * Zd.shape[1]))
+    for a in range(0, len(C), step):
+        c = C[a:a + step]
+        out[a:a + step] = np.all((Zd[None, :, :] & c[:, None, :]) == c[:, None, :], axis=-1).sum(axis=1)
+    return out
 
 
-def _keys(Z, rows, done, fixed):
-    """Keys of simple rays: each zero set with one *removable* bit removed (one
-    whose loss keeps a face at every finished node: only such keys can be the
-    common zero set of a combinable pair or of its witnesses), as comparable
-    scalars; returns (keys, ray index of each key)."""
-    if len(rows) == 0:
-        return _as_key(np.zeros((0, Z.shape[1]), dtype=np.uint64)), np.zeros(0, dtype=np.intp)
-    Zr = Z[rows]
+def _removable(Zr, done, fixed):
+    """Bits of each zero set whose removal keeps a face at every finished node (never
+    an equality row of the face: those are in every zero set)."""
     one, two = np.uint64(1), np.uint64(2)
     u = Zr & done
     f = (Zr >> one) & (Zr >> two) & done
     wild = u & f
     req_u, req_f = u & ~wild, f & ~wild
-    removable = Zr & ~(req_u | (req_f << one) | (req_f << two) | fixed)
-    keys, owner = [], []
-    for w in range(Z.shape[1]):
-        col = removable[:, w]
-        present = np.bitwise_or.reduce(col) if len(col) else np.uint64(0)
-        for b in range(64):
-            bit = np.uint64(1) << np.uint64(b)
-            if not present & bit:
-                continue
-            sel = np.flatnonzero(col & bit)
-            K = Zr[sel]
+    return Zr & ~(req_u | (req_f << one) | (req_f << two) | fixed)
+
+
+def _key_bits(rem):
+    """The removable bits present in rem (n, W): yields (w, bit, rows having it)."""
+    for w in range(rem.shape[1]):
+        col = rem[:, w]
+        present = int(np.bitwise_or.reduce(col)) if len(col) else 0
+        while present:
+            low = present & -present
+            present ^= low
+            bit = np.uint64(low)
+            yield w, bit, np.flatnonzero(col & bit)
+
+
+def _hash(K):
+    """(n, W) uint64 -> (n,) uint64, linear in the words (mod 2^64), so that the hash
+    of a key is the hash of its zero set minus that of the removed bit. Table slots
+    are its top bits."""
+    h = K[:, 0] * HASH_MUL[0]
+    for w in range(1, K.shape[1]):
+        h += K[:, w] * HASH_MUL[w % len(HASH_MUL)]
+    return h
+
+
+def _bit_hash(w, bit):
+    """_hash of the one-bit set (word w, bit)."""
+    return np.uint64(int(bit) * int(HASH_MUL[w % len(HASH_MUL)]) % (1 << 64))
+
+
+class _KeySet:
+    """The keys of a set of simple rays (global indices rows, zero sets Zr), kept as
+    (row, removed bit) and their hashes; keys are built only for the survivors."""
+
+    def __init__(self, Zr, rows, done, fixed, side):
+        self.Zr, self.rows, self.side = Zr, rows, side
+        self.rem = _removable(Zr, done, fixed)
+        self.count = int(np.bitwise_count(self.rem).sum(dtype=np.int64))
+        self.hz = _hash(Zr)
+
+    def chunks(self, shift):
+        """Yields (w, bit, local rows, table slots) one removed bit at a time."""
+        for w, bit, sel in _key_bits(self.rem):
+            yield w, bit, sel, ((self.hz[sel] - _bit_hash(w, bit)) >> shift).view(np.int64)
+
+    def keys(self, parts):
+        """Keys and ray indices of the (w, bit, local rows) parts."""
+        W = self.Zr.shape[1]
+        if not parts:
+            return np.zeros((0, W), dtype=np.uint64), np.zeros(0, dtype=np.intp)
+        Ks, os_ = [], []
+        for w, bit, sel in parts:
+            K = self.Zr[sel]
             K[:, w] ^= bit
-            keys.append(K)
-            owner.append(rows[sel])
-    if not keys:
-        return _as_key(np.zeros((0, Z.shape[1]), dtype=np.uint64)), np.zeros(0, dtype=np.intp)
-    return _as_key(np.concatenate(keys)), np.concatenate(owner)
+            Ks.append(K)
+            os_.append(self.rows[sel])
+        return np.concatenate(Ks), np.concatenate(os_)
+
+
+def _join(Z, sP, sM, sO, probes, done, fixed):
+    """Simple pairs (p, q) whose key occurs exactly twice among the simple rays' keys
+    (once in P, once in M), and for each probe whether it occurs exactly once."""
+    sets = [_KeySet(Z[sP], sP, done, fixed, P_SIDE), _KeySet(Z[sM], sM, done, fixed, M_SIDE)]
+    small, big = sorted(sets, key=lambda k: k.count)
+    other = _KeySet(Z[sO], sO, done, fixed, O_SIDE)
+    B = int(np.clip(int(np.ceil(np.log2(max(small.count + len(probes), 1)))) + 3, 12, 28))
+    shift = np.uint64(64 - B)
+    hp = (_hash(probes) >> shift).view(np.int64)
+    table = np.zeros(1 << B, dtype=bool)
+    small_parts = list(small.chunks(shift))
+    for _, _, _, h in small_parts:
+        table[h] = True
+    table[hp] = True
+    # the other side, filtered while it is generated; the simple rays outside P and M
+    big_parts = []
+    for w, bit, sel, h in big.chunks(shift):
+        hit = table[h]
+        big_parts.append((w, bit, sel[hit], h[hit]))
+    other_parts = [(w, bit, sel[table[h]]) for w, bit, sel, h in other.chunks(shift)]
+    table[:] = False
+    for _, _, _, h in big_parts:
+        table[h] = True
+    table[hp] = True
+    small_parts = [(w, bit, sel[hit], h[hit]) for w, bit, sel, h in small_parts
+                   for hit in [table[h]]]
+    # one more round each way with the next B bits of the hash (an independent
+    # filter): false positives of the first round are mostly gone
+    shift2 = np.uint64(64 - 2 * B)
+    mask = np.int64((1 << B) - 1)
+    hp2 = ((_hash(probes) >> shift2).view(np.int64)) & mask
+    small_parts = [(w, bit, sel, ((small.hz[sel] - _bit_hash(w, bit)) >> shift2).view(np.int64) & mask)
+                   for w, bit, sel, _ in small_parts]
+    big_parts = [(w, bit, sel, ((big.hz[sel] - _bit_hash(w, bit)) >> shift2).view(np.int64) & mask)
+                 for w, bit, sel, _ in big_parts]
+    table[:] = False
+    for _, _, _, h in small_parts:
+        table[h] = True
+    table[hp2] = True
+    big_parts = [(w, bit, sel[hit], h[hit]) for w, bit, sel, h in big_parts for hit in [table[h]]]
+    table[:] = False
+    for _, _, _, h in big_parts:
+        table[h] = True
+    table[hp2] = True
+    small_parts = [(w, bit, sel[table[h]]) for w, bit, sel, h in small_parts]
+    del table
+    Ks, os_ = small.keys(small_parts)
+    Kb, ob = big.keys([(w, bit, sel) for w, bit, sel, _ in big_parts])
+    Ko, oo = other.keys(other_parts)
+    # exact join on the survivors
+    keys = np.concatenate([Ks, Kb, Ko, probes])
+    side = np.concatenate([np.full(len(Ks), small.side, np.int8), np.full(len(Kb), big.side, np.int8),
+                           np.full(len(Ko), O_SIDE, np.int8), np.full(len(probes), PROBE, np.int8)])
+    owner = np.concatenate([os_, ob, oo, np.arange(len(probes), dtype=np.intp)])
+    probe_ok = np.zeros(len(probes), dtype=bool)
+    empty = np.zeros(0, dtype=np.intp)
+    if len(keys) == 0:
+        return empty, empty, probe_ok
+    order = np.argsort(_as_key(keys))
+    ks, ss, os_ = keys[order], side[order], owner[order]
+    first = np.ones(len(ks), dtype=bool)
+    first[1:] = np.any(ks[1:] != ks[:-1], axis=1)
+    run = np.cumsum(first) - 1
+    nr = int(run[-1]) + 1
+    real = ss != PROBE
+    count = np.bincount(run[real], minlength=nr)
+    isp, ism = ss == P_SIDE, ss == M_SIDE
+    cp = np.bincount(run[isp], minlength=nr)
+    cm = np.bincount(run[ism], minlength=nr)
+    p_of = np.zeros(nr, dtype=np.intp)
+    q_of = np.zeros(nr, dtype=np.intp)
+    p_of[run[isp]] = os_[isp]
+    q_of[run[ism]] = os_[ism]
+    good = np.flatnonzero((count == 2) & (cp == 1) & (cm == 1))
+    pr = ss == PROBE
+    probe_ok[os_[pr]] = count[run[pr]] == 1
+    return p_of[good], q_of[good], probe_ok
 
 
 def _as_key(K):
@@ -452,7 +585,7 @@ def _candidates(P, M, Z, done, nz1, bits):
     """All (p, q) in P x M with a shared face at finished nodes and |Z(p) & Z(q)| >= nz1-1."""
     ZP = Z[P]
     chunk = max(1, (1 << 20) // max(1, len(P)))
-    out_p, out_q = [], []
+    out_p, out_q = [np.zeros(0, dtype=np.intp)], [np.zeros(0, dtype=np.intp)]
     for a in range(0, len(M), chunk):
         q = M[a:a + chunk]
         common = ZP[None, :, :] & Z[q][:, None, :]            # (cq, |P|, W)
