@@ -172,6 +172,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
     if face is not None:
         stats["face"] = _canonical_face(face)
     total = len(rest)
+    work: dict = {}                  # buffers reused from step to step
     for step, h in enumerate(rest, 1):
         added.add(h)
         i = h // 3
@@ -179,7 +180,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
         if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
             w, b = divmod(i, NODES_PER_WORD)
             done_after[w] |= np.uint64(1) << np.uint64(3 * b)
-        X, Z = _add_constraint(A[h], h, X, Z, done, done_after, fixed, nz1, bits, exact, stats)
+        X, Z = _add_constraint(A[h], h, X, Z, done, done_after, fixed, nz1, bits, exact, stats, work)
         done = done_after
         stats["max_rays"] = max(stats["max_rays"], int(X.shape[0]))
         if progress is not None:
@@ -302,13 +303,14 @@ def _initial_rays(AS, exact) -> np.ndarray:
     return X / np.linalg.norm(X, axis=1, keepdims=True)
 
 
-def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats):
+def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats, work):
     """One DD step with complementarity-restricted, exactly tested adjacency.
 
     Returns the rays of the new cone (old rays with a >= 0 in their order, then the
     new ones), minus those that are not complementary at the nodes of done_after
     (dropped before they are copied)."""
-    s = X.dot(a)
+    # (einsum, not BLAS: no BLAS threads spinning next to the other ranks)
+    s = X.dot(a) if exact else np.einsum("ij,j->i", X, a)
     if exact:
         pos = np.array([v > 0 for v in s], dtype=bool)
         neg = np.array([v < 0 for v in s], dtype=bool)
@@ -317,7 +319,7 @@ def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats
     zer = ~(pos | neg)
     P, M = np.flatnonzero(pos), np.flatnonzero(neg)
     w, bit = bits.pos(h)
-    pi, qi = _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats)
+    pi, qi = _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats, work)
     Z = Z.copy()
     Z[zer, w] |= bit
     Zn = Z[pi] & Z[qi]
@@ -329,7 +331,7 @@ def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats
         pi, qi, Zn = pi[new_ok], qi[new_ok], Zn[new_ok]
     n0 = int(keep.sum())
     Xo = np.empty((n0 + len(pi), X.shape[1]), dtype=X.dtype)
-    Xo[:n0] = X[keep]
+    np.compress(keep, X, axis=0, out=Xo[:n0])
     if exact:
         for k, (p, q) in enumerate(zip(pi, qi)):
             Xo[n0 + k] = xq.primitive(s[p] * X[q] - s[q] * X[p])
@@ -347,12 +349,12 @@ def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats
     return Xo, np.concatenate([Z[keep], Zn])
 
 
-CHUNK = 1 << 16
+CHUNK = 1 << 12                  # rows per block of new-ray arithmetic (stays in cache)
 HASH_MUL = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), np.uint64(0x165667B19E3779F9))
 P_SIDE, M_SIDE, O_SIDE, PROBE = 0, 1, 2, 3
 
 
-def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats):
+def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats, work):
     """Pairs (p in P, q in M) that share a face at every finished node, have
     |Z(p) & Z(q)| >= nz1 - 1, and are adjacent (combinatorial test, exact).
 
@@ -396,7 +398,7 @@ def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats):
         cand_p.append(pi), cand_q.append(qi), cand_g.append(qi)
     cand_p, cand_q, cand_g = np.concatenate(cand_p), np.concatenate(cand_q), np.concatenate(cand_g)
     probes = Z[cand_p] & Z[cand_q]
-    pi, qi, probe_ok = _join(Z, sP, sM, np.flatnonzero(simple & (sign == 0)), probes, done, fixed)
+    pi, qi, probe_ok = _join(Z, sP, sM, np.flatnonzero(simple & (sign == 0)), probes, done, fixed, work)
     stats["pairs_tested"] += len(pi) + len(cand_p)
     if len(deg):
         Zd = Z[deg]
@@ -426,6 +428,18 @@ def _contained_count(C, Zd):
         c = C[a:a + step]
         out[a:a + step] = np.all((Zd[None, :, :] & c[:, None, :]) == c[:, None, :], axis=-1).sum(axis=1)
     return out
+
+
+def _table(work: dict, B: int) -> np.ndarray:
+    """A zeroed bool table of 2^B slots, from a buffer reused across steps (a fresh
+    one would page-fault in every step)."""
+    buf = work.get("table")
+    if buf is None or len(buf) < (1 << B):
+        buf = work["table"] = np.zeros(1 << B, dtype=bool)
+        return buf
+    table = buf[:1 << B]
+    table.fill(False)
+    return table
 
 
 def _removable(Zr, done, fixed):
@@ -495,7 +509,7 @@ class _KeySet:
         return np.concatenate(Ks), np.concatenate(os_)
 
 
-def _join(Z, sP, sM, sO, probes, done, fixed):
+def _join(Z, sP, sM, sO, probes, done, fixed, work):
     """Simple pairs (p, q) whose key occurs exactly twice among the simple rays' keys
     (once in P, once in M), and for each probe whether it occurs exactly once."""
     sets = [_KeySet(Z[sP], sP, done, fixed, P_SIDE), _KeySet(Z[sM], sM, done, fixed, M_SIDE)]
@@ -504,7 +518,7 @@ def _join(Z, sP, sM, sO, probes, done, fixed):
     B = int(np.clip(int(np.ceil(np.log2(max(small.count + len(probes), 1)))) + 3, 12, 28))
     shift = np.uint64(64 - B)
     hp = (_hash(probes) >> shift).view(np.int64)
-    table = np.zeros(1 << B, dtype=bool)
+    table = _table(work, B)
     small_parts = list(small.chunks(shift))
     for _, _, _, h in small_parts:
         table[h] = True
