@@ -19,7 +19,8 @@ For every m:
          the parent. Its wall time is the number to compare with the 60 s target.
 
 The machine is shared: CPU seconds are reported next to wall seconds (wall time under
-load from other users is inflated). Writes results/bench_dd_faces.json.
+load from other users is inflated). Every process runs with one BLAS thread (unless
+OPENBLAS_NUM_THREADS etc. are set). Writes results/bench_dd_faces.json.
 """
 from __future__ import annotations
 
@@ -32,6 +33,9 @@ import subprocess
 import sys
 import time
 
+# one BLAS thread per process: P worker processes on P cores, as P MPI ranks would run
+for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 MARK = "BENCH_RESULT "

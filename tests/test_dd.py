@@ -104,6 +104,32 @@ def test_pruned_equals_unpruned_filtered():
     assert set(map(tuple, complementary_rays(A, 4).zero)) == brute_force_rays(A)
 
 
+@pytest.mark.parametrize("seed", range(10))
+@pytest.mark.parametrize("m,free", [(4, False), (5, True), (6, True)])
+def test_row_orders_agree(seed, m, free):
+    """The row order changes the work, never the result: greedy (the float default),
+    static, and a random node order give the same rays."""
+    rng = np.random.default_rng(300 + 1000 * seed + 10 * m + free)
+    prob = random_problem(rng, m, free)
+    A = friction_rows_2d(parametrize(prob), float(rng.uniform(0.3, 1.5)), m)
+    ref = complementary_rays(A, m)
+    assert len(ref.X) == len(set(map(tuple, ref.zero)))
+    for order in ("static", "greedy", list(rng.permutation(m))):
+        r = complementary_rays(A, m, order=order)
+        assert set(map(tuple, r.zero)) == set(map(tuple, ref.zero))
+        assert len(r.X) == len(ref.X)
+
+
+def test_greedy_order_is_float_only():
+    rng = np.random.default_rng(1)
+    p = parametrize(random_problem(rng, 3, False), exact=True)
+    A = friction_rows_2d(p, 0.8, 3, exact=True)
+    with pytest.raises(ValueError):
+        complementary_rays(A, 3, exact=True, order="greedy")
+    with pytest.raises(ValueError):
+        complementary_rays(A, 3, exact=True, order="fastest")
+
+
 # --------------------------------------------------------------------- face splitting
 
 def _on_face(zero: np.ndarray, face) -> np.ndarray:
