@@ -10,14 +10,15 @@
 #
 # Runs `mpirun -n RANKS python -m hpcwedge run SCENE -o RESULT --resume`: a
 # rerun continues from the checkpoint beside RESULT (or starts fresh when there
-# is none). Ctrl-C / SIGTERM / SIGHUP: the run gets SIGUSR1 (the master writes a
-# checkpoint and stops), then SIGTERM after HPCWEDGE_STOP_GRACE seconds (default
-# 30); a second Ctrl-C sends SIGTERM at once. mpirun runs in its own session so
-# that the terminal's Ctrl-C reaches only this script: Open MPI's mpirun would
-# answer a direct SIGINT/SIGTERM by killing the ranks a second later.
+# is none). Ctrl-C / SIGTERM / SIGHUP: mpirun gets SIGTERM, which it forwards;
+# the master writes a checkpoint and exits 75 within the second Open MPI gives
+# it (the workers ignore SIGTERM); SIGKILL if mpirun is still there 30 s later.
+# mpirun runs in its own session so that the terminal's Ctrl-C reaches only this
+# script (Open MPI's mpirun would answer it by killing the ranks at once).
+# Send the run SIGUSR1 yourself for a checkpoint without stopping.
 #
 # Environment: HPCWEDGE_ROOT, HPCWEDGE_PYTHON, HPCWEDGE_MPIRUN,
-# HPCWEDGE_MPIRUN_ARGS, HPCWEDGE_STOP_GRACE (as for jobs/wedge.sbatch).
+# HPCWEDGE_MPIRUN_ARGS (as for jobs/wedge.sbatch).
 
 log() { printf '%s [wedge-mpirun] %s\n' "$(date '+%F %T')" "$*" >&2; }
 stop_sig="" stop_t=0 term_t=0 child=""
@@ -26,15 +27,12 @@ on_signal() {
   if [ -z "$stop_sig" ]; then
     stop_sig=$1 stop_t=$SECONDS
     if [ -n "$child" ]; then
-      log "signal $1 received: forwarding USR1 to ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints"
-      kill -USR1 "$child" 2>/dev/null
+      log "signal $1 received: SIGTERM to ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints and stops"
+      term_t=$SECONDS
+      kill -TERM "$child" 2>/dev/null
     else
       log "signal $1 received before the launch"
     fi
-  elif [ -n "$child" ] && [ "$term_t" = 0 ]; then
-    log "signal $1 received again: SIGTERM to ${LAUNCH[0]:-mpirun} now"
-    term_t=$SECONDS
-    kill -TERM "$child" 2>/dev/null
   fi
 }
 trap 'on_signal INT' INT
@@ -91,7 +89,6 @@ if [ "$RANKS" -gt "$CPUS" ]; then
 fi
 [ "$(id -u)" = 0 ] && export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
-GRACE=${HPCWEDGE_STOP_GRACE:-30}
 SETSID=()
 command -v setsid >/dev/null && SETSID=(setsid)
 
@@ -101,17 +98,13 @@ if [ -n "$stop_sig" ]; then log "stopped by SIG$stop_sig before the launch"; exi
 "${SETSID[@]}" "${CMD[@]}" < /dev/null &
 child=$!
 log "launch: ${CMD[*]} (mpirun pid $child)"
-[ -n "$stop_sig" ] && kill -USR1 "$child" 2>/dev/null
+[ -n "$stop_sig" ] && { term_t=$SECONDS; kill -TERM "$child" 2>/dev/null; }
 
 while kill -0 "$child" 2>/dev/null; do
   if [ -z "$stop_sig" ]; then
     wait "$child"
   else
-    if [ "$term_t" = 0 ] && [ $((SECONDS - stop_t)) -ge "$GRACE" ]; then
-      log "still running ${GRACE}s after the signal: SIGTERM to ${LAUNCH[0]}"
-      term_t=$SECONDS
-      kill -TERM "$child" 2>/dev/null
-    elif [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge 30 ]; then
+    if [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge 30 ]; then
       log "${LAUNCH[0]} ignored SIGTERM for 30 s: SIGKILL"
       kill -KILL "$child" 2>/dev/null
     fi

@@ -35,19 +35,22 @@ mu = [0.65]
 enumerate = true
 mu_c = "cones"
 """
-# Long enough (5-20 s on 2 cores) to be signalled while it runs, with a small result:
-# below mu^c nothing is wedged, so the global mu^c comes from the sign-pattern
-# branch and bound (the work that is distributed and checkpointed).
-LONG = """name = "plug2d-r10-global"
-dim = 2
+# Long enough (10-40 s on 2 cores) to be signalled while it runs, with a small
+# result, and all of it work that the engine distributes and checkpoints: the
+# 3D sign-pattern tree of plug3d (m = 12) and the mu^c of its 223 patterns.
+LONG = """name = "plug3d-2x6"
+dim = 3
 [model]
-kind = "plug2d"
-rows = 10
+kind = "plug3d"
+levels = 2
+ring = 6
 [friction]
-mu = [0.1]
+mu = [1.0]
 [compute]
-enumerate = false
-mu_c = "global"
+enumerate = true
+mu_c = "cones"
+[run]
+checkpoint_every_s = 2
 """
 
 
@@ -257,7 +260,7 @@ def test_mpirun_script_forwards_sigint_then_resumes(scenes, tmp_path):
         if p.poll() is None:
             p.kill()
     log = read(errpath)
-    assert "signal INT received: forwarding USR1 to mpirun" in log and "stopped by SIGINT" in log, log
+    assert "signal INT received: SIGTERM to mpirun" in log and "stopped by SIGINT" in log, log
     with pytest.raises(ProcessLookupError):
         os.kill(mpirun_pid, 0)
     # The same command again finishes the job (from the checkpoint once there is one).
