@@ -286,12 +286,12 @@ def merge_results(results: list[DDResult]) -> DDResult:
     results = sorted(results, key=lambda r: r.stats.get("face", ((), ())))
     X = np.concatenate([r.X for r in results])
     zero = np.concatenate([r.zero for r in results])
-    order = np.lexsort(zero.T[::-1])          # stable: first face first among equals
-    X, zero = X[order], zero[order]
-    if len(zero):
-        new = np.ones(len(zero), dtype=bool)
-        new[1:] = np.any(zero[1:] != zero[:-1], axis=1)
-        X, zero = X[new], zero[new]
+    order, words = canonical_order(zero, return_words=True)   # stable: first face first
+    words = words[order]
+    new = np.ones(len(zero), dtype=bool)
+    new[1:] = np.any(words[1:] != words[:-1], axis=1)
+    keep = order[new]
+    X, zero = X[keep], zero[keep]
     stats = {"faces": len(results),
              "rays_found": int(sum(len(r.X) for r in results)),
              "initial_rays": int(sum(r.stats.get("initial_rays", 0) for r in results)),
@@ -301,6 +301,21 @@ def merge_results(results: list[DDResult]) -> DDResult:
              "seconds": float(sum(r.stats.get("seconds", 0.0) for r in results)),
              "face_seconds": [float(r.stats.get("seconds", 0.0)) for r in results]}
     return DDResult(X=X, zero=zero, stats=stats)
+
+
+def canonical_order(zero: np.ndarray, return_words: bool = False):
+    """Stable permutation sorting the rows of zero (R, k) bool lexicographically
+    (column 0 first, False < True): the same as np.lexsort(zero.T[::-1]), but on
+    the rows packed into big-endian 64-bit words (one sort key per 64 columns).
+    With return_words, also the packed rows (R, ceil(k / 64)) uint64."""
+    R, k = zero.shape
+    nw = max(1, -(-k // 64))
+    packed = np.zeros((R, 8 * nw), dtype=np.uint8)
+    if k:
+        packed[:, :-(-k // 8)] = np.packbits(zero, axis=1)
+    words = packed.view(">u8").astype(np.uint64)
+    order = np.lexsort(words.T[::-1]) if nw > 1 else np.argsort(words[:, 0], kind="stable")
+    return (order, words) if return_words else order
 
 
 def _initial_basis(A, m, order, exact, eq=()) -> tuple[list[int], list[int]]:
@@ -410,8 +425,8 @@ def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats, work):
     """Pairs (p in P, q in M) that share a face at every finished node, have
     |Z(p) & Z(q)| >= nz1 - 1, and are adjacent (combinatorial test, exact).
 
-    Simple rays (exactly nz1 = d - 1 (+ implied face rows) zeros). The *keys* of a
-    simple ray are its zero set minus one removable bit (one whose loss keeps a face
+    A ray is simple when it has exactly nz1 zeros (d - 1, plus the rows implied by
+    a face), else degenerate. The *keys* of a simple ray are its zero set minus one removable bit (one whose loss keeps a face
     at every finished node). For simple p and q, C = Z(p) & Z(q) has nz1 - 1
     elements iff it is a key of both, and then every simple witness (a third ray
     whose zero set contains C) has C among its keys too. So (p, q) is adjacent iff
@@ -423,11 +438,14 @@ def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats, work):
     no degenerate ray but g contains C: C is looked up as a "probe" in the same join.
     Pairs of two degenerate rays are tested by brute force (they are rare).
 
-    The join: the keys of the side with fewer keys are hashed into a bit table; the
-    other side's keys are generated bit by bit and only those whose hash is in the
-    table are kept; the small side is then filtered by a table of the survivors.
-    Every occurrence of a key present on both sides (or probed) survives, so the
-    exact join by sorting, run on the survivors only, counts occurrences exactly.
+    The join (_join) never sorts all keys: the hashes of the keys of the side with
+    fewer keys (and of the probes) mark a table; the other side's keys are generated
+    one removed bit at a time and kept only if their hash is marked; then the small
+    side is filtered by a table of the survivors, and both once more with other hash
+    bits. A key present on both sides (or probed) has every one of its occurrences
+    survive, so the exact join by sorting, run on the survivors only (about two per
+    adjacent pair), counts occurrences exactly. Hash collisions only let extra keys
+    through to the exact join.
     """
     empty = np.zeros(0, dtype=np.intp)
     if len(P) == 0 or len(M) == 0:
@@ -441,14 +459,16 @@ def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats, work):
     gP, gM = P[~simple[P]], M[~simple[M]]
     out_p, out_q = [], []
     # degenerate x simple: candidate pairs, probed in the join
-    cand_p, cand_q, cand_g = [empty], [empty], [empty]
+    cand_p, cand_q = [empty], [empty]
     for g in gP:
         pi, qi = _candidates(np.array([g]), sM, Z, done, nz1, bits)
-        cand_p.append(pi), cand_q.append(qi), cand_g.append(pi)
+        cand_p.append(pi)
+        cand_q.append(qi)
     for g in gM:
         pi, qi = _candidates(sP, np.array([g]), Z, done, nz1, bits)
-        cand_p.append(pi), cand_q.append(qi), cand_g.append(qi)
-    cand_p, cand_q, cand_g = np.concatenate(cand_p), np.concatenate(cand_q), np.concatenate(cand_g)
+        cand_p.append(pi)
+        cand_q.append(qi)
+    cand_p, cand_q = np.concatenate(cand_p), np.concatenate(cand_q)
     probes = Z[cand_p] & Z[cand_q]
     pi, qi, probe_ok = _join(Z, sP, sM, np.flatnonzero(simple & (sign == 0)), probes, done, fixed, work)
     stats["pairs_tested"] += len(pi) + len(cand_p)

@@ -116,10 +116,31 @@ _A = None
 
 
 def _face_task(face):
+    """One face in a worker; the rays go back through a /dev/shm file (a pickle of
+    ~700 MB through the pool's pipe costs ~10 s at m = 20; an MPI layer would send
+    the arrays as buffers)."""
+    import tempfile
+    import numpy as np
     from hpcwedge.dd import complementary_rays
     t, c = time.perf_counter(), time.process_time()
     dd = complementary_rays(_A, _A.shape[0] // 3, face=face)
-    return face, dd, time.perf_counter() - t, time.process_time() - c
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    fd, path = tempfile.mkstemp(suffix=".npz", dir=SHM)
+    with os.fdopen(fd, "wb") as f:
+        np.savez(f, X=dd.X, zero=np.packbits(dd.zero, axis=1), n=dd.zero.shape[1])
+    return face, path, dd.stats, wall, cpu
+
+
+def _load_face(path, stats):
+    import numpy as np
+    from hpcwedge.dd import DDResult
+    with np.load(path) as f:
+        X, zero = f["X"], np.unpackbits(f["zero"], axis=1, count=int(f["n"])).astype(bool)
+    os.unlink(path)
+    return DDResult(X=X, zero=zero, stats=stats)
+
+
+SHM = "/dev/shm" if os.path.isdir("/dev/shm") else None
 
 
 def parallel_run(m: int, mu: float, nodes: list[int], workers: int, cost: dict) -> dict:
@@ -134,8 +155,8 @@ def parallel_run(m: int, mu: float, nodes: list[int], workers: int, cost: dict) 
     per_face = []
     with mp.get_context("fork").Pool(workers) as pool:
         results = []
-        for face, dd, wall, cpu in pool.imap_unordered(_face_task, faces):
-            results.append(dd)
+        for face, path, stats, wall, cpu in pool.imap_unordered(_face_task, faces):
+            results.append(_load_face(path, stats))
             per_face.append({"face": face, "wall": wall, "cpu": cpu, "done_at": time.perf_counter() - t1})
     t2 = time.perf_counter()
     dd = merge_results(results)
@@ -145,7 +166,7 @@ def parallel_run(m: int, mu: float, nodes: list[int], workers: int, cost: dict) 
     return {"workers": workers, "nodes": nodes, "wall_total": t4 - t0, "parametrize": t_param,
             "faces_wall": t2 - t1, "merge": t3 - t2, "cones": t4 - t3, "wedged": int(dd.wedged().sum()),
             "rays": len(dd.X), "n_cones": len(cones), "per_face": per_face,
-            "parent_maxrss_gb": _rss_gb()}
+            "parent_maxrss_gb": _rss_gb(), "load": os.getloadavg()}
 
 
 def main(argv=None) -> int:
@@ -193,10 +214,12 @@ def main(argv=None) -> int:
             if args.workers:
                 cost = {json.dumps(f["face"]): f["cpu"] for f in faces}
                 r = parallel_run(m, args.mu, nodes, args.workers, cost)
+                busy = [sum(f["cpu"] for f in r["per_face"])]
                 print(f"m={m} nodes {nodes} on {args.workers} processes: enumerate stage wall "
                       f"{r['wall_total']:.1f} s (parametrize {r['parametrize']:.2f}, faces {r['faces_wall']:.1f}, "
                       f"merge {r['merge']:.1f}, cones {r['cones']:.1f}), {r['wedged']} wedged rays, "
-                      f"{r['n_cones']} cones", flush=True)
+                      f"{r['n_cones']} cones; faces cpu sum {busy[0]:.1f} s, largest "
+                      f"{max(f['cpu'] for f in r['per_face']):.1f} s; load {r['load'][0]:.2f}", flush=True)
                 report.append({"m": m, "kind": "parallel", **r})
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, "bench_dd_faces.json")
