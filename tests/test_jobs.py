@@ -244,8 +244,11 @@ def test_mpirun_script_forwards_sigint_then_resumes(scenes, tmp_path):
     out = str(tmp_path / "r.h5")
     errpath = tmp_path / "err.txt"
     with open(errpath, "w") as err:
+        # a shell started in the background inherits SIGINT ignored, and bash cannot trap a
+        # signal ignored on entry: give the script the terminal's default, as a user's has
         p = subprocess.Popen([MPIRUN_SH, "-n", "2", scene, out], stderr=err, stdout=subprocess.DEVNULL,
-                             env={**os.environ, **job_env()})
+                             env={**os.environ, **job_env()},
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         t0 = time.monotonic()
         while "launch: " not in read(errpath):
