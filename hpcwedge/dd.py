@@ -437,6 +437,10 @@ def _adjacent_pairs(P, M, Z, done, fixed, nz1, bits, stats, work):
     is adjacent iff C occurs exactly once among the simple rays' keys (q's own) and
     no degenerate ray but g contains C: C is looked up as a "probe" in the same join.
     Pairs of two degenerate rays are tested by brute force (they are rare).
+    (In exact arithmetic the counting conditions always hold once C is a key of a
+    simple ray: its nz1 - 1 rows have rank d - 2, so the face {x : A_C x = 0} is
+    2-dimensional and holds no third extreme ray. They stay as a cheap check on
+    float zero sets; the join's cost is in finding the common keys.)
 
     The join (_join) never sorts all keys: the hashes of the keys of the side with
     fewer keys (and of the probes) mark a table; the other side's keys are generated
