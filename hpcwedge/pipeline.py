@@ -20,7 +20,7 @@ import numpy as np
 
 from .build import build_model, contact_problem
 from .cones import maximal_cones
-from .dd import complementary_rays
+from .dd import canonical_order, complementary_rays
 from .model import Model
 from .mu_critical import mu_critical
 from .parallel import Engine, run_mu_c, run_patterns, strip_exact
@@ -185,7 +185,7 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
 
 
 def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
-    order = np.lexsort(dd.zero.T[::-1])
+    order = canonical_order(dd.zero)
     X, zero = dd.X[order], dd.zero[order]
     wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
     _, V = ray_vectors(param, X, m, wedged)
