@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Parallel speedup of the sign-pattern branch and bound (issue 3), one run.
 
-Runs one 3D scene (default plug3d levels 2 x ring 6, m = 12, mu 1.0) through
+Runs one 3D scene (default plug3d levels 2 x ring 7, m = 14, mu 1.0) through
 the real command line: in one process, then under mpirun with 1, 2 and 3
 workers (2, 3, 4 ranks; rank 0 is the master and sleeps while it waits, so
 3 workers oversubscribe this 2-core machine). Checks that every run gives the
@@ -10,7 +10,7 @@ speedups relative to 1 worker. The SOCP count against 2^m for m = 8..14 is
 scripts/bench_socp_count.py (results/bench_socp_count.json); its table is
 copied into the JSON here when present.
 
-    .venv/bin/python scripts/bench_parallel.py [--ring 6] [--mu 1.0] [--repeat 2]
+    .venv/bin/python scripts/bench_parallel.py [--ring 7] [--mu 1.0] [--repeat 2]
 """
 from __future__ import annotations
 
@@ -58,7 +58,7 @@ def answers(path: str) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", type=int, default=2)
-    ap.add_argument("--ring", type=int, default=6)
+    ap.add_argument("--ring", type=int, default=7)
     ap.add_argument("--mu", type=float, default=1.0)
     ap.add_argument("--repeat", type=int, default=2)
     args = ap.parse_args()
