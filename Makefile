@@ -19,6 +19,8 @@ test: setup
 bench: setup-bench
 	$(PY) scripts/bench_2d.py
 	$(PY) scripts/bench_mu_c.py
+	PYTHONPATH=. $(PY) scripts/bench_socp_count.py --brute-max 14
+	$(PY) scripts/bench_parallel.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick
