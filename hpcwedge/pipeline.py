@@ -118,7 +118,7 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         pats = run_patterns(partial(PatternTree, strip_exact(param), m), scene.mu, engine=engine,
                             budget=scene.task_budget)
         for run, found, doubt in zip(result.runs, pats.found, pats.undecided):
-            run.patterns = [{"contact": [i for i in range(m) if s.contact >> i & 1], "mu_c": None,
+            run.patterns = [{"contact": np.flatnonzero(s.masks(m)[0]).tolist(), "mu_c": None,
                              "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)]
         c = pats.counters
         stats["patterns_undecided"] = sum(len(u) for u in pats.undecided)

@@ -22,7 +22,7 @@ import numpy as np
 from hpcwedge.build import contact_problem
 from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import BnBStats, PatternTree, global_mu_critical
+from hpcwedge.patterns import BnBStats, PatternTree, Subtree, global_mu_critical
 from hpcwedge.problem import parametrize
 from hpcwedge.scene import parse_scene
 
@@ -64,7 +64,7 @@ def main():
             counts = {}
             brute = []
             for bits in range(1 << m):
-                zu = np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
+                zu = Subtree(m, contact=bits).masks(m)[0]
                 if feasible(pattern_rows(p, m, zu, ~zu), mu, counts)[0] == FEASIBLE:
                     brute.append(bits)
             row["brute_seconds"] = round(time.perf_counter() - t, 3)
@@ -79,7 +79,7 @@ def main():
     t = time.perf_counter()
     polished, lps, values = 0, 0, []
     for bits in got:
-        zu = np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
+        zu = Subtree(m, contact=bits).masks(m)[0]
         r = mu_critical(p, m, zu, ~zu, mu_hi=mu)
         polished += r.polished
         lps += r.lps

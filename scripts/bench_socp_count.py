@@ -24,7 +24,7 @@ import numpy as np
 
 from hpcwedge.build import contact_problem
 from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
-from hpcwedge.patterns import PatternTree
+from hpcwedge.patterns import PatternTree, Subtree
 from hpcwedge.problem import parametrize
 from hpcwedge.scene import parse_scene
 
@@ -39,7 +39,7 @@ def plug(levels, ring, taper=10.0):
 def brute(p, m, mu):
     out = []
     for bits in range(1 << m):
-        zu = np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
+        zu = Subtree(m, contact=bits).masks(m)[0]
         if feasible(pattern_rows(p, m, zu, ~zu), mu)[0] == FEASIBLE:
             out.append(bits)
     return out

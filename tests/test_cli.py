@@ -19,14 +19,19 @@ def write(tmp_path, text, name="s.toml"):
     return str(p)
 
 
-def test_run_show_json(tmp_path, capsys):
-    s = write(tmp_path, 'name = "n"\ndim = 2\n[model]\nkind = "stiffness"\nK = [[2.0, 0.5], [0.5, 1.0]]\n'
-                        '[friction]\nmu = [2.5, 1.5]\n')
+def run_show_json(tmp_path, capsys, text):
+    """`run` a scene text quietly, then `show --json` its result: (result path, JSON)."""
+    s = write(tmp_path, text)
     out = str(tmp_path / "r.h5")
     assert main(["run", s, "-o", out, "-q"]) == 0
     capsys.readouterr()
     assert main(["show", out, "--json"]) == 0
-    got = json.loads(capsys.readouterr().out)
+    return out, json.loads(capsys.readouterr().out)
+
+
+def test_run_show_json(tmp_path, capsys):
+    out, got = run_show_json(tmp_path, capsys, 'name = "n"\ndim = 2\n[model]\nkind = "stiffness"\n'
+                             'K = [[2.0, 0.5], [0.5, 1.0]]\n[friction]\nmu = [2.5, 1.5]\n')
     assert got["name"] == "n" and got["m"] == 1 and got["complete"] is True
     assert abs(got["mu_c"] - 2.0) < 1e-12
     assert [r["mu"] for r in got["runs"]] == [1.5, 2.5]
@@ -77,13 +82,9 @@ def test_public_scenes(tmp_path):
 
 
 def test_run_show_json_3d(tmp_path, capsys):
-    s = write(tmp_path, 'name = "n3"\ndim = 3\n[model]\nkind = "stiffness"\n'
-                        'K = [[3.0, 0.4, 0.2], [0.4, 2.0, 0.3], [0.2, 0.3, 1.5]]\n[friction]\nmu = [5.0, 4.0]\n')
-    out = str(tmp_path / "r.h5")
-    assert main(["run", s, "-o", out, "-q"]) == 0
-    capsys.readouterr()
-    assert main(["show", out, "--json"]) == 0
-    got = json.loads(capsys.readouterr().out)
+    out, got = run_show_json(tmp_path, capsys, 'name = "n3"\ndim = 3\n[model]\nkind = "stiffness"\n'
+                             'K = [[3.0, 0.4, 0.2], [0.4, 2.0, 0.3], [0.2, 0.3, 1.5]]\n'
+                             '[friction]\nmu = [5.0, 4.0]\n')
     assert got["dim"] == 3 and math.isclose(got["mu_c"], 4.784010530585897, rel_tol=1e-9)
     r4, r5 = got["runs"]
     assert (r4["mu"], r4["n_patterns"], r4["patterns"]) == (4.0, 0, [])
