@@ -652,6 +652,7 @@ class Engine:
         """How the work was split: depends on ranks and resumes (answers do not)."""
         return {"ranks": self.size, "resumes": self.resumes, "tasks_per_rank": list(self.tasks_per_rank),
                 "checkpoints_written": self.checkpoints_written,
+                "last_checkpoint_reason": self.checkpoint_reason or "",
                 "elapsed_s_all_sessions": self.elapsed(),
                 "jobs": {name: dict(job.counters) for name, job in self._jobs.items()}}
 

@@ -119,10 +119,14 @@ def parallel_stats(path: str) -> dict:
     return show_json(path)["stats"]["parallel"]
 
 
-def rank_pids(launcher_pid: int, ranks: int, timeout: float = 30.0) -> dict[int, int]:
-    """{rank: pid} of the processes mpirun started (children with OMPI_COMM_WORLD_RANK)."""
+def rank_pids(launcher_pid: int, ranks: int, timeout: float = 30.0,
+              proc: subprocess.Popen | None = None) -> dict[int, int]:
+    """{rank: pid} of the processes mpirun started (children with OMPI_COMM_WORLD_RANK).
+    With `proc` (the launcher), what was found so far once it has ended: a run
+    may finish between the caller's last poll and this search."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
+        ended = proc is not None and proc.poll() is not None
         found = {}
         for d in os.listdir("/proc"):
             if not d.isdigit():
@@ -138,7 +142,7 @@ def rank_pids(launcher_pid: int, ranks: int, timeout: float = 30.0) -> dict[int,
                 continue
             if b"OMPI_COMM_WORLD_RANK" in envs:
                 found[int(envs[b"OMPI_COMM_WORLD_RANK"])] = int(d)
-        if len(found) == ranks:
+        if len(found) == ranks or ended:
             return found
         time.sleep(0.02)
     raise AssertionError(f"mpirun {launcher_pid}: ranks not found")
