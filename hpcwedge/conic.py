@@ -84,7 +84,8 @@ class ConeRows:
     """The 3D pattern SOCP (module doc). eq (E, d), lin (L, d): unit rows;
     rn (c, d), rt (c, 2, d): the cone nodes `nodes`, each node's three rows scaled
     by one common factor; norm (d,): sum r_n. Z (d, p): orthonormal basis of the
-    null space of eq (the solver's coordinates, x = Z w)."""
+    null space of eq (the solver's coordinates, x = Z w). lin_nodes (L,): the node
+    of each lin row."""
 
     eq: np.ndarray
     lin: np.ndarray
@@ -93,6 +94,7 @@ class ConeRows:
     norm: np.ndarray
     nodes: np.ndarray
     Z: np.ndarray
+    lin_nodes: np.ndarray
 
     @property
     def d(self) -> int:
@@ -107,11 +109,14 @@ def problem_dim(param: Parametrization, m: int) -> int:
 def _unit(A: np.ndarray) -> np.ndarray:
     """Rows scaled to unit norm; rows that are identically zero (relative to the
     largest) dropped."""
-    if A.shape[0] == 0:
-        return A
+    A = A[_kept(A)]
+    return A / np.linalg.norm(A, axis=1, keepdims=True)
+
+
+def _kept(A: np.ndarray) -> np.ndarray:
+    """The rows of A that `_unit` keeps (boolean mask)."""
     s = np.linalg.norm(A, axis=1)
-    keep = s > ZERO_ROW_RTOL * max(s.max(), 1e-300)
-    return A[keep] / s[keep, None]
+    return s > ZERO_ROW_RTOL * max(s.max(initial=0.0), 1e-300)
 
 
 def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
@@ -150,6 +155,7 @@ def _pattern_rows_3d(param, m, zu, zr, friction):
     norm = Rn.sum(axis=0)
     eq = _unit(np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]]))
     lin = _unit(Un[~zu])
+    lin_nodes = np.flatnonzero(~zu)[_kept(Un[~zu])]
     fr = ~zr
     if not friction:
         rn = _unit(Rn[fr])
@@ -158,8 +164,7 @@ def _pattern_rows_3d(param, m, zu, zr, friction):
         return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=norm)
     nodes = np.flatnonzero(fr)
     rn, rt = Rn[fr], np.stack([Rt1[fr], Rt2[fr]], axis=1)
-    sc = np.sqrt((rn ** 2).sum(1) + (rt ** 2).sum((1, 2)))
-    sc[sc == 0] = 1.0
+    sc = _cone_scale(Rn, Rt1, Rt2)[fr]
     if eq.shape[0]:
         _, s, vt = np.linalg.svd(eq)
         rank = int((s > EQ_RANK_RTOL * s[0]).sum())
@@ -167,7 +172,14 @@ def _pattern_rows_3d(param, m, zu, zr, friction):
     else:
         Z = np.eye(param.d)
     return ConeRows(eq=eq, lin=lin, rn=rn / sc[:, None], rt=rt / sc[:, None, None], norm=norm,
-                    nodes=nodes, Z=Z)
+                    nodes=nodes, Z=Z, lin_nodes=lin_nodes)
+
+
+def _cone_scale(Rn: np.ndarray, Rt1: np.ndarray, Rt2: np.ndarray) -> np.ndarray:
+    """The common factor of each node's (r_n, r_t1, r_t2) rows in the SOCP."""
+    sc = np.sqrt((Rn ** 2).sum(1) + (Rt1 ** 2).sum(1) + (Rt2 ** 2).sum(1))
+    sc[sc == 0] = 1.0
+    return sc
 
 
 # ----------------------------------------------------------------------- dispatch
@@ -276,6 +288,9 @@ class Decision:
     status: str
     x: np.ndarray | None = None
     positive: bool = False
+    #: INFEASIBLE by a verified Clarabel certificate: that certificate (its rows laid
+    #: out as in _socp_data), for `infeasible_core`
+    farkas: np.ndarray | None = None
 
 
 def _socp_data(rows: ConeRows, mu: float):
@@ -296,8 +311,9 @@ def _socp_data(rows: ConeRows, mu: float):
 
 
 def _clarabel(rows: ConeRows, mu: float, attempt: int = 0, objective: np.ndarray | None = None):
-    """One Clarabel solve. Returns (status name, x or None, certificate ok or None,
-    positive): positive when an objective was given and the dual proves it > 0."""
+    """One Clarabel solve. Returns (status name, x or the Farkas certificate z or None,
+    certificate ok (PrimalInfeasible) or None, positive): positive when an objective
+    was given and the dual proves it > 0."""
     import clarabel
     A, b, cones = _socp_data(rows, mu)
     p = rows.Z.shape[1]
@@ -318,7 +334,8 @@ def _clarabel(rows: ConeRows, mu: float, attempt: int = 0, objective: np.ndarray
                                        np.concatenate([[1.0], np.asarray(sol.z)]), 2, n_lin)
         return name, rows.Z @ np.asarray(sol.x), None, positive
     if name == "PrimalInfeasible":
-        return name, None, _certificate_ok(A, b, np.asarray(sol.z), 1, n_lin), False
+        z = np.asarray(sol.z)
+        return name, z, _certificate_ok(A, b, z, 1, n_lin), False
     return name, None, None, False
 
 
@@ -409,14 +426,14 @@ def decide(rows: Rows | ConeRows, mu: float, counts: dict | None = None,
         name, x, cert, positive = _clarabel(rows, mu, attempt, objective if attempt == 0 else None)
         tag = f"retry{attempt}_" if attempt else ""
         _count(counts, tag + name)
-        if x is not None:
+        if cert is not None:
+            if cert:
+                return Decision(INFEASIBLE, farkas=x)
+            _count(counts, tag + "certificate_failed")
+        elif x is not None:
             if violation(rows, mu, x) <= VERIFY_TOL:
                 return Decision(FEASIBLE, x / (rows.norm @ x), positive)
             _count(counts, tag + "verify_failed")
-        elif cert is True:
-            return Decision(INFEASIBLE)
-        elif cert is False:
-            _count(counts, tag + "certificate_failed")
     for sides in PYRAMID_SIDES:
         status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, _LP_TIGHT)
         _count(counts, "lp_calls")
@@ -430,3 +447,112 @@ def decide(rows: Rows | ConeRows, mu: float, counts: dict | None = None,
             return Decision(INFEASIBLE)
     _count(counts, "undecided")
     return Decision(UNDECIDED)
+
+
+# ----------------------------------------------------------------------- 3D: infeasible cores
+@dataclass(frozen=True)
+class NodeRows:
+    """Every node's rows of the pattern SOCP in x-space, scaled as `pattern_rows`
+    scales them: un (m, d) unit u_n rows (zero rows stay zero); cone (m, 3, d) the
+    (r_n, r_t1, r_t2) rows over one common factor per node (mu not applied);
+    norm (d,) sum r_n."""
+
+    un: np.ndarray
+    cone: np.ndarray
+    norm: np.ndarray
+
+
+def node_rows(param: Parametrization, m: int) -> NodeRows:
+    U, R = param.U, param.R
+    Un, Rn, Rt1, Rt2 = U[:m], R[:m], R[m:2 * m], R[2 * m:3 * m]
+    un = np.zeros_like(Un)
+    keep = _kept(Un)
+    un[keep] = Un[keep] / np.linalg.norm(Un[keep], axis=1, keepdims=True)
+    cone = np.stack([Rn, Rt1, Rt2], axis=1) / _cone_scale(Rn, Rt1, Rt2)[:, None, None]
+    return NodeRows(un=un, cone=cone, norm=Rn.sum(axis=0))
+
+
+def infeasible_core(nr: NodeRows, rows: ConeRows, mu: float, zu: np.ndarray, zr: np.ndarray,
+                    z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The part of the pattern (zu, zr) that a verified Clarabel certificate z of its
+    infeasibility at mu really uses: masks (core_u <= zu, core_r <= zr) such that
+    every pattern fixing at least core_u to contact and core_r to gap is
+    infeasible at mu (and at any smaller mu).
+
+    Node-wise, a certificate is a multiplier lam_i of u_n,i (>= 0 unless i is in
+    contact, where it is free) and zeta_i of (mu r_n, r_t1, r_t2)_i (in the second-
+    order cone unless i is in gap, where it is free) with
+
+        norm + sum_i lam_i un_i + sum_i zeta_i . C_i(mu) = 0       (x-space)
+
+    (then sum r_n = 1 and the constraints give 0 = 1 + (>= 0)). z gives lam and zeta
+    for the free nodes; least squares gives the multipliers of the pattern's
+    equalities. A fixed node whose multiplier already has the sign (lies in the
+    cone) of a free node is left out of the core; so are those whose multiplier is
+    cleaned to that (clipped at 0 / projected onto the cone) within half of
+    CERT_TOL in total. The cleaned certificate is checked like Clarabel's own
+    (residual <= CERT_TOL with sum r_n's multiplier 1); if it fails, the core is
+    the whole pattern (what the solve proved anyway)."""
+    whole = (zu.copy(), zr.copy())
+    m, d = nr.un.shape
+    if not np.isfinite(z).all() or z[0] >= 0:
+        return whole
+    z = z / -z[0]
+    L = rows.lin.shape[0]
+    C = nr.cone * np.array([mu, 1.0, 1.0])[None, :, None]        # (m, 3, d) at mu
+    lam, zeta = np.zeros(m), np.zeros((m, 3))
+    lam[rows.lin_nodes] = z[1:1 + L]
+    zeta[rows.nodes] = z[1 + L:].reshape(-1, 3)
+    # multipliers of the pattern's equalities: least squares on their rows
+    cu, cr = np.flatnonzero(zu), np.flatnonzero(zr)
+    h = nr.norm + nr.un.T @ lam + np.einsum("ik,ikd->d", zeta, C)
+    M = np.vstack([nr.un[cu], C[cr].reshape(-1, d)])
+    if M.shape[0]:
+        nu = np.linalg.lstsq(M.T, -h, rcond=None)[0]
+        lam[cu] = nu[:len(cu)]
+        zeta[cr] = nu[len(cu):].reshape(-1, 3)
+
+    def residual(lam, zeta):
+        return np.abs(nr.norm + nr.un.T @ lam + np.einsum("ik,ikd->d", zeta, C)).max()
+
+    if residual(lam, zeta) > CERT_TOL / 2:
+        return whole
+    # what each fixed node's multiplier lacks to be a free node's (its cleaning cost:
+    # the rows are unit-sized, C's at most max(mu, 1))
+    lam_c = np.maximum(lam, 0.0)
+    zeta_c = _soc_project(zeta)
+    cost = np.zeros(m)
+    cost[cu] = lam[cu] - lam_c[cu]
+    cost[cu] = np.abs(cost[cu])
+    cost[cr] = max(mu, 1.0) * np.linalg.norm(zeta[cr] - zeta_c[cr], axis=1)
+    fixed = np.concatenate([cu, cr])
+    kind = np.concatenate([np.zeros(len(cu), bool), np.ones(len(cr), bool)])
+    order = np.argsort(cost[fixed], kind="stable")
+    spent = np.cumsum(cost[fixed][order])
+    out = spent <= CERT_TOL / 2
+    core_u, core_r = zu.copy(), zr.copy()
+    for j in order[out]:
+        i = fixed[j]
+        if kind[j]:
+            core_r[i] = False
+            zeta[i] = zeta_c[i]
+        else:
+            core_u[i] = False
+            lam[i] = lam_c[i]
+    if residual(lam, zeta) > CERT_TOL:
+        return whole
+    return core_u, core_r
+
+
+def _soc_project(v: np.ndarray) -> np.ndarray:
+    """Rows of v (k, 3) projected onto the second-order cone {||v[1:]|| <= v[0]}."""
+    t, w = v[:, 0], v[:, 1:]
+    nw = np.linalg.norm(w, axis=1)
+    out = v.copy()
+    below = nw <= -t                              # in the polar cone: to 0
+    out[below] = 0.0
+    mid = (nw > np.abs(t))
+    a = (t[mid] + nw[mid]) / 2
+    out[mid, 0] = a
+    out[mid, 1:] = w[mid] * (a / nw[mid])[:, None]
+    return out

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .conic import INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, pattern_rows, problem_dim, violation
+from .conic import (INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, infeasible_core, node_rows, pattern_rows,
+                    problem_dim, violation)
 from .mu_critical import mu_critical
 from .problem import Parametrization
 
@@ -110,6 +111,9 @@ class PatternTree:
         self.steer = self.dim == 3 and friction and not self.dynamic
         U = param.U[:m]
         self._steer = U / np.maximum(np.linalg.norm(U, axis=1, keepdims=True), 1e-300)
+        #: 3D with friction: the infeasible cores learnt so far (see `_prunes`)
+        self._cores = Cores(m) if self.dim == 3 and friction and m <= Cores.MAX_M else None
+        self._node_rows = node_rows(param, m) if self._cores is not None else None
 
     def root(self) -> Subtree:
         return Subtree(0)
@@ -137,11 +141,17 @@ class PatternTree:
             stats.nodes += 1
             doubt = no_contact = False
             if x is None:
+                if self._cores is not None and self._cores.covers(node):
+                    _bump(stats.statuses, "infeasible_by_core")
+                    continue
                 stats.solves += 1
                 zu, zr = node.masks(m)
                 steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
-                dec = decide(pattern_rows(param, m, zu, zr, self.friction), mu, stats.statuses, steer)
+                rows = pattern_rows(param, m, zu, zr, self.friction)
+                dec = decide(rows, mu, stats.statuses, steer)
                 if dec.status == INFEASIBLE:
+                    if dec.farkas is not None and self._cores is not None:
+                        self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
                     continue
                 if dec.status == UNDECIDED:
                     stats.undecided += 1
@@ -205,6 +215,39 @@ class PatternTree:
         if violation(rows, mu, y) > VERIFY_TOL:
             return None
         return y / (rows.norm @ y)
+
+
+class Cores:
+    """Partial patterns proven infeasible by a certificate that uses only their
+    fixings (conic.infeasible_core): a tree node fixing at least one core's nodes
+    the same way is infeasible without a solve. A core is kept only when it is
+    smaller than the node it came from (two nodes of one tree never extend each
+    other unless one is below the other, whose subtree is gone anyway). Bit sets
+    in uint64 words, so m <= MAX_M."""
+
+    MAX_M = 64
+
+    def __init__(self, m: int):
+        self.m = m
+        self._c = np.zeros(64, dtype=np.uint64)
+        self._g = np.zeros(64, dtype=np.uint64)
+        self.n = 0
+
+    def add(self, node: Subtree, core_u: np.ndarray, core_r: np.ndarray) -> None:
+        w = np.uint64(1) << np.arange(self.m, dtype=np.uint64)
+        c, g = int(w[core_u].sum()), int(w[core_r].sum())
+        if (c, g) == (node.contact, node.gap):
+            return
+        if self.n == len(self._c):
+            self._c, self._g = np.resize(self._c, 2 * self.n), np.resize(self._g, 2 * self.n)
+        self._c[self.n], self._g[self.n] = c, g
+        self.n += 1
+
+    def covers(self, node: Subtree) -> bool:
+        if not self.n:
+            return False
+        c, g = np.uint64(node.contact), np.uint64(node.gap)
+        return bool(((self._c[:self.n] & ~c) | (self._g[:self.n] & ~g)).min() == 0)
 
 
 def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = True,
