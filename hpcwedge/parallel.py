@@ -169,7 +169,7 @@ class PatternContext:
         return {"make_tree": self.make_tree, "mus": self.mus, "_trees": {}}
 
 
-STAT_KEYS = ("nodes", "solves", "skipped", "undecided")
+STAT_KEYS = ("nodes", "solves", "skipped", "pruned", "undecided")
 
 
 def explore_task(ctx: PatternContext, payload):

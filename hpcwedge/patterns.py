@@ -20,6 +20,7 @@ from .conic import (INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, infeasible_core, 
                     problem_dim, violation)
 from .mu_critical import mu_critical
 from .problem import Parametrization
+from .symmetry import Symmetry
 
 MEETS_TOL = 1e-12
 #: 3D: a child's condition counts as nearly met by the parent's x below this
@@ -31,11 +32,13 @@ NEAR_TOL = 1e-6
 class BnBStats:
     """solves: feasibility problems solved (3D: SOCPs); lps: linear programs solved
     besides (3D: screens and pyramid fallbacks); skipped: tree nodes decided by the
-    parent's solution; undecided: solves that decided nothing (kept); nodes: tree
+    parent's solution; pruned: tree nodes ruled out by a learnt infeasible core
+    (Cores), without a solve; undecided: solves that decided nothing (kept); nodes: tree
     nodes visited; statuses: how each solve was decided (conic.feasible counts)."""
 
     solves: int = 0
     skipped: int = 0
+    pruned: int = 0
     undecided: int = 0
     nodes: int = 0
     lps: int = 0
@@ -43,7 +46,7 @@ class BnBStats:
     statuses: dict = field(default_factory=dict)
 
     def add(self, other: "BnBStats") -> None:
-        for k in ("solves", "skipped", "undecided", "nodes", "lps"):
+        for k in ("solves", "skipped", "pruned", "undecided", "nodes", "lps"):
             setattr(self, k, getattr(self, k) + getattr(other, k))
         for k, v in other.statuses.items():
             self.statuses[k] = self.statuses.get(k, 0) + v
@@ -95,11 +98,21 @@ class PatternTree:
     3D with friction and `order=None` branches dynamically instead (the default):
     on the free node whose relaxed solution violates complementarity most
     (`_branch_node`; scripts/bench_socp_count.py, results/bench_socp_count.json).
-    A given `order` keeps the static order with steered solves."""
+    A given `order` keeps the static order with steered solves.
+
+    With a `symmetry` group (symmetry.py; the feasible patterns are invariant
+    under it) the tree branches on orbits (orbital branching): at a tree node
+    with stabiliser H (the elements fixing its contact and gap sets) and branching
+    node i, the children are "i in contact" and "the whole H-orbit of i in gap".
+    Every orbit of feasible patterns keeps a representative among the leaves
+    (a pattern below the node with some j of the orbit in contact is mapped by the
+    h in H with h(j) = i into the first child; otherwise it lies in the second);
+    `expand` gives back all of them."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
-                 order: list[int] | None = None):
+                 order: list[int] | None = None, symmetry: Symmetry | None = None):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
+        self.symmetry = symmetry if symmetry is not None and symmetry.order > 1 else None
         self.dim = problem_dim(param, m)
         #: 3D with friction and no order given: the node branched on is chosen from the
         #: relaxed solution (explore); otherwise the static order below
@@ -142,7 +155,7 @@ class PatternTree:
             doubt = no_contact = False
             if x is None:
                 if self._cores is not None and self._cores.covers(node):
-                    _bump(stats.statuses, "infeasible_by_core")
+                    stats.pruned += 1
                     continue
                 stats.solves += 1
                 zu, zr = node.masks(m)
@@ -168,14 +181,18 @@ class PatternTree:
                     break
                 continue
             i = self._branch_node(node, x)
+            orbit = [i] if self.symmetry is None else \
+                self.symmetry.stabilizer(node.contact, node.gap).orbit(i).tolist()
             kids = []
             for contact in (True, False):
                 if contact and no_contact:
                     _bump(stats.statuses, "contact_child_infeasible_by_parent")
                     continue
-                kid = Subtree(node.depth + 1, node.contact | (1 << i) if contact else node.contact,
-                              node.gap if contact else node.gap | (1 << i))
-                kids.append((kid, None if x is None else self._witness(kid, x, i, contact, mu)))
+                fixed = [i] if contact else orbit
+                bits = sum(1 << j for j in fixed)
+                kid = Subtree(node.depth + len(fixed), node.contact | bits if contact else node.contact,
+                              node.gap if contact else node.gap | bits)
+                kids.append((kid, None if x is None else self._witness(kid, x, fixed, contact, mu)))
             stack.extend(reversed(kids))
         stats.lps = stats.statuses.get("lp_calls", 0)
         return Explored(found, [node for node, _ in reversed(stack)], stats, undecided)
@@ -200,12 +217,21 @@ class PatternTree:
         v = np.minimum(np.maximum(u, 0) / max(np.abs(u).max(), 1e-300), r / max(r.max(), 1e-300))
         return max(free, key=lambda i: v[i])          # first maximum in `order`
 
-    def _witness(self, kid: Subtree, x: np.ndarray, i: int, contact: bool, mu: float) -> np.ndarray | None:
-        """x, or a point derived from it, that proves `kid` feasible; None if it does not."""
+    def expand(self, found: list[Subtree]) -> list[Subtree]:
+        """All patterns of the orbits of `found` (itself without a symmetry), sorted
+        by (contact, gap) bits."""
+        if self.symmetry is None:
+            return list(found)
+        return [Subtree(self.m, c, g) for c, g in self.symmetry.expand([(s.contact, s.gap) for s in found])]
+
+    def _witness(self, kid: Subtree, x: np.ndarray, nodes: list[int], contact: bool,
+                 mu: float) -> np.ndarray | None:
+        """x, or a point derived from it, that proves `kid` (whose `nodes` are the ones
+        newly fixed) feasible; None if it does not."""
         param, m = self.param, self.m
         if self.dim == 2:
-            return x if _meets(param, m, x, i, contact) else None
-        if not _meets(param, m, x, i, contact, NEAR_TOL, dim=3):
+            return x if all(_meets(param, m, x, i, contact) for i in nodes) else None
+        if not all(_meets(param, m, x, i, contact, NEAR_TOL, dim=3) for i in nodes):
             return None
         zu, zr = kid.masks(m)
         rows = pattern_rows(param, m, zu, zr, self.friction)
@@ -252,13 +278,16 @@ class Cores:
 
 def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = True,
                   first_only: bool = False, stats: BnBStats | None = None,
-                  order: list[int] | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Feasible full patterns (zero_u, zero_r) at mu, depth first, in contact-
-    before-gap order at each level (a canonical order), serially."""
-    out = PatternTree(param, m, mu, friction, order).explore(Subtree(0), first_only=first_only)
+                  order: list[int] | None = None,
+                  symmetry: Symmetry | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Feasible full patterns (zero_u, zero_r) at mu, serially: depth first, in
+    contact-before-gap order at each level; with a symmetry, every orbit's
+    patterns sorted by (contact, gap) bits (first_only: one representative)."""
+    tree = PatternTree(param, m, mu, friction, order, symmetry)
+    out = tree.explore(Subtree(0), first_only=first_only)
     if stats is not None:
         stats.add(out.stats)
-    return [node.masks(m) for node in out.found]
+    return [node.masks(m) for node in (out.found if first_only else tree.expand(out.found))]
 
 
 def _absorb(stats: BnBStats, r) -> None:

@@ -28,6 +28,7 @@ from .patterns import BnBStats, PatternTree, global_mu_critical
 from .problem import ContactProblem, parametrize, friction_rows_2d, ray_vectors
 from .progress import Progress
 from .scene import Scene
+from .symmetry import node_symmetries
 
 
 @dataclass
@@ -97,6 +98,11 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     result = Result(scene=scene, m=m, runs=[Run(mu=mu) for mu in scene.mu], model=model,
                     problem=problem, stages=stages, timings=timings)
     stats = {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
+    sym = None
+    if scene.symmetry and (plan.patterns or plan.mu_c_cones or plan.mu_c_global):
+        sym = node_symmetries(problem.K, scene.dim)
+        stats["symmetry"] = {"order": sym.order}
+        sym = sym if sym.order > 1 else None
 
     if plan.rays:
         t = time.perf_counter()
@@ -115,14 +121,18 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     if plan.patterns:
         t = time.perf_counter()
         stages.append("enumerate")
-        pats = run_patterns(partial(PatternTree, strip_exact(param), m), scene.mu, engine=engine,
-                            budget=scene.task_budget)
+        make_tree = partial(PatternTree, strip_exact(param), m, symmetry=sym)
+        pats = run_patterns(make_tree, scene.mu, engine=engine, budget=scene.task_budget)
+        tree = make_tree(scene.mu[0])
         for run, found, doubt in zip(result.runs, pats.found, pats.undecided):
+            found, doubt = tree.expand(found), set(tree.expand(doubt))
             run.patterns = [{"contact": np.flatnonzero(s.masks(m)[0]).tolist(), "mu_c": None,
                              "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)]
+        if sym is not None:
+            stats["symmetry"]["representatives"] = [len(f) for f in pats.found]
         c = pats.counters
         stats["patterns_undecided"] = sum(len(u) for u in pats.undecided)
-        stats["bnb"] = {k: c.get(k, 0) for k in ("nodes", "solves", "skipped", "undecided")}
+        stats["bnb"] = {k: c.get(k, 0) for k in ("nodes", "solves", "skipped", "pruned", "undecided")}
         stats["bnb"]["partitions"] = 2 ** m * len(scene.mu)       # what brute force would solve
         if scene.dim == 3:
             stats["socp_statuses"] = {k[7:]: v for k, v in c.items() if k.startswith("status_")}
@@ -138,12 +148,16 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         def mask(nodes):
             return np.isin(np.arange(m), nodes)
 
+        def orbit_key(zu, zr):    # the same for every pattern of an orbit: one mu^c task each
+            bits = (sum(1 << i for i in zu), sum(1 << i for i in zr))
+            return bits if sym is None else sym.canonical(*bits)
+
         def keyed(run):       # (key, zero_u, zero_r) of the run's cones and patterns
             for c in run.cones or []:
-                yield (tuple(c["zero_u"]), tuple(c["zero_r"])), mask(c["zero_u"]), mask(c["zero_r"]), c
+                yield orbit_key(c["zero_u"], c["zero_r"]), mask(c["zero_u"]), mask(c["zero_r"]), c
             for p in run.patterns or []:
                 gap = [i for i in range(m) if i not in p["contact"]]
-                yield (tuple(p["contact"]), tuple(gap)), mask(p["contact"]), mask(gap), p
+                yield orbit_key(p["contact"], gap), mask(p["contact"]), mask(gap), p
 
         listed = [r for r in result.runs if r.cones or r.patterns]
         wanted = result.runs if plan.mu_c_cones else listed[:1]

@@ -21,7 +21,7 @@ KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
-RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64}
+RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True}
 
 
 class SceneError(ValueError):
@@ -58,6 +58,7 @@ class Scene:
     text: str = field(repr=False, default="")
     base_dir: str = "."
     task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
+    symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
 
     @property
     def hash(self) -> str:
@@ -146,6 +147,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     v = run["task_budget"]
     if isinstance(v, bool) or not isinstance(v, int) or v < 1:
         raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
+    if not isinstance(run["symmetry"], bool):
+        raise SceneError(f"run.symmetry: true or false, got {run['symmetry']!r}")
     contact = data.get("contact", {})
     if not isinstance(contact, dict):
         raise SceneError("contact: must be a table")
@@ -157,7 +160,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  mu_c=compute["mu_c"], mu_c_method=compute["mu_c_method"],
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
-                 text=text, base_dir=base_dir, task_budget=run["task_budget"])
+                 text=text, base_dir=base_dir, task_budget=run["task_budget"],
+                 symmetry=run["symmetry"])
 
 
 def _unknown(table, allowed, prefix):

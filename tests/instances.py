@@ -129,3 +129,37 @@ def ur_sandwich(prob, contact: np.ndarray, mu: float, sides: int = 64):
     if not ur_pyramid_feasible(prob, contact, mu, sides, inner=False):
         return "infeasible"
     return None
+
+
+def symmetric_problem_3d(rng: np.random.Generator, m: int, free: bool) -> ContactProblem:
+    """A random 3D problem with a planted cyclic node symmetry: contact points on a
+    ring (node k = node 0 turned by 2 pi k / m about z, its frame turned with it)
+    and K averaged over the m shifts of the node blocks, so that node i -> i + 1
+    (mod m) with unchanged local frames leaves K invariant. Supported (K SPD) or
+    free (null space = the ring's rigid modes, which the shifts map onto themselves)."""
+    n = 3 * m
+    p0 = np.array([rng.uniform(0.5, 1.5), 0.0, rng.uniform(-0.5, 0.5)])
+    f0 = frames_3d(rng, 1)[0]
+    rot = [np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+           for a in 2 * np.pi * np.arange(m) / m]
+    pts = np.array([R @ p0 for R in rot])
+    frames = np.array([f0 @ R.T for R in rot])
+    if free:
+        M = rigid_modes_local_3d(pts, frames)
+        U, s, _ = np.linalg.svd(M, full_matrices=False)
+        N = U[:, s > 1e-10 * s[0]]
+        B = sla.null_space(N.T)
+        G = rng.standard_normal((B.shape[1], B.shape[1]))
+        K0 = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
+    else:
+        N = np.zeros((n, 0))
+        G = rng.standard_normal((n, n))
+        K0 = G @ G.T + 0.2 * np.eye(n)
+    K = np.zeros((n, n))
+    for k in range(m):
+        idx = (np.arange(3)[:, None] * m + (np.arange(m) + k) % m).ravel()   # dof of node i -> node i + k
+        P = np.zeros((n, n))
+        P[idx, np.arange(n)] = 1.0
+        K += P @ K0 @ P.T
+    K /= m
+    return ContactProblem(3, 0.5 * (K + K.T), N)

@@ -97,10 +97,85 @@ def test_3d_skip_rule_and_steering_save_solves():
     assert len(out.found) == 131
     s = out.stats
     assert s.skipped > 0 and s.statuses.get("contact_child_infeasible_by_parent", 0) > 0
-    assert s.solves < 1024 and s.solves + s.skipped == s.nodes
+    assert s.solves < 1024 and s.solves + s.skipped + s.pruned == s.nodes
     dyn = PatternTree(p, 10, 1.0)
     assert dyn.dynamic
     out2 = dyn.explore(dyn.root())
     key = lambda t: (t.contact, t.gap)
     assert sorted(out2.found, key=key) == sorted(out.found, key=key)
     assert out2.stats.solves < s.solves
+
+
+# ---------------------------------------------------------------- symmetry and learnt cores
+
+
+def _brute_3d(p, m, mu):
+    """Feasible full patterns by one SOCP per partition (contact bits)."""
+    from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
+    out = set()
+    for bits in range(1 << m):
+        zu = Subtree(m, contact=bits).masks(m)[0]
+        if feasible(pattern_rows(p, m, zu, ~zu), mu)[0] == FEASIBLE:
+            out.add(bits)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_orbital_branching_finds_every_orbit(seed):
+    """Planted cyclic symmetry (free and supported, m = 3..6, random mu): the tree
+    with the symmetry, expanded over the group, finds exactly the brute force's
+    patterns; it visits fewer leaves than there are patterns whenever some orbit
+    has more than one pattern."""
+    from hpcwedge.symmetry import node_symmetries
+    from instances import symmetric_problem_3d
+    rng = np.random.default_rng(seed)
+    m = 3 + seed % 4
+    prob = symmetric_problem_3d(rng, m, free=bool(seed % 2))
+    mu = float(np.exp(rng.uniform(np.log(0.3), np.log(3.0))))
+    p = parametrize(prob)
+    G = node_symmetries(prob.K, 3)
+    assert G.order >= m
+    tree = PatternTree(p, m, mu, symmetry=G)
+    out = tree.explore(tree.root())
+    got = tree.expand(out.found)
+    assert {s.contact for s in got} == _brute_3d(p, m, mu)
+    assert all(s.depth == m and s.contact | s.gap == (1 << m) - 1 and not s.contact & s.gap for s in got)
+    if any(len(G.expand([(s.contact, s.gap)])) > 1 for s in got):
+        assert len(out.found) < len(got)
+
+
+def test_symmetry_saves_solves_on_plug3d_and_changes_no_pattern():
+    from hpcwedge.build import contact_problem
+    from hpcwedge.scene import parse_scene
+    from hpcwedge.symmetry import node_symmetries
+    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d", "ring": 5}, "friction": {"mu": 1.0}})
+    prob = contact_problem(sc)
+    p, G = parametrize(prob), node_symmetries(prob.K, 3)
+    plain, sym = PatternTree(p, 10, 1.0), PatternTree(p, 10, 1.0, symmetry=G)
+    a, b = plain.explore(plain.root()), sym.explore(sym.root())
+    key = lambda t: (t.contact, t.gap)
+    assert sorted(a.found, key=key) == sym.expand(b.found) and len(a.found) == 131
+    assert 2 * b.stats.solves < a.stats.solves
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_learnt_cores_rule_out_only_infeasible_patterns(seed):
+    """Every full pattern that extends a core learnt from a Farkas certificate is
+    infeasible by brute force; the cores are smaller than the nodes they came from."""
+    from instances import random_problem_3d
+    rng = np.random.default_rng(100 + seed)
+    m = 5 + seed % 2
+    prob = random_problem_3d(rng, m, free=bool(seed % 2))
+    mu = float(np.exp(rng.uniform(np.log(0.3), np.log(3.0))))
+    p = parametrize(prob)
+    tree = PatternTree(p, m, mu)
+    out = tree.explore(tree.root())
+    feasible = _brute_3d(p, m, mu)
+    assert {s.contact for s in out.found} == feasible
+    if seed == 2:                                     # this one learns 4 cores, which rule out 4 nodes
+        assert out.stats.pruned > 0
+    cores = tree._cores
+    for c, g in zip(cores._c[:cores.n].tolist(), cores._g[:cores.n].tolist()):
+        assert c & g == 0
+        for bits in feasible:                         # a feasible pattern extends no core
+            assert not (c & ~bits == 0 and g & bits == 0), (bin(c), bin(g), bin(bits))

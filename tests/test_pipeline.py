@@ -9,9 +9,9 @@ from hpcwedge.pipeline import run_scene
 from hpcwedge.scene import parse_scene
 
 
-def scene(model, mu=(0.65,), dim=2, **compute):
+def scene(model, mu=(0.65,), dim=2, run=None, **compute):
     return parse_scene({"name": "t", "dim": dim, "model": model, "friction": {"mu": list(mu)},
-                        "compute": compute})
+                        "compute": compute, "run": run or {}})
 
 
 @pytest.mark.parametrize("rows", [2, 3, 4, 5, 6, 7, 8])
@@ -106,6 +106,24 @@ def test_plug3d_pattern_counts_monotone_in_mu(plug3d_run):
     bnb = res.stats["bnb"]
     assert bnb["partitions"] == 5 * 1024 and bnb["solves"] < 5 * 1024
     assert res.runs[0].rays is None and res.runs[0].cones is None
+
+
+def test_symmetry_changes_no_answer(plug3d_run):
+    """plug3d with run.symmetry = false: the same patterns and the same mu^c (to
+    1e-9: there each pattern's own computation; with the symmetry the value of its
+    orbit's representative), in more SOCPs and more mu^c computations."""
+    off = run_scene(scene({"kind": "plug3d"}, mu=(0.65, 1.0), dim=3, run={"symmetry": False}))
+    assert plug3d_run.stats["symmetry"]["order"] == 10 and "symmetry" not in off.stats
+    on = {r.mu: r for r in plug3d_run.runs}
+    for run in off.runs:
+        got = {tuple(p["contact"]): p["mu_c"] for p in on[run.mu].patterns}
+        want = {tuple(p["contact"]): p["mu_c"] for p in run.patterns}
+        assert list(got) == list(want)
+        assert all(abs(got[k] - want[k]) <= 1e-9 * want[k] for k in got)
+    assert abs(off.mu_c - plug3d_run.mu_c) <= 1e-12
+    per_mu = off.stats["bnb"]["solves"] / 2
+    assert plug3d_run.stats["bnb"]["solves"] / 5 < per_mu
+    assert plug3d_run.stats["mu_c_polished"] < off.stats["mu_c_polished"]
 
 
 def test_truss_3d_without_tangents_equals_plug3d(plug3d_run):
