@@ -13,6 +13,7 @@ the subtree (never pruned on doubt); an undecided full pattern is reported in
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -278,16 +279,18 @@ class Cores:
 
 def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = True,
                   first_only: bool = False, stats: BnBStats | None = None,
-                  order: list[int] | None = None,
-                  symmetry: Symmetry | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+                  order: list[int] | None = None, symmetry: Symmetry | None = None,
+                  representatives: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
     """Feasible full patterns (zero_u, zero_r) at mu, serially: depth first, in
     contact-before-gap order at each level; with a symmetry, every orbit's
-    patterns sorted by (contact, gap) bits (first_only: one representative)."""
+    patterns sorted by (contact, gap) bits — or, with representatives=True (and
+    first_only), only the leaves the tree found: one or more per orbit."""
     tree = PatternTree(param, m, mu, friction, order, symmetry)
     out = tree.explore(Subtree(0), first_only=first_only)
     if stats is not None:
         stats.add(out.stats)
-    return [node.masks(m) for node in (out.found if first_only else tree.expand(out.found))]
+    found = out.found if first_only or representatives else tree.expand(out.found)
+    return [node.masks(m) for node in found]
 
 
 def _absorb(stats: BnBStats, r) -> None:
@@ -313,20 +316,22 @@ def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool,
 
 
 def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: str = "accurate",
-                       tol: float = 1e-6, stats: BnBStats | None = None) -> tuple[float | None, str]:
+                       tol: float = 1e-6, stats: BnBStats | None = None,
+                       symmetry: Symmetry | None = None) -> tuple[float | None, str]:
     """Least mu with any solution, by branch and bound over patterns with an incumbent
-    (2D and 3D alike).
+    (2D and 3D alike; with a symmetry, over orbit representatives).
 
     Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
     r_t free has no solution) or "none_up_to_mu_max".
     """
     stats = stats if stats is not None else BnBStats()
-    if not sign_patterns(param, m, np.inf, friction=False, first_only=True, stats=stats):
+    search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry)
+    if not search(np.inf, friction=False, first_only=True):
         return None, "none_at_any_mu"
     best = None
     bound = mu_max
     while True:
-        leaf = sign_patterns(param, m, bound, first_only=True, stats=stats)
+        leaf = search(bound, first_only=True)
         if not leaf:
             break
         zu, zr = leaf[0]
@@ -339,8 +344,9 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     if best is None:
         return None, "none_up_to_mu_max"
     # patterns whose mu^c lies within the last step below `best`: settle them all
+    # (one per orbit: mu^c is invariant under the symmetry)
     top = best * (1 + 1e-9)
-    for zu, zr in sign_patterns(param, m, top, stats=stats):
+    for zu, zr in search(top, representatives=True):
         r = mu_critical(param, m, zu, zr, mu_hi=top, method=method, tol=tol)
         _absorb(stats, r)
         if r.mu_c is not None:

@@ -185,7 +185,8 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
             if result.mu_c is None:
                 bnb = BnBStats()
                 result.mu_c, result.mu_c_status = global_mu_critical(
-                    param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb)
+                    param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb,
+                    symmetry=sym)
                 stats["bnb"] = {"solves": bnb.solves, "skipped": bnb.skipped,
                                 "undecided": bnb.undecided, "nodes": bnb.nodes}
         timings["mu_c"] = time.perf_counter() - t

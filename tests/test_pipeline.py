@@ -197,3 +197,14 @@ def test_3d_stages_and_global_mu_c():
     assert r.mu_c is None and r.mu_c_status == "none_at_any_mu" and r.runs[0].n_patterns == 0
     r = run_scene(scene(K3, mu=(5.0,), dim=3, mu_c_method="bisection", mu_c_tol=1e-4))
     assert want <= r.mu_c <= want * (1 + 2e-4)
+
+
+@pytest.mark.parametrize("symmetry", [True, False])
+def test_plug3d_global_mu_c_below_every_listed_mu(symmetry):
+    """plug3d 2 x 4 at mu = 0.1 < tan 10°: no pattern, the global branch and bound
+    (over orbit representatives with the symmetry) gives tan 10° to 1e-9."""
+    r = run_scene(scene({"kind": "plug3d", "ring": 4}, mu=(0.1,), dim=3, run={"symmetry": symmetry}))
+    want = math.tan(math.radians(10.0))
+    assert r.runs[0].n_patterns == 0 and r.mu_c_status == "found"
+    assert abs(r.mu_c - want) <= 1e-9 * want
+    assert r.stats.get("symmetry", {}).get("order", 1) == (8 if symmetry else 1)
