@@ -199,8 +199,23 @@ def _count(counts, key, n=1):
         counts[key] = counts.get(key, 0) + n
 
 
+#: solver tolerances: "default" or "tight" (HiGHS feasibility 1e-10; Clarabel feasibility and gap
+#: 1e-10 on every attempt) — set by `solver_tolerances`, for benchmarks of run time against error
+_TOLERANCES = {"mode": "default"}
+
+
+def solver_tolerances(mode: str) -> None:
+    """Every later LP and SOCP at the solvers' "default" tolerances or "tight" ones."""
+    if mode not in ("default", "tight"):
+        raise ValueError(f"solver tolerances: 'default' or 'tight', got {mode!r}")
+    _TOLERANCES["mode"] = mode
+    _SETTINGS.clear()
+
+
 def lp_feasible(rows: Rows, mu: float, options: dict | None = None) -> tuple[str, np.ndarray | None]:
     """Feasibility of {rows(mu) x (>=,==) 0, sum r_n = 1}: (status, x or None)."""
+    if options is None and _TOLERANCES["mode"] == "tight":
+        options = _LP_TIGHT
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
     live = scale > 0
@@ -259,7 +274,7 @@ def _settings(attempt: int, tight: bool = False):
     if attempt == 2:
         s.static_regularization_constant = 1e-7
         s.max_iter = 400
-    if tight:
+    if tight or _TOLERANCES["mode"] == "tight":
         # an optimum (the branch and bound's steered solves) lies on the boundary,
         # where the default 1e-8 tolerances left cone rows 1e-8..4e-8 short of
         # VERIFY_TOL relative to the reactions (66 of 945 solves on plug3d, mu = 1)

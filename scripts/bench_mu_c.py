@@ -1,12 +1,19 @@
 #!/usr/bin/env python3
 """Run time against error for mu^c (issue 4): scenes with analytic mu^c.
 
-For each scene the critical pattern (the cone of least mu^c) is found once;
-then mu^c of that pattern is recomputed by every method, repeated, and timed:
+For each scene the critical cone (2D) or pattern (3D) — the one of least mu^c —
+is found once; then its mu^c is recomputed by every method, repeated, and timed:
 
-- "bisection tol=T": plain bisection on LP feasibility to relative width T
-  (T = 1e-2 ... 1e-12), the upper end returned;
-- "accurate": bracket to 1e-7 then the verified pencil polish (the default).
+- "bisection tol=T": plain bisection on LP (2D, HiGHS) or SOCP (3D, Clarabel)
+  feasibility to relative width T (T = 1e-2 ... 1e-12), the upper end returned;
+  "tight bisection tol=T": the same with the solvers' feasibility (and Clarabel's
+  gap) tolerances tightened from their defaults to 1e-10 (conic.solver_tolerances);
+- "accurate": 2D: bracket to 1e-7 then the verified pencil polish; 3D: scaled
+  Dinkelbach iterations then the verified KKT Newton step (the default).
+
+Analytic values: plug2d and plug3d tan(taper); the V-groove bar
+tan θ + eps / (k sin 2θ); a single 3D node, 1 / ||K_tt^-1 K_tn|| (the least
+||K_tt v|| / (K_nt . v): u = (0, v), r = K u).
 
 Error = |mu^c - analytic| / analytic. Writes results/bench_mu_c.{csv,json,png}
 and prints a summary: the worst error of each method and the time of
@@ -26,6 +33,7 @@ import time
 
 import numpy as np
 
+from hpcwedge.conic import solver_tolerances
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
@@ -35,30 +43,46 @@ OUT = os.path.join(os.path.dirname(__file__), "..", "results")
 TOLS = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12]
 
 
-def scenes(quick: bool) -> list[tuple[str, dict, float, float]]:
-    """(label, model table, listed mu, analytic mu^c)."""
+def scenes(quick: bool) -> list[tuple[str, int, dict, float, float]]:
+    """(label, dim, model table, listed mu, analytic mu^c)."""
     out = []
     for rows in ((2, 4) if quick else (2, 4, 6, 8)):
         for taper in (3.0, 10.0, 25.0):
-            out.append((f"plug2d r{rows} taper {taper:g}",
+            out.append((f"plug2d r{rows} taper {taper:g}", 2,
                         {"kind": "plug2d", "rows": rows, "taper_deg": taper},
                         1.5 * math.tan(math.radians(taper)) + 0.05, math.tan(math.radians(taper))))
     for theta, k, eps in ((20.0, 1.0, 0.0), (20.0, 1.0, 0.1), (35.0, 2.0, 0.3), (10.0, 0.5, 0.01)):
         th = math.radians(theta)
         want = math.tan(th) + eps / (k * math.sin(2 * th))
         model = {"kind": "vgroove_bar", "theta_deg": theta, "EA": 2 * k, "eps": eps}  # bar length 2
-        out.append((f"vgroove theta {theta:g} k {k:g} eps {eps:g}", model, 1.5 * want, want))
+        out.append((f"vgroove theta {theta:g} k {k:g} eps {eps:g}", 2, model, 1.5 * want, want))
+    for ring in ((4,) if quick else (4, 5)):
+        for taper in (5.0, 10.0, 20.0):
+            want = math.tan(math.radians(taper))
+            out.append((f"plug3d 2x{ring} taper {taper:g}", 3,
+                        {"kind": "plug3d", "ring": ring, "taper_deg": taper}, 1.5 * want + 0.05, want))
+    rng = np.random.default_rng(3)
+    for k in range(2 if quick else 4):
+        G = rng.standard_normal((3, 3))
+        K = G @ G.T + 0.5 * np.eye(3)
+        want = 1.0 / np.linalg.norm(np.linalg.solve(K[1:, 1:], K[1:, 0]))
+        out.append((f"node3d random K #{k}", 3, {"kind": "stiffness", "K": K.tolist()}, 1.5 * want, want))
     return out
 
 
-def critical_pattern(model: dict, mu: float):
-    scene = parse_scene({"name": "bench", "dim": 2, "model": model, "friction": {"mu": [mu]},
+def critical_pattern(dim: int, model: dict, mu: float):
+    """(parametrisation, m, zero_u, zero_r) of the cone / pattern of least mu^c."""
+    scene = parse_scene({"name": "bench", "dim": dim, "model": model, "friction": {"mu": [mu]},
                          "compute": {"enumerate": True, "mu_c": "cones"}})
     res = run_scene(scene)
-    cone = min(res.runs[0].cones, key=lambda c: c["mu_c"])
     m = res.m
-    zu = np.isin(np.arange(m), cone["zero_u"])
-    zr = np.isin(np.arange(m), cone["zero_r"])
+    if dim == 2:
+        cone = min(res.runs[0].cones, key=lambda c: c["mu_c"])
+        zu, zr = np.isin(np.arange(m), cone["zero_u"]), np.isin(np.arange(m), cone["zero_r"])
+    else:
+        pat = min(res.runs[0].patterns, key=lambda p: p["mu_c"])
+        zu = np.isin(np.arange(m), pat["contact"])
+        zr = ~zu
     return parametrize(res.problem), m, zu, zr
 
 
@@ -76,14 +100,18 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
     repeat = 3 if args.quick else 7
-    methods = [(f"bisection tol={t:.0e}", "bisection", t) for t in TOLS] + [("accurate", "accurate", 1e-6)]
+    methods = [(f"bisection tol={t:.0e}", "bisection", t, "default") for t in TOLS] + \
+        [(f"tight bisection tol={t:.0e}", "bisection", t, "tight") for t in TOLS[::2]] + \
+        [("accurate", "accurate", 1e-6, "default")]
     rows = []
-    for label, model, mu, want in scenes(args.quick):
-        param, m, zu, zr = critical_pattern(model, mu)
-        for name, method, tol in methods:
+    for label, dim, model, mu, want in scenes(args.quick):
+        param, m, zu, zr = critical_pattern(dim, model, mu)
+        for name, method, tol, tolerances in methods:
+            solver_tolerances(tolerances)
             sec, r = timed(lambda: mu_critical(param, m, zu, zr, mu_hi=mu, method=method, tol=tol), repeat)
+            solver_tolerances("default")
             err = abs(r.mu_c - want) / want
-            rows.append({"scene": label, "m": m, "method": name, "tol": tol, "seconds": sec,
+            rows.append({"scene": label, "dim": dim, "m": m, "method": name, "tol": tol, "seconds": sec,
                          "lps": r.lps, "mu_c": r.mu_c, "analytic": want, "rel_error": err,
                          "polished": r.polished})
     os.makedirs(OUT, exist_ok=True)
@@ -91,16 +119,17 @@ def main() -> None:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    summary = summarise(rows)
+    summary = {f"{d}d": summarise([r for r in rows if r["dim"] == d]) for d in (2, 3)}
     with open(os.path.join(OUT, "bench_mu_c.json"), "w") as f:
         json.dump({"summary": summary, "rows": rows}, f, indent=1)
     plot(summary)
-    print(f"{'method':<22}{'worst rel. error':>18}{'mean time [ms]':>16}{'mean LPs':>10}")
-    for name, s in summary["methods"].items():
-        print(f"{name:<22}{s['worst_error']:>18.2e}{1e3 * s['mean_seconds']:>16.2f}{s['mean_lps']:>10.1f}")
-    print(f"accurate / bisection(1e-6) time: {summary['accurate_over_bisection_1e-6']:.2f}x "
-          f"(worst over scenes {summary['worst_ratio']:.2f}x); accurate worst error "
-          f"{summary['methods']['accurate']['worst_error']:.1e}")
+    for key, sm in summary.items():
+        print(f"{key}: {'method':<22}{'worst rel. error':>18}{'mean time [ms]':>16}{'mean solves':>12}")
+        for name, s in sm["methods"].items():
+            print(f"    {name:<22}{s['worst_error']:>18.2e}{1e3 * s['mean_seconds']:>16.2f}{s['mean_lps']:>12.1f}")
+        print(f"    accurate / bisection(1e-6) time: {sm['accurate_over_bisection_1e-6']:.2f}x "
+              f"(worst over scenes {sm['worst_ratio']:.2f}x); accurate worst error "
+              f"{sm['methods']['accurate']['worst_error']:.1e}")
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -122,18 +151,23 @@ def plot(summary: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6, 4.5))
-    bis = [(v["mean_seconds"], max(v["worst_error"], 1e-17)) for k, v in summary["methods"].items()
-           if k.startswith("bisection")]
-    ax.loglog([1e3 * t for t, _ in bis], [e for _, e in bis], "o-", label="plain bisection (1e-2 … 1e-12)")
-    acc = summary["methods"]["accurate"]
-    ax.loglog([1e3 * acc["mean_seconds"]], [max(acc["worst_error"], 1e-17)], "r*", ms=14,
-              label="bracket 1e-7 + polish")
+    fig, ax = plt.subplots(figsize=(6.5, 4.8))
+    for (key, sm), color in zip(summary.items(), ("C0", "C1")):
+        solver = "LP" if key == "2d" else "SOCP"
+        for prefix, style, what in (("bisection", "o-", "default"), ("tight bisection", "s--", "tight")):
+            bis = [(v["mean_seconds"], max(v["worst_error"], 1e-17)) for k, v in sm["methods"].items()
+                   if k.startswith(prefix + " tol")]
+            ax.loglog([1e3 * t for t, _ in bis], [e for _, e in bis], style, color=color, mfc="none",
+                      label=f"{key.upper()}: {solver} bisection 1e-2 … 1e-12, {what} solver tol.")
+        acc = sm["methods"]["accurate"]
+        ax.loglog([1e3 * acc["mean_seconds"]], [max(acc["worst_error"], 1e-17)], "*", color=color, ms=15,
+                  mec="k", label=f"{key.upper()}: " + ("bracket + pencil polish" if key == "2d"
+                                                       else "Dinkelbach + KKT Newton"))
     ax.axhline(1e-9, color="grey", ls=":", lw=1)
     ax.set_xlabel("mean time per mu^c [ms]")
     ax.set_ylabel("worst relative error vs analytic")
-    ax.set_title("mu^c: run time against error (2D analytic scenes)")
-    ax.legend()
+    ax.set_title("mu^c: run time against error (analytic scenes)")
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(os.path.join(OUT, "bench_mu_c.png"), dpi=120)
 
