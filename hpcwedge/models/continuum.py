@@ -37,7 +37,8 @@ def _connectivity(conn, cell: str, nen: int, n_nodes: int, key: str) -> np.ndarr
 
 
 def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1.0, nu=0.3,
-                        thickness=1.0, key: str = "model.cells") -> sp.csr_matrix:
+                        thickness=1.0, key: str = "model.cells",
+                        material_key: str = "material") -> sp.csr_matrix:
     """Stiffness (n_nodes*dim, n_nodes*dim) CSR, exactly symmetric, node-major DOFs.
 
     coords: (n_nodes, dim), dim 2 (plane stress) or 3; cells: {cell type: (ne, nen) node ids}
@@ -47,7 +48,7 @@ def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1
     Every block is assembled on its own (chunked, so 10^6 elements stay within memory) and
     the blocks summed. ValueError("<key>: ...") on an unsupported cell type, a bad node id or
     a non-positive Jacobian (naming the cell type and its element index within the block);
-    material errors name material.E / material.nu / material.thickness.
+    material errors name <material_key>.E / .nu / .thickness.
     """
     X = as_float_array(coords, "model.nodes", ndim=2)
     n, dim = X.shape
@@ -59,15 +60,16 @@ def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1
                              f"(supported: {', '.join(CELL_TYPES[dim])})")
     conns = {c: _connectivity(q, c, REFERENCE[c].nen, n, key) for c, q in cells.items()}
     total = sum(len(q) for q in conns.values())
-    Ev = _per_element(E, total, "material.E")
-    nuv = _per_element(nu, total, "material.nu")
-    tv = _per_element(thickness, total, "material.thickness")
+    mk = material_key
+    Ev = _per_element(E, total, f"{mk}.E")
+    nuv = _per_element(nu, total, f"{mk}.nu")
+    tv = _per_element(thickness, total, f"{mk}.thickness")
     if np.any(Ev <= 0):
-        raise ValueError("material.E: must be > 0")
+        raise ValueError(f"{mk}.E: must be > 0")
     if np.any((nuv <= -1) | (nuv >= 0.5)):
-        raise ValueError("material.nu: must lie in (-1, 0.5)")
+        raise ValueError(f"{mk}.nu: must lie in (-1, 0.5)")
     if np.any(tv <= 0):
-        raise ValueError("material.thickness: must be > 0")
+        raise ValueError(f"{mk}.thickness: must be > 0")
     K = sp.csr_matrix((n * dim, n * dim))
     offset = 0
     for cell, Q in conns.items():
