@@ -193,6 +193,17 @@ def test_hexahedron_frustum_volume():
     assert math.isclose(0.5 * u @ K @ u, 0.5 * V * 9 * bulk, rel_tol=1e-13)
 
 
+def test_reentrant_element_rejected():
+    """det J > 0 at every Gauss point but < 0 at a node (a dart-shaped quad, and the
+    hexahedron extruded from it): rejected, naming the element."""
+    X = np.array([[0, 0], [1, 0], [0.4, 0.4], [0, 1], [1, 1]], float)
+    with pytest.raises(ValueError, match=r"model.cells: quad element 1 has a non-positive Jacobian"):
+        continuum_stiffness(X, {"quad": [[0, 1, 4, 3], [0, 1, 2, 3]]})
+    X3 = np.r_[np.c_[X[:4], np.zeros(4)], np.c_[X[:4], np.ones(4)]]
+    with pytest.raises(ValueError, match=r"model.cells: hexahedron element 0 has a non-positive Jacobian"):
+        continuum_stiffness(X3, {"hexahedron": [list(range(8))]})
+
+
 # ----------------------------------------------------------------------------- files
 def write_gmsh(path, points, body_type, body, groups=(), version="gmsh22", binary=False):
     """A Gmsh file with one body entity and one entity per named group (type, cells);
@@ -310,6 +321,76 @@ def test_triangles_and_mixed_cells(tmp_path):
     model = build_model(load_scene(s))
     assert set(model.cells) == {"quad", "triangle"} and model.rigid_modes.shape[1] == 3
     assert math.isclose(run_scene(load_scene(s)).mu_c, math.tan(TAU), rel_tol=1e-9)
+
+
+def test_orphan_nodes_and_repeated_cells(tmp_path):
+    """A point of no element (first in the file) is dropped and a cell listed twice (Gmsh 2
+    repeats an element once per physical group) counts once: the condensed K is block2d's."""
+    ref = block2d(2, 2)
+    P = np.r_[[[9.0, 9.0, 0.0]], np.c_[ref.coords, np.zeros(len(ref.coords))]]
+    Q = ref.cells["quad"] + 1
+    tags = [np.full(len(Q), 1), np.full(len(Q), 2)]
+    meshio.write(str(tmp_path / "o.msh"), meshio.Mesh(P, [("quad", Q), ("quad", Q)],
+                 cell_data={"gmsh:physical": tags, "gmsh:geometrical": [np.ones(len(Q), int)] * 2},
+                 field_data={"a": np.array([1, 2]), "b": np.array([2, 2])}), file_format="gmsh22")
+    s = write_scene(tmp_path, 'file = "o.msh"', f"nodes = {(ref.contact_nodes + 1).tolist()}", v_groove_obstacles(True))
+    m = build_model(load_scene(s))
+    assert m.coords.shape == ref.coords.shape and len(m.cells["quad"]) == len(Q)
+    K0, K1 = condense(ref)[0], condense(m)[0]
+    assert np.abs(K1 - K0).max() <= 1e-12 * np.abs(K0).max()
+
+
+MSH41_TWO_GROUPS = """$MeshFormat
+4.1 0 8
+$EndMeshFormat
+$PhysicalNames
+3
+1 1 "bottom"
+1 2 "contact"
+2 3 "body"
+$EndPhysicalNames
+$Entities
+0 1 1 0
+1 0 0 0 1 0 0 2 1 2 0
+1 0 0 0 1 1 0 1 3 0
+$EndEntities
+$Nodes
+2 4 1 4
+1 1 0 2
+1
+2
+0 0 0
+1 0 0
+2 1 0 2
+3
+4
+1 1 0
+0 1 0
+$EndNodes
+$Elements
+2 3 1 3
+1 1 1 1
+1 1 2
+2 1 2 2
+2 1 2 3
+3 1 3 4
+$EndElements
+"""
+
+
+def test_groups_from_every_source(tmp_path):
+    """Gmsh 4: a curve in two physical groups is in both (meshio's cell sets; its
+    gmsh:physical keeps only the first); Abaqus node sets (meshio point sets)."""
+    from hpcwedge.models.mesh import read_mesh
+    (tmp_path / "two.msh").write_text(MSH41_TWO_GROUPS)
+    m = read_mesh(str(tmp_path / "two.msh"), 2)
+    assert m.cells["triangle"].tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert {g: v.tolist() for g, v in m.groups.items()} == {"bottom": [0, 1], "contact": [0, 1], "body": [0, 1, 2, 3]}
+    X, C, _, _ = _patch("quad")
+    meshio.write(str(tmp_path / "p.inp"), meshio.Mesh(np.c_[X, np.zeros(len(X))], [("quad", C)],
+                                                      point_sets={"wall": np.array([0, 3, 6])}))
+    m = read_mesh(str(tmp_path / "p.inp"), 2)
+    assert m.groups["wall"].tolist() == [0, 3, 6] and len(m.cells["quad"]) == 4
 
 
 # ----------------------------------------------------------------------------- 3D plug
