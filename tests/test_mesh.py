@@ -256,7 +256,7 @@ def v_groove_obstacles(as_cone):
                  "half_angle_deg": 10.0}]
     c, s = math.cos(TAU), math.sin(TAU)
     return [{"type": "plane", "point": _num([-0.5, 0]), "normal": _num([c, s])},
-            {"type": "plane", "point": _num([0.5, 0]), "normal": _num([c, -s])}]      # outward: the sign does not matter
+            {"type": "plane", "point": _num([0.5, 0]), "normal": _num([c, -s])}]   # outward: sign is free
 
 
 def _answers(res):

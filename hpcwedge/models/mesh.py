@@ -217,8 +217,9 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
         fixed = np.union1d(fixed, (dim * g[:, None] + comps).ravel())
     elif support_dofs is not None:
         raise ValueError("model.support_dofs: only with model.support_group")
-    _require_in_body(np.unique(fixed // dim), used, "model.supports" if support_group is None else "model.support_group")
-    check_contact_free(fixed, c, dim, "model.supports" if support_group is None else "model.support_group")
+    skey = "model.supports" if support_group is None else "model.support_group"
+    _require_in_body(np.unique(fixed // dim), used, skey)
+    check_contact_free(fixed, c, dim, skey)
     # frames
     m = len(c)
     if (normals is None) == (obstacles is None):
