@@ -538,6 +538,36 @@ def test_errors_name_the_key(block_files, body, contact, obstacles, key, phrase)
     assert msg.startswith(key) and phrase in msg and "\n" not in msg, msg
 
 
+def test_obstacle_forms_and_tolerance(block_files):
+    """contact.obstacle (inline tables) = [[obstacle]]; contact.tolerance widens the band;
+    obstacles are for mesh scenes only, and given once."""
+    d, ref = block_files
+    a = build_model(load_scene(write_scene(d, OK_BODY, OK_CONTACT, v_groove_obstacles(True))))
+    (d / "inline.toml").write_text(
+        'name = "i"\ndim = 2\n[model]\nkind = "mesh"\nfile = "ok.msh"\n[contact]\ngroup = "contact"\n'
+        f'obstacle = [{{type = "cone", apex = [0.0, {-0.5 / math.tan(TAU)!r}], axis = [0.0, 1.0], '
+        'half_angle_deg = 10.0}]\n[friction]\nmu = 1.0\n')
+    b = build_model(load_scene(str(d / "inline.toml")))
+    np.testing.assert_array_equal(a.normals, b.normals)
+    off = [{"type": "plane", "point": _num([-0.5, 0]), "normal": _num([1, 0])}]
+    m = build_model(load_scene(write_scene(d, OK_BODY, OK_CONTACT + "\ntolerance = 10", off)))
+    assert np.all(np.abs(m.normals[:, 0]) == 1.0)
+    with pytest.raises(SceneError, match=r'^obstacle: obstacle surfaces are for kind = "mesh"'):
+        load_scene(_builtin_with_obstacle(d))
+    text = (d / "inline.toml").read_text().replace("[friction]", "[[obstacle]]\ntype = \"plane\"\n"
+                                                  "point = [0.0, 0.0]\nnormal = [0.0, 1.0]\n[friction]")
+    (d / "both.toml").write_text(text)
+    with pytest.raises(SceneError, match=r"^obstacle: give \[\[obstacle\]\] tables or contact.obstacle, not both"):
+        load_scene(str(d / "both.toml"))
+
+
+def _builtin_with_obstacle(d):
+    p = d / "builtin_obstacle.toml"
+    p.write_text('name = "b"\ndim = 2\n[model]\nkind = "plug2d"\n[[obstacle]]\ntype = "plane"\n'
+                 'point = [0.0, 0.0]\nnormal = [0.0, 1.0]\n[friction]\nmu = 1.0\n')
+    return str(p)
+
+
 def test_cli_bad_mesh_exit_2_nothing_written(block_files, tmp_path, capsys):
     d, ref = block_files
     s = write_scene(d, 'file = "inverted.msh"', f"nodes = {ref.contact_nodes.tolist()}", v_groove_obstacles(True),
