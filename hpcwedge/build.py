@@ -36,11 +36,30 @@ def build_model(scene: Scene) -> Model:
                 raise SceneError(f"model.nodes: {nodes.shape[1]} coordinates per node, scene dim = {scene.dim}")
             return truss.truss_model(nodes, m["bars"], m.get("EA", 1.0), m.get("supports", []),
                                      c["nodes"], c["normals"], c.get("tangents"))
+        if scene.kind == "mesh":
+            return _mesh_model(scene)
         return library.builtin(scene.kind, scene.model)
     except SceneError:
         raise
     except (ValueError, TypeError, IndexError) as e:
         raise SceneError(str(e).splitlines()[0]) from None
+
+
+def _mesh_model(scene: Scene) -> Model:
+    """kind = "mesh": read model.file (relative to the scene file) and build the Model."""
+    from .models import mesh
+    from .models.obstacle import parse_obstacles
+    m, c = scene.model, scene.contact
+    data = mesh.read_mesh(os.path.join(scene.base_dir, m["file"]), scene.dim, name=m["file"])
+    obstacles = (parse_obstacles(scene.obstacles, scene.dim, scene.obstacle_key)
+                 if scene.obstacles is not None else None)
+    return mesh.mesh_model(data, E=m.get("E", 1.0), nu=m.get("nu", 0.3), thickness=m.get("thickness", 1.0),
+                           contact_nodes=c.get("nodes"), contact_group=c.get("group"),
+                           normals=c.get("normals"), tangents=c.get("tangents"),
+                           obstacles=obstacles, obstacle_key=scene.obstacle_key,
+                           tolerance=c.get("tolerance", mesh.DEFAULT_TOLERANCE),
+                           supports=m.get("supports"), support_group=m.get("support_group"),
+                           support_dofs=m.get("support_dofs"))
 
 
 def contact_problem(scene: Scene, model: Model | None = None) -> ContactProblem:

@@ -18,7 +18,10 @@ from .models.library import BUILTIN_DIM, BUILTINS  # the one table of built-ins
 
 KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 
-TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact"}
+TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact", "obstacle"}
+#: keys of a kind = "mesh" scene (values are checked when the mesh is read: models/mesh.py)
+MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs"}
+MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True}
@@ -59,6 +62,8 @@ class Scene:
     base_dir: str = "."
     task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
     symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
+    obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
+    obstacle_key: str = "obstacle"  # where they came from, for messages
 
     @property
     def hash(self) -> str:
@@ -107,8 +112,6 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         raise SceneError(f"model.kind: unknown kind {kind!r} (one of {', '.join(KINDS)})")
     if kind in BUILTIN_DIM and BUILTIN_DIM[kind] != dim:
         raise SceneError(f"dim: {kind} is a {BUILTIN_DIM[kind]}D model, scene says dim = {dim}")
-    if kind == "mesh":
-        raise SceneError("model.kind: 'mesh' scenes are not supported yet")
     friction = data.get("friction")
     if not isinstance(friction, dict) or "mu" not in friction:
         raise SceneError("friction.mu: required (one value or a list)")
@@ -155,13 +158,28 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     params = {k: v for k, v in model.items() if k != "kind"}
     if kind in BUILTINS:
         _check_builtin(kind, params)
+    obstacles, obstacle_key = None, "obstacle"
+    if "obstacle" in data or (kind == "mesh" and "obstacle" in contact):
+        if kind != "mesh":
+            raise SceneError("obstacle: obstacle surfaces are for kind = \"mesh\" (give contact.normals)")
+        if "obstacle" in data and "obstacle" in contact:
+            raise SceneError("obstacle: give [[obstacle]] tables or contact.obstacle, not both")
+        obstacle_key = "obstacle" if "obstacle" in data else "contact.obstacle"
+        obstacles = data["obstacle"] if "obstacle" in data else contact["obstacle"]
+        from .models.obstacle import parse_obstacles
+        try:
+            parse_obstacles(obstacles, dim, obstacle_key)
+        except ValueError as e:
+            raise SceneError(str(e)) from None
+    if kind == "mesh":
+        _check_mesh(params, contact, dim, obstacles is not None)
     return Scene(name=name, dim=dim, kind=kind, model=params, contact=contact,
                  mu=tuple(sorted(float(v) for v in mus)), enumerate=compute["enumerate"],
                  mu_c=compute["mu_c"], mu_c_method=compute["mu_c_method"],
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
                  text=text, base_dir=base_dir, task_budget=run["task_budget"],
-                 symmetry=run["symmetry"])
+                 symmetry=run["symmetry"], obstacles=obstacles, obstacle_key=obstacle_key)
 
 
 def _unknown(table, allowed, prefix):
@@ -183,6 +201,38 @@ def _check_builtin(kind: str, params: dict) -> None:
         if isinstance(default, int) and not isinstance(default, bool):
             if not isinstance(v, int) or v < 1:
                 raise SceneError(f"model.{k}: must be a whole number >= 1, got {v!r}")
+
+
+def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> None:
+    """Keys and value types of a kind = "mesh" scene; the values against the mesh are
+    checked when it is read (models/mesh.py)."""
+    _unknown(params, MESH_MODEL_KEYS, "model.")
+    _unknown(contact, MESH_CONTACT_KEYS, "contact.")
+    if not isinstance(params.get("file"), str) or not params["file"]:
+        raise SceneError("model.file: required for a mesh, a file name (relative to the scene file)")
+    if dim == 3 and "thickness" in params:
+        raise SceneError("model.thickness: only for 2D (plane stress) meshes")
+    for k in ("E", "nu", "thickness"):
+        v = params.get(k, 1.0)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SceneError(f"model.{k}: must be a finite number, got {v!r}")
+    for k, where in (("support_group", "model."), ("group", "contact.")):
+        table = params if where == "model." else contact
+        v = table.get(k)
+        names = [v] if isinstance(v, str) else v
+        if v is not None and (not isinstance(names, list) or not names
+                              or not all(isinstance(g, str) and g for g in names)):
+            raise SceneError(f"{where}{k}: a group name or a list of group names, got {v!r}")
+    if ("group" in contact) == ("nodes" in contact):
+        raise SceneError("contact.group / contact.nodes: give exactly one (a group of the mesh, or node ids)")
+    if ("normals" in contact) == has_obstacle:
+        raise SceneError("contact.normals / obstacle: give exactly one (normals per contact node, "
+                         "or [[obstacle]] surfaces)")
+    if "tangents" in contact and "normals" not in contact:
+        raise SceneError("contact.tangents: only with contact.normals")
+    v = contact.get("tolerance", 1.0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise SceneError(f"contact.tolerance: must be a finite number > 0, got {v!r}")
 
 
 def array(value, key: str, ndim: int | None = None) -> np.ndarray:

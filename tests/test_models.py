@@ -76,9 +76,9 @@ def test_q4_constant_strain_energy():
 
 def test_q4_bad_jacobian():
     X = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
-    with pytest.raises(ValueError, match=r"model.quads: element 0 has a non-positive Jacobian"):
+    with pytest.raises(ValueError, match=r"model.quads: quad element 0 has a non-positive Jacobian"):
         q4_stiffness(X, [[0, 3, 2, 1]])          # clockwise
-    with pytest.raises(ValueError, match=r"model.quads: element 0 refers to node"):
+    with pytest.raises(ValueError, match=r"model.quads: quad element 0 refers to node"):
         q4_stiffness(X, [[0, 1, 2, 7]])
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..model import Model, contact_frames
-from .plane_stress import q4_stiffness
+from .continuum import q4_stiffness
 from .rigid import rigid_modes
 from .truss import truss_model
 

@@ -1,0 +1,54 @@
+"""Assembly of element matrices into a global sparse stiffness, chunked over elements."""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+#: element-matrix entries per assembly chunk (65536 Q4 elements; bounds the temporaries to ~100 MB)
+CHUNK_ENTRIES = 65536 * 64
+
+
+def _node_pattern(conn: np.ndarray, n_nodes: int):
+    """Node-level CSR pattern (indptr, indices) of the element graph and sorted keys i*n + j."""
+    nen = conn.shape[1]
+    idx = np.int32 if n_nodes < 2 ** 31 - 1 else np.int64
+    I = np.repeat(conn.astype(idx), nen, axis=1).ravel()
+    Jc = np.tile(conn.astype(idx), (1, nen)).ravel()
+    P = sp.coo_matrix((np.ones(I.size, dtype=np.int8), (I, Jc)), shape=(n_nodes, n_nodes)).tocsr()
+    del I, Jc
+    P.sum_duplicates()
+    P.sort_indices()
+    rows = np.repeat(np.arange(n_nodes, dtype=np.int64), np.diff(P.indptr))
+    keys = rows * n_nodes + P.indices
+    return P.indptr, P.indices, keys
+
+
+def assemble_blocks(conn: np.ndarray, n_nodes: int, dim: int, element_matrices,
+                    chunk: int | None = None) -> sp.csr_matrix:
+    """Assemble (n_nodes*dim)^2 CSR from element matrices without a global COO array.
+
+    conn: (ne, nen) node ids; element_matrices(lo, hi) -> (hi-lo, nen*dim, nen*dim) exactly
+    symmetric matrices with node-major local DOFs. The node-level pattern is built once; each
+    chunk's blocks are added into it with bincount, in element order, so the result is exactly
+    symmetric. Memory ~ nnz of K plus one chunk of temporaries (chunk elements; default
+    CHUNK_ENTRIES / (nen*dim)^2).
+    """
+    ne, nen = conn.shape
+    if chunk is None:
+        chunk = max(1, CHUNK_ENTRIES // (nen * dim) ** 2)
+    indptr, indices, keys = _node_pattern(conn, n_nodes)
+    nnzb = keys.size
+    data = np.zeros((dim, dim, nnzb))
+    for lo in range(0, ne, chunk):
+        hi = min(ne, lo + chunk)
+        c = conn[lo:hi].astype(np.int64)
+        pos = np.searchsorted(keys, (c[:, :, None] * n_nodes + c[:, None, :]).ravel())
+        ke = element_matrices(lo, hi).reshape(hi - lo, nen, dim, nen, dim)
+        for p in range(dim):
+            for q in range(dim):
+                data[p, q] += np.bincount(pos, weights=ke[:, :, p, :, q].ravel(), minlength=nnzb)
+    blocks = np.ascontiguousarray(data.transpose(2, 0, 1))
+    del data
+    K = sp.bsr_matrix((blocks, indices, indptr), shape=(n_nodes * dim, n_nodes * dim)).tocsr()
+    K.sort_indices()
+    return K

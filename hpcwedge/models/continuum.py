@@ -1,0 +1,99 @@
+"""Global stiffness of an isotropic linear-elastic continuum meshed with linear cells."""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..model import as_float_array
+from .assembly import assemble_blocks
+from .elements import CELL_TYPES, REFERENCE, element_stiffness
+
+
+def _per_element(v, ne: int, key: str) -> np.ndarray:
+    a = as_float_array(v, key)
+    if a.ndim > 1 or (a.ndim == 1 and a.shape[0] != ne):
+        raise ValueError(f"{key}: expected a scalar or one value per element ({ne}), got shape {a.shape}")
+    return np.broadcast_to(a, (ne,))
+
+
+def _connectivity(conn, cell: str, nen: int, n_nodes: int, key: str) -> np.ndarray:
+    """(ne, nen) int64 node ids of one cell block, in range; ValueError naming key otherwise."""
+    Q = np.asarray(conn)
+    if Q.ndim != 2 or Q.shape[1] != nen:
+        raise ValueError(f"{key}: {cell} cells need {nen} nodes each, got shape {Q.shape}")
+    if not np.issubdtype(Q.dtype, np.integer):
+        Qf = as_float_array(Q, key)
+        if np.any(Qf != np.round(Qf)):
+            raise ValueError(f"{key}: non-integer node id in the {cell} cells")
+        Q = Qf.astype(np.int64)
+    Q = Q.astype(np.int64, copy=False)
+    if Q.size and (Q.min() < 0 or Q.max() >= n_nodes):
+        e = int(np.flatnonzero((Q.min(axis=1) < 0) | (Q.max(axis=1) >= n_nodes))[0])
+        raise ValueError(f"{key}: {cell} element {e} refers to node {Q[e].tolist()}, "
+                         f"only {n_nodes} nodes (0-based)")
+    return Q
+
+
+def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1.0, nu=0.3,
+                        thickness=1.0, key: str = "model.cells",
+                        material_key: str = "material") -> sp.csr_matrix:
+    """Stiffness (n_nodes*dim, n_nodes*dim) CSR, exactly symmetric, node-major DOFs.
+
+    coords: (n_nodes, dim), dim 2 (plane stress) or 3; cells: {cell type: (ne, nen) node ids}
+    with types from elements.CELL_TYPES[dim] in meshio's node order (see elements.py).
+    E (Young's modulus, > 0), nu (Poisson ratio, -1 < nu < 0.5) and thickness (> 0, 2D only):
+    scalars or one value per element, elements counted over `cells` in its order.
+    Every block is assembled on its own (chunked, so 10^6 elements stay within memory) and
+    the blocks summed. ValueError("<key>: ...") on an unsupported cell type, a bad node id or
+    a non-positive Jacobian (naming the cell type and its element index within the block);
+    material errors name <material_key>.E / .nu / .thickness.
+    """
+    X = as_float_array(coords, "model.nodes", ndim=2)
+    n, dim = X.shape
+    if dim not in CELL_TYPES:
+        raise ValueError(f"model.nodes: expected (n_nodes, 2) or (n_nodes, 3) coordinates, got {X.shape}")
+    for cell in cells:
+        if cell not in CELL_TYPES[dim]:
+            raise ValueError(f"{key}: unsupported cell type {cell!r} for a {dim}D body "
+                             f"(supported: {', '.join(CELL_TYPES[dim])})")
+    conns = {c: _connectivity(q, c, REFERENCE[c].nen, n, key) for c, q in cells.items()}
+    total = sum(len(q) for q in conns.values())
+    mk = material_key
+    Ev = _per_element(E, total, f"{mk}.E")
+    nuv = _per_element(nu, total, f"{mk}.nu")
+    tv = _per_element(thickness, total, f"{mk}.thickness")
+    if np.any(Ev <= 0):
+        raise ValueError(f"{mk}.E: must be > 0")
+    if np.any((nuv <= -1) | (nuv >= 0.5)):
+        raise ValueError(f"{mk}.nu: must lie in (-1, 0.5)")
+    if np.any(tv <= 0):
+        raise ValueError(f"{mk}.thickness: must be > 0")
+    K = sp.csr_matrix((n * dim, n * dim))
+    offset = 0
+    for cell, Q in conns.items():
+        o = offset
+
+        def element_matrices(lo: int, hi: int, cell=cell, Q=Q, o=o) -> np.ndarray:
+            return element_stiffness(cell, X[Q[lo:hi]], Ev[o + lo:o + hi], nuv[o + lo:o + hi],
+                                     tv[o + lo:o + hi], first=lo, key=key)
+
+        if len(Q):
+            Kc = assemble_blocks(Q, n, dim, element_matrices)
+            K = Kc if K.nnz == 0 else (K + Kc).tocsr()
+        offset += len(Q)
+    K.sort_indices()
+    return K
+
+
+def q4_stiffness(coords: np.ndarray, quads: np.ndarray, E=1.0, nu=0.3, t=1.0,
+                 key: str = "model.quads") -> sp.csr_matrix:
+    """Plane-stress bilinear quadrilaterals: continuum_stiffness(coords, {"quad": quads}, ...).
+
+    coords: (n_nodes, 2); quads: (ne, 4) counter-clockwise corners; 2x2 Gauss quadrature.
+    """
+    X = as_float_array(coords, "model.nodes", ndim=2)
+    if X.shape[1] != 2:
+        raise ValueError(f"model.nodes: plane stress needs (n_nodes, 2) coordinates, got {X.shape}")
+    return continuum_stiffness(X, {"quad": quads}, E, nu, t, key=key)
