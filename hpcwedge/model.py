@@ -22,6 +22,10 @@ class Model:
     rigid_modes:   (n_nodes*dim, k) rigid-body motions the supports leave free
                    (k = 0 for a supported body), from the geometry.
     cells:         plotting/export connectivity, e.g. {"line": (nb, 2), "quad": (ne, 4)}.
+    material:      per-element constants for stress recovery, element order = the blocks of
+                   `cells` in order: {"EA": (nb,)} for bars ("line" cells); {"E": (ne,),
+                   "nu": (ne,), "thickness": (ne,)} for continuum cells (thickness 1 in 3D).
+                   (Springs added to K by hand, e.g. vgroove_bar's eps, are not elements.)
     """
 
     dim: int
@@ -33,6 +37,7 @@ class Model:
     tangents: np.ndarray
     rigid_modes: np.ndarray
     cells: dict = field(default_factory=dict)
+    material: dict = field(default_factory=dict)
 
     @property
     def m(self) -> int:

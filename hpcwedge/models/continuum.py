@@ -8,7 +8,7 @@ import scipy.sparse as sp
 
 from ..model import as_float_array
 from .assembly import assemble_blocks
-from .elements import CELL_TYPES, REFERENCE, element_stiffness
+from .elements import CELL_TYPES, REFERENCE, centroid_stress, element_stiffness, von_mises
 
 
 def _per_element(v, ne: int, key: str) -> np.ndarray:
@@ -36,6 +36,45 @@ def _connectivity(conn, cell: str, nen: int, n_nodes: int, key: str) -> np.ndarr
     return Q
 
 
+def continuum_material(n_elements: int, E=1.0, nu=0.3, thickness=1.0,
+                       material_key: str = "material") -> dict[str, np.ndarray]:
+    """Validated per-element constants {"E", "nu", "thickness"}: each (n_elements,) float.
+
+    E > 0, -1 < nu < 0.5, thickness > 0; scalars or one value per element (elements counted
+    over the cell blocks in order). ValueError naming <material_key>.E / .nu / .thickness.
+    """
+    mk = material_key
+    Ev = _per_element(E, n_elements, f"{mk}.E")
+    nuv = _per_element(nu, n_elements, f"{mk}.nu")
+    tv = _per_element(thickness, n_elements, f"{mk}.thickness")
+    if np.any(Ev <= 0):
+        raise ValueError(f"{mk}.E: must be > 0")
+    if np.any((nuv <= -1) | (nuv >= 0.5)):
+        raise ValueError(f"{mk}.nu: must lie in (-1, 0.5)")
+    if np.any(tv <= 0):
+        raise ValueError(f"{mk}.thickness: must be > 0")
+    return {"E": np.array(Ev), "nu": np.array(nuv), "thickness": np.array(tv)}
+
+
+def continuum_von_mises(coords: np.ndarray, cells: Mapping[str, np.ndarray], u: np.ndarray,
+                        material: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Von Mises stress at the element centroids: {cell type: (ne,)}, same blocks as `cells`.
+
+    coords: (n_nodes, dim); cells: {cell type: (ne, nen)} (as continuum_stiffness);
+    u: (n_nodes, dim) nodal displacements; material: continuum_material(...) of the same
+    elements (E, nu per element; in 2D plane stress, sigma_zz = 0). Units of E.
+    """
+    X = np.asarray(coords, dtype=float)
+    out, offset = {}, 0
+    for cell, Q in cells.items():
+        Q = np.asarray(Q, dtype=np.int64)
+        sl = slice(offset, offset + len(Q))
+        sig = centroid_stress(cell, X[Q], u[Q], material["E"][sl], material["nu"][sl])
+        out[cell] = von_mises(sig)
+        offset += len(Q)
+    return out
+
+
 def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1.0, nu=0.3,
                         thickness=1.0, key: str = "model.cells",
                         material_key: str = "material") -> sp.csr_matrix:
@@ -60,16 +99,8 @@ def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1
                              f"(supported: {', '.join(CELL_TYPES[dim])})")
     conns = {c: _connectivity(q, c, REFERENCE[c].nen, n, key) for c, q in cells.items()}
     total = sum(len(q) for q in conns.values())
-    mk = material_key
-    Ev = _per_element(E, total, f"{mk}.E")
-    nuv = _per_element(nu, total, f"{mk}.nu")
-    tv = _per_element(thickness, total, f"{mk}.thickness")
-    if np.any(Ev <= 0):
-        raise ValueError(f"{mk}.E: must be > 0")
-    if np.any((nuv <= -1) | (nuv >= 0.5)):
-        raise ValueError(f"{mk}.nu: must lie in (-1, 0.5)")
-    if np.any(tv <= 0):
-        raise ValueError(f"{mk}.thickness: must be > 0")
+    mat = continuum_material(total, E, nu, thickness, material_key)
+    Ev, nuv, tv = mat["E"], mat["nu"], mat["thickness"]
     K = sp.csr_matrix((n * dim, n * dim))
     offset = 0
     for cell, Q in conns.items():

@@ -1,7 +1,8 @@
-"""Element stiffness of linear isoparametric cells in isotropic linear elasticity.
+"""Element stiffness and centroid stress of linear isoparametric cells in isotropic linear
+elasticity.
 
-One routine for every cell type (`element_stiffness`), vectorised over elements with
-numpy einsum; the cell types differ only in their reference data (`REFERENCE`):
+One routine for every cell type (`element_stiffness`; `centroid_stress` for stress recovery),
+vectorised over elements with numpy einsum; the cell types differ only in their reference data (`REFERENCE`):
 
     cell type    dim  nodes  quadrature
     triangle      2     3    1 point (exact: constant strain)
@@ -43,6 +44,7 @@ class ReferenceCell:
     dN_check: (nc, nen, dim) gradients at the points where det J must be positive: the
              quadrature points, then (tensor-product cells) the nodes. For simplices det J is
              constant and the one quadrature point suffices.
+    dN_centroid: (1, nen, dim) gradients at the reference centroid (where stresses are reported).
     """
 
     name: str
@@ -51,6 +53,7 @@ class ReferenceCell:
     dN: np.ndarray
     weights: np.ndarray
     dN_check: np.ndarray
+    dN_centroid: np.ndarray
 
     @property
     def nen(self) -> int:
@@ -62,7 +65,7 @@ def _simplex(name: str, dim: int) -> ReferenceCell:
     nodes = np.vstack([np.zeros(dim), np.eye(dim)])
     grad = np.vstack([-np.ones(dim), np.eye(dim)])[None]                  # (1, dim+1, dim)
     volume = 1.0 / (2.0 if dim == 2 else 6.0)
-    return ReferenceCell(name, dim, nodes, grad, np.array([volume]), grad)
+    return ReferenceCell(name, dim, nodes, grad, np.array([volume]), grad, grad)
 
 
 def _tensor_gradients(nodes: np.ndarray, xi: np.ndarray) -> np.ndarray:
@@ -81,7 +84,8 @@ def _tensor(name: str, nodes: np.ndarray) -> ReferenceCell:
     gauss = nodes / np.sqrt(3.0)
     dN = _tensor_gradients(nodes, gauss)
     check = np.concatenate([dN, _tensor_gradients(nodes, nodes)])
-    return ReferenceCell(name, nodes.shape[1], nodes, dN, np.ones(len(gauss)), check)
+    centre = _tensor_gradients(nodes, np.zeros((1, nodes.shape[1])))
+    return ReferenceCell(name, nodes.shape[1], nodes, dN, np.ones(len(gauss)), check, centre)
 
 
 _SQUARE = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
@@ -120,6 +124,21 @@ def _det_inv(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return det, adj / det[..., None, None]
 
 
+def _checked_jacobian(ref: ReferenceCell, Xe: np.ndarray, first: int, key: str):
+    """det J (ne, nc) and J^-1 (ne, nc, dim, dim) at ref.dN_check; ValueError on det J <= 0."""
+    dim = Xe.shape[2]
+    J = np.einsum("eai,caj->ecij", Xe, ref.dN_check)                       # dx_i/dxi_j
+    det, inv = _det_inv(J)
+    size = np.ptp(Xe, axis=1).max(axis=1) ** dim
+    bad = np.flatnonzero(np.any(det <= DET_RTOL * size[:, None], axis=1))
+    if bad.size:
+        e = int(bad[0])
+        raise ValueError(f"{key}: {ref.name} element {first + e} has a non-positive Jacobian "
+                         f"(det J = {det[e].min():.3g}); its nodes must be ordered counter-clockwise "
+                         f"(2D) or right-handed (3D) and the element must not be degenerate")
+    return det, inv
+
+
 def element_stiffness(cell: str, Xe: np.ndarray, E: np.ndarray, nu: np.ndarray,
                       t: np.ndarray | None = None, first: int = 0, key: str = "model.cells") -> np.ndarray:
     """Element stiffness matrices (ne, nen*dim, nen*dim), exactly symmetric.
@@ -133,15 +152,7 @@ def element_stiffness(cell: str, Xe: np.ndarray, E: np.ndarray, nu: np.ndarray,
     ref = REFERENCE[cell]
     ne, nen, dim = Xe.shape
     ng = len(ref.weights)
-    J = np.einsum("eai,caj->ecij", Xe, ref.dN_check)                       # dx_i/dxi_j
-    det, inv = _det_inv(J)
-    size = np.ptp(Xe, axis=1).max(axis=1) ** dim
-    bad = np.flatnonzero(np.any(det <= DET_RTOL * size[:, None], axis=1))
-    if bad.size:
-        e = int(bad[0])
-        raise ValueError(f"{key}: {cell} element {first + e} has a non-positive Jacobian "
-                         f"(det J = {det[e].min():.3g}); its nodes must be ordered counter-clockwise "
-                         f"(2D) or right-handed (3D) and the element must not be degenerate")
+    det, inv = _checked_jacobian(ref, Xe, first, key)
     G = np.einsum("gaj,egji->egai", ref.dN, inv[:, :ng])                   # dN_a/dx_i at Gauss points
     w = det[:, :ng] * ref.weights
     if dim == 2:
@@ -154,3 +165,34 @@ def element_stiffness(cell: str, Xe: np.ndarray, E: np.ndarray, nu: np.ndarray,
     ke[:, :, idx, :, idx] += mu[None, :, None, None] * S[None]
     ke = ke.reshape(ne, nen * dim, nen * dim)
     return 0.5 * (ke + ke.transpose(0, 2, 1))
+
+
+def centroid_stress(cell: str, Xe: np.ndarray, Ue: np.ndarray, E: np.ndarray, nu: np.ndarray,
+                    first: int = 0, key: str = "model.cells") -> np.ndarray:
+    """Cauchy stress (ne, 3, 3) at each element's reference centroid, global axes.
+
+    cell, Xe (ne, nen, dim), E, nu (ne,): as element_stiffness; Ue: (ne, nen, dim) nodal
+    displacements. Small strain eps = sym(grad u) at the centroid, sigma = lam tr(eps) I +
+    2 mu eps with the Lamé constants of `lame` (plane stress in 2D: the in-plane block, and
+    sigma_zz = sigma_xz = sigma_yz = 0). Units of E times strain.
+    """
+    ref = REFERENCE[cell]
+    dim = Xe.shape[2]
+    _checked_jacobian(ref, Xe, first, key)
+    J = np.einsum("eai,caj->eij", Xe, ref.dN_centroid)
+    _, inv = _det_inv(J)
+    G = np.einsum("aj,eji->eai", ref.dN_centroid[0], inv)                 # dN_a/dx_i at the centroid
+    grad = np.einsum("eap,eaq->epq", Ue, G)                                # du_p/dx_q
+    eps = 0.5 * (grad + grad.transpose(0, 2, 1))
+    lam, mu = lame(E, nu, dim)
+    sig = 2.0 * mu[:, None, None] * eps
+    sig[:, np.arange(dim), np.arange(dim)] += (lam * np.trace(eps, axis1=1, axis2=2))[:, None]
+    out = np.zeros((len(Xe), 3, 3))
+    out[:, :dim, :dim] = sig
+    return out
+
+
+def von_mises(sigma: np.ndarray) -> np.ndarray:
+    """Von Mises equivalent stress sqrt(3/2 s:s), s = deviator of sigma (..., 3, 3)."""
+    s = sigma - np.trace(sigma, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) / 3.0
+    return np.sqrt(1.5 * np.einsum("...ij,...ij->...", s, s))

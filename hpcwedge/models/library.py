@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..model import Model, contact_frames
-from .continuum import q4_stiffness
+from .continuum import continuum_material, q4_stiffness
 from .rigid import rigid_modes
 from .truss import truss_model
 
@@ -165,7 +165,8 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     nrm, tan = contact_frames(_wall_normals_2d(side, tau), 2, len(contact))
     K = q4_stiffness(X, quads, E, nu, thickness)
     return Model(dim=2, coords=X, K=K, fixed_dofs=np.zeros(0, dtype=np.int64), contact_nodes=contact,
-                 normals=nrm, tangents=tan, rigid_modes=rigid_modes(X, 2), cells={"quad": quads})
+                 normals=nrm, tangents=tan, rigid_modes=rigid_modes(X, 2), cells={"quad": quads},
+                 material=continuum_material(len(quads), E, nu, thickness, "model"))
 
 
 #: built-in generators by scene `model.kind`, and their dimension

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..model import (Model, as_index_array, check_contact_free, check_contact_nodes, check_supports,
                      contact_frames)
-from .continuum import continuum_stiffness
+from .continuum import continuum_material, continuum_stiffness
 from .elements import CELL_TYPES
 from .obstacle import Cone, Plane, obstacle_frames, orient_into_body
 from .rigid import rigid_modes
@@ -240,7 +240,8 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
     Xb = X[used]
     cells = {t: new[conn] for t, conn in mesh.cells.items()}
     fixed_b = np.sort(dim * new[fixed // dim] + fixed % dim)
-    K = continuum_stiffness(Xb, cells, E, nu, thickness if dim == 2 else 1.0, key="model.file",
-                            material_key="model")
+    t = thickness if dim == 2 else 1.0
+    K = continuum_stiffness(Xb, cells, E, nu, t, key="model.file", material_key="model")
+    material = continuum_material(sum(len(q) for q in cells.values()), E, nu, t, "model")
     return Model(dim=dim, coords=Xb, K=K, fixed_dofs=fixed_b, contact_nodes=new[c], normals=nrm,
-                 tangents=tan, rigid_modes=rigid_modes(Xb, dim, fixed_b), cells=cells)
+                 tangents=tan, rigid_modes=rigid_modes(Xb, dim, fixed_b), cells=cells, material=material)

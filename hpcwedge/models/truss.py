@@ -44,6 +44,19 @@ def truss_stiffness(coords: np.ndarray, bars: np.ndarray, EA: float | np.ndarray
     return K
 
 
+def bar_forces(coords: np.ndarray, bars: np.ndarray, EA, u: np.ndarray) -> np.ndarray:
+    """Axial force of every bar (n_bars,), tension positive: EA/L * e . (u_b - u_a).
+
+    coords, u: (n_nodes, dim) positions and displacements; bars: (n_bars, 2); EA: scalar or
+    (n_bars,). Units of EA (force).
+    """
+    X = np.asarray(coords, dtype=float)
+    B = np.asarray(bars, dtype=np.int64).reshape(-1, 2)
+    e, L = _bar_geometry(X, B)
+    du = u[B[:, 1]] - u[B[:, 0]]
+    return np.broadcast_to(np.asarray(EA, dtype=float), L.shape) / L * (e * du).sum(axis=1)
+
+
 def truss_model(nodes, bars, EA, supports, contact_nodes, normals, tangents=None) -> Model:
     """Validated truss Model (SPEC §3, kind = "truss").
 
@@ -83,4 +96,5 @@ def truss_model(nodes, bars, EA, supports, contact_nodes, normals, tangents=None
     nrm, tan = contact_frames(normals, dim, len(c), tangents)
     K = truss_stiffness(X, B, ea)
     return Model(dim=dim, coords=X, K=K, fixed_dofs=fixed, contact_nodes=c, normals=nrm, tangents=tan,
-                 rigid_modes=rigid_modes(X, dim, fixed), cells={"line": B})
+                 rigid_modes=rigid_modes(X, dim, fixed), cells={"line": B},
+                 material={"EA": np.array(np.broadcast_to(ea, (len(B),)), dtype=float)})
