@@ -6,10 +6,12 @@ The only module that imports petsc4py. Serial (PETSc.COMM_SELF).
     N_local = orth(T R_c)                           (dim*m, k), R_c = rigid modes on contact DOFs
 
 with supports applied (fixed DOFs dropped), c = contact DOFs (node-major), i = the other free
-DOFs, T = model.local_map().
+DOFs, T = model.local_map(). `interior_response` reads the condensation backwards
+(u_i = -K_ii^-1 K_ic u_c) with the same factorisation routine (`_factored`).
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -144,13 +146,49 @@ _ZERO_PIVOT_ERRORS = {71, 73, 81}   # MAT_LU_ZRPVT, ARG_WRONGSTATE (missing diag
 def _schur_petsc(Kcc: np.ndarray, Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model,
                  solver: str | None = None) -> np.ndarray:
     """S = Kcc - Kic^T Kii^-1 Kic (global node-major contact DOFs), Kii factored by PETSc."""
+    with _factored(Kii, model, solver, probe=Kic[:, 0].toarray().ravel()) as solve:
+        S = np.array(Kcc, dtype=float, copy=True)
+        KicT = Kic.T.tocsr()
+        p = Kic.shape[1]
+        for lo in range(0, p, COLUMN_BLOCK):
+            hi = min(p, lo + COLUMN_BLOCK)
+            S[:, lo:hi] -= KicT @ solve(Kic[:, lo:hi].toarray())
+        return S
+
+
+def interior_response(model: Model, uc: np.ndarray, solver: str | None = None) -> np.ndarray:
+    """Interior DOFs u_i = -K_ii^-1 K_ic u_c of a body whose contact DOFs are displaced by u_c.
+
+    uc: (dim*m,) or (dim*m, q) global contact DOFs, node-major (model.contact_dofs()).
+    Returns (n_i,) or (n_i, q) on split_dofs(model).interior (supported DOFs are zero and not
+    included). This is the static condensation read backwards: with these u_i, K u = f has
+    f = 0 at every free non-contact DOF. K_ii is factored exactly as by `condense` (same
+    solver choice and null-pivot checks; ValueError if singular).
+    """
+    sp_ = split_dofs(model)
+    _, Kic, Kii = _blocks(model, sp_)
+    U = np.asarray(uc, dtype=float)
+    B = -(Kic @ U.reshape(len(sp_.contact), -1))
+    if sp_.interior.size == 0:
+        X = B
+    else:
+        with _factored(Kii, model, solver, probe=B[:, 0]) as solve:
+            X = np.hstack([solve(B[:, lo:lo + COLUMN_BLOCK]) for lo in range(0, B.shape[1], COLUMN_BLOCK)])
+    return X.ravel() if U.ndim == 1 else X
+
+
+@contextmanager
+def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.ndarray):
+    """Factor Kii once with PETSc (MUMPS or native LU, see `condense`) and yield
+    solve(B (n, q) dense) -> Kii^-1 B (n, q). `probe` (n,): a right-hand side solved once
+    to detect a failed factorisation. Every PETSc object is destroyed on exit."""
     if solver not in (None, "mumps", "petsc"):
         raise ValueError(f"condense: unknown solver {solver!r} (mumps, petsc)")
     PETSc = _petsc()
     comm = PETSc.COMM_SELF
     Kii = sp.csr_matrix(Kii)
     Kii.sort_indices()
-    n, p = Kic.shape
+    n = Kii.shape[0]
     A = PETSc.Mat().createAIJ(size=(n, n), csr=(Kii.indptr.astype(PETSc.IntType),
                                                 Kii.indices.astype(PETSc.IntType), Kii.data), comm=comm)
     A.assemble()
@@ -196,26 +234,26 @@ def _schur_petsc(Kcc: np.ndarray, Kic: sp.csr_matrix, Kii: sp.csr_matrix, model:
         # solve that diverges with DIVERGED_PC_FAILED (native LU flags small pivots this way)
         b, x = A.createVecLeft(), A.createVecRight()
         objs += [b, x]
-        b.setArray(Kic[:, 0].toarray().ravel())
+        b.setArray(np.asarray(probe, dtype=float))
         ksp.solve(b, x)
         reason = ksp.getConvergedReason()
         if reason < 0:
             raise _singular(model, f"factorisation failed, KSP reason {reason}")
-        S = np.array(Kcc, dtype=float, copy=True)
-        KicT = Kic.T.tocsr()
-        for lo in range(0, p, COLUMN_BLOCK):
-            hi = min(p, lo + COLUMN_BLOCK)
-            Bm = PETSc.Mat().createDense((n, hi - lo), array=np.asfortranarray(Kic[:, lo:hi].toarray()), comm=comm)
-            Xm = PETSc.Mat().createDense((n, hi - lo), comm=comm)
-            objs += [Bm, Xm]
-            Xm.setUp()
-            Bm.assemble()
-            Xm.assemble()
-            F.matSolve(Bm, Xm)
-            S[:, lo:hi] -= KicT @ Xm.getDenseArray()
-            Bm.destroy()
-            Xm.destroy()
-        return S
+
+        def solve(B: np.ndarray) -> np.ndarray:
+            Bm = PETSc.Mat().createDense((n, B.shape[1]), array=np.asfortranarray(B, dtype=float), comm=comm)
+            Xm = PETSc.Mat().createDense((n, B.shape[1]), comm=comm)
+            try:
+                Xm.setUp()
+                Bm.assemble()
+                Xm.assemble()
+                F.matSolve(Bm, Xm)
+                return np.array(Xm.getDenseArray())
+            finally:
+                Bm.destroy()
+                Xm.destroy()
+
+        yield solve
     finally:
         for o in objs:
             o.destroy()
