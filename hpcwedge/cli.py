@@ -1,4 +1,4 @@
-"""Command line (SPEC §4): hpcwedge run | show | plot."""
+"""Command line (SPEC §4): hpcwedge run | show | plot | export."""
 from __future__ import annotations
 
 import argparse
@@ -38,9 +38,20 @@ def main(argv: list[str] | None = None) -> int:
     pl.add_argument("-o", "--output", required=True)
     pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     pl.add_argument("--ray", type=int, default=0, help="wedged ray to draw")
+    ex = sub.add_parser("export", help="write one configuration of the whole body as a VTU file (ParaView)",
+                        description="Recover every node's displacement, the contact reactions and the "
+                        "element stresses (von Mises / bar axial force) of one item of a result, on the "
+                        "body rebuilt from the stored scene, and write them as a VTK XML unstructured grid.")
+    ex.add_argument("result")
+    ex.add_argument("-o", "--output", required=True, help="the .vtu file to write")
+    ex.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
+    item = ex.add_mutually_exclusive_group(required=True)
+    item.add_argument("--ray", type=int, help="2D: wedged ray J")
+    item.add_argument("--cone", type=int, help="2D: cone J (the mean of its wedged rays)")
+    item.add_argument("--pattern", type=int, help="sign pattern J (a feasible point at the run's mu)")
     try:
         args = p.parse_args(argv)
-        return {"run": _run, "show": _show, "plot": _plot}[args.cmd](args)
+        return {"run": _run, "show": _show, "plot": _plot, "export": _export}[args.cmd](args)
     except _UserError as e:
         print(f"hpcwedge: error: {e}", file=sys.stderr)
         return 2
@@ -147,6 +158,18 @@ def _plot(args) -> int:
         plot_result(args.result, args.output, run=args.run, ray=args.ray)
     except ValueError as e:
         raise _UserError(str(e)) from None
+    return 0
+
+
+def _export(args) -> int:
+    from .configuration import ConfigurationError, load_configuration, write_vtu
+    try:
+        config = load_configuration(args.result, run=args.run, ray=args.ray, cone=args.cone,
+                                    pattern=args.pattern)
+    except ConfigurationError as e:
+        raise _UserError(f"export: {e}") from None
+    write_vtu(config, args.output)
+    print(f"[hpcwedge] {config.label}: wrote {args.output}", file=sys.stderr)
     return 0
 
 

@@ -18,6 +18,8 @@ import tempfile
 import h5py
 import numpy as np
 
+from .results import index, index_range
+
 DISP_FRACTION = 0.10     # largest drawn displacement / body size
 ARROW_FRACTION = 0.15    # largest drawn reaction arrow / body size
 WALL_FRACTION = 0.12     # length of a wall segment / body size
@@ -66,10 +68,9 @@ def _read(f, path: str, run: int, ray: int) -> dict:
     m = int(a["m"])
     keys = sorted(f["runs"])
     n_runs = len(keys)
-    k = _index(run, n_runs)
+    k = index(run, n_runs)
     if k is None:
-        rng = f"0..{n_runs - 1} or -{n_runs}..-1" if n_runs else "none"
-        raise ValueError(f"plot: run {run} out of range (the result has {n_runs} run(s): {rng})")
+        raise ValueError(f"plot: run {run} out of range (the result has {n_runs} run(s): {index_range(n_runs)})")
     g = f["runs"][keys[k]]
     rays = np.asarray(g["rays"][()], dtype=float) if "rays" in g else None
     if rays is not None:
@@ -77,7 +78,7 @@ def _read(f, path: str, run: int, ray: int) -> dict:
         if rays.shape[1] != 4 * m:
             raise ValueError(f"plot: {path}: run {k} rays have {rays.shape[1]} entries, expected 4m = {4 * m}")
     n_rays = 0 if rays is None else len(rays)
-    j = _index(ray, n_rays) if n_rays else (0 if ray in (0, -1) else None)
+    j = index(ray, n_rays) if n_rays else (0 if ray in (0, -1) else None)
     if j is None:
         what = f"0..{n_rays - 1} or -{n_rays}..-1" if n_rays else "only 0 when there are none"
         raise ValueError(f"plot: ray {ray} out of range (run {k} has {n_rays} wedged ray(s): {what})")
@@ -100,14 +101,6 @@ def _read(f, path: str, run: int, ray: int) -> dict:
             raise ValueError(f"plot: {path}: /model does not match dim 2 and m = {m}")
         out["model"] = mdl
     return out
-
-
-def _index(i: int, n: int) -> int | None:
-    """Python-style index i into n items, or None when out of range."""
-    i = int(i)
-    if -n <= i < n:
-        return i % n
-    return None
 
 
 def _str(v) -> str:

@@ -2,7 +2,9 @@
 
 Layout of RESULT.h5
     /                attrs: name, dim, m, complete, mu_c (NaN = null), mu_c_status,
-                     version, scene_hash, stages (JSON), timings (JSON), stats (JSON)
+                     version, scene_hash, stages (JSON), timings (JSON), stats (JSON),
+                     scene_dir (absolute folder of the scene file: its file paths are
+                     relative to it)
     /scene_text      the scene file, verbatim
     /model/          coords, contact_nodes, normals, cells_<kind> (when a model was built)
     /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
@@ -70,6 +72,7 @@ def write_result(path: str, result) -> None:
                         "mu_c": np.nan if result.mu_c is None else result.mu_c,
                         "mu_c_status": result.mu_c_status or "",
                         "version": __version__, "scene_hash": s.hash,
+                        "scene_dir": os.path.abspath(s.base_dir),
                         "stages": json.dumps(result.stages), "timings": json.dumps(result.timings),
                         "stats": json.dumps(result.stats, default=_plain)})
         f.create_dataset("scene_text", data=s.text)
@@ -122,6 +125,17 @@ def read_result(path: str, with_rays: bool = True) -> dict:
             run["patterns"] = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
             out["runs"].append(run)
     return out
+
+
+def index(i: int, n: int) -> int | None:
+    """Python-style index i into n items (0..n-1 or -n..-1) as 0..n-1, or None when out of range."""
+    i = int(i)
+    return i % n if -n <= i < n else None
+
+
+def index_range(n: int) -> str:
+    """The valid indices into n items, for messages: "0..n-1 or -n..-1" (or "none")."""
+    return f"0..{n - 1} or -{n}..-1" if n else "none"
 
 
 def _text(ds) -> str:

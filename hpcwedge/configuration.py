@@ -1,0 +1,295 @@
+"""Whole-body wedged configurations: every node's displacement, the contact reactions and
+the element stresses of one item of a result, and its export as a VTU file.
+
+A result stores the contact DOFs only (SPEC §1: local frames, block ordering
+[n_1..n_m, t_1..t_m(, t2_1..t2_m)]). One configuration (u_local, r_local), each (dim*m,),
+is taken from an item of a run:
+
+    ray J       2D: wedged ray J, [u, r] as stored (sum r_n = 1).
+    cone J      2D: the mean of the cone's wedged rays (each sum r_n = 1, so the mean too):
+                the cone's rays are pairwise cross-complementary, so their sum is a wedged
+                configuration of the cone.
+    pattern J   one point of the pattern's feasible set at the run's mu:
+                conic.feasible(pattern_rows(...)) (3D: the SOCP; 2D: the LP) gives x,
+                and u = U x, r = R x (problem.parametrize), scaled to sum r_n = 1.
+
+and extended to the body by the static condensation read backwards (`whole_body`):
+
+    u_c = T^T u_local            global contact DOFs, node-major (T = model.local_map(), orthogonal)
+    u_i = -K_ii^-1 K_ic u_c      condense.interior_response (the factorisation `condense` uses)
+    u = 0 at supported DOFs
+    f   = T^T r_local at the contact DOFs, 0 elsewhere: the obstacle's force on the body
+
+so that K u = f at every free DOF (the supports take K u at theirs). The amplitude is that
+of the normalised item (sum r_n = 1, in force units; displacements in length units); any
+positive multiple is the same wedged configuration.
+
+Element values (`element_values`): von Mises stress at the centroid of every continuum
+element (plane stress in 2D), axial force (tension > 0) of every bar.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import tomllib
+from dataclasses import dataclass
+
+import h5py
+import numpy as np
+
+from .model import Model
+
+#: cell-data names by cell family, in the VTU and in Configuration.element_values
+VON_MISES, AXIAL_FORCE = "von_mises", "axial_force"
+#: the stored /model must agree with the rebuilt one to this relative tolerance
+MODEL_MATCH_RTOL = 1e-12
+
+
+class ConfigurationError(ValueError):
+    """A configuration cannot be made from this result / item: one line, for exit status 2."""
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """One wedged configuration of the whole body.
+
+    model:          the body (hpcwedge.model.Model).
+    u_local, r_local: (dim*m,) contact displacement and reaction, local frames, block ordering.
+    displacement:   (n_nodes, dim) every node, global axes.
+    reaction:       (n_nodes, dim) obstacle force on the body, global axes; zero off contact.
+    element_values: {VON_MISES or AXIAL_FORCE: {cell type: (ne,)}} for the blocks of model.cells.
+    label:          what was taken, e.g. "run 0 (mu = 0.65), wedged ray 3 of 44".
+    """
+
+    model: Model
+    u_local: np.ndarray
+    r_local: np.ndarray
+    displacement: np.ndarray
+    reaction: np.ndarray
+    element_values: dict
+    label: str = ""
+
+
+# --------------------------------------------------------------------------- recovery
+
+def to_global(model: Model, v_local: np.ndarray) -> np.ndarray:
+    """(dim*m,) local block-ordered contact vector -> (m, dim) global vectors per contact node."""
+    v = np.asarray(v_local, dtype=float)
+    if v.shape != (model.dim * model.m,):
+        raise ValueError(f"configuration: expected a local contact vector of size dim*m = "
+                         f"{model.dim * model.m}, got shape {v.shape}")
+    return (model.local_map().T @ v).reshape(model.m, model.dim)
+
+
+def whole_body(model: Model, u_local: np.ndarray, r_local: np.ndarray, label: str = "",
+               solver: str | None = None) -> Configuration:
+    """The Configuration of `model` with contact displacement u_local and reaction r_local
+    (each (dim*m,), local frames, block ordering): see the module doc for the recovery."""
+    from .condense import interior_response, split_dofs
+    n, dim = model.coords.shape
+    uc = to_global(model, u_local).ravel()
+    u = np.zeros(n * dim)
+    u[model.contact_dofs()] = uc
+    u[split_dofs(model).interior] = interior_response(model, uc, solver=solver)
+    f = np.zeros((n, dim))
+    f[model.contact_nodes] = to_global(model, r_local)
+    U = u.reshape(n, dim)
+    return Configuration(model=model, u_local=np.asarray(u_local, dtype=float),
+                         r_local=np.asarray(r_local, dtype=float), displacement=U, reaction=f,
+                         element_values=element_values(model, U), label=label)
+
+
+def element_values(model: Model, displacement: np.ndarray) -> dict:
+    """{VON_MISES: {continuum cell type: (ne,)}, AXIAL_FORCE: {"line": (nb,)}} (families that
+    the model has), from the nodal displacement (n_nodes, dim) and model.material. Empty when
+    the model carries no material (then there is nothing to recover per element)."""
+    from .models.continuum import continuum_von_mises
+    from .models.truss import bar_forces
+    out: dict = {}
+    mat = model.material
+    if "line" in model.cells and "EA" in mat:
+        out[AXIAL_FORCE] = {"line": bar_forces(model.coords, model.cells["line"], mat["EA"], displacement)}
+    solid = {c: q for c, q in model.cells.items() if c != "line"}
+    if solid and "E" in mat:
+        out[VON_MISES] = continuum_von_mises(model.coords, solid, displacement, mat)
+    return out
+
+
+# --------------------------------------------------------------------------- from a result
+
+def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: int | None = None,
+                       pattern: int | None = None, solver: str | None = None) -> Configuration:
+    """The Configuration of one item (exactly one of ray, cone, pattern) of run `run` of the
+    result file `path` (indices 0-based, Python-style negatives allowed), on the body rebuilt
+    from the scene text stored in the result (`rebuild_model`).
+
+    ConfigurationError (one line) for a missing file, a result of a `stiffness` scene (no
+    body), a run or item index out of range, a run without that kind of item, or a pattern
+    whose feasibility point the solvers cannot give.
+    """
+    from .results import index, index_range
+    chosen = [(k, v) for k, v in (("ray", ray), ("cone", cone), ("pattern", pattern)) if v is not None]
+    if len(chosen) != 1:
+        raise ConfigurationError("give exactly one of ray, cone, pattern")
+    what, j = chosen[0]
+    if not os.path.exists(path):
+        raise ConfigurationError(f"{path}: no such file")
+    try:
+        with h5py.File(path, "r") as f:
+            dim, m = int(f.attrs["dim"]), int(f.attrs["m"])
+            keys = sorted(f["runs"])
+            k = index(run, len(keys))
+            if k is None:
+                raise ConfigurationError(f"run {run} out of range (the result has {len(keys)} run(s): "
+                                         f"{index_range(len(keys))})")
+            g = f["runs"][keys[k]]
+            mu = float(g.attrs["mu"])
+            rays = np.asarray(g["rays"][()], dtype=float).reshape(-1, 2 * dim * m) if "rays" in g else None
+            cones = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
+            patterns = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
+    except (OSError, KeyError) as e:
+        raise ConfigurationError(f"{path}: not a hpcwedge result ({e})") from None
+    items = {"ray": rays, "cone": cones, "pattern": patterns}[what]
+    head = f"run {k} (mu = {mu:.6g})"
+    noun = "wedged ray" if what == "ray" else what
+    if items is None:
+        why = {"ray": "wedged rays are 2D results of compute.enumerate = true or \"rays\"",
+               "cone": "cones are 2D results of compute.enumerate = true",
+               "pattern": "sign patterns are 3D results, or 2D with compute.enumerate = \"patterns\""}[what]
+        raise ConfigurationError(f"{head} has no {noun}s ({why})")
+    i = index(j, len(items))
+    if i is None:
+        raise ConfigurationError(f"{what} {j} out of range ({head} has {len(items)} {noun}(s): "
+                                 f"{index_range(len(items))})")
+    scene, model = rebuild_model(path)
+    n = dim * m
+    label = f"{head}, {noun} {i} of {len(items)}"
+    if what == "ray":
+        u, r = rays[i, :n], rays[i, n:]
+    elif what == "cone":
+        members = items[i]["rays"]
+        if not members:
+            raise ConfigurationError(f"cone {i} of {head} has no wedged ray")
+        v = rays[members].mean(axis=0)
+        u, r = v[:n], v[n:]
+        label += f" (mean of its {len(members)} wedged ray(s))"
+    else:
+        u, r = pattern_point(scene, model, items[i]["contact"], mu)
+        label += f" (contact {items[i]['contact']}; a feasible point)"
+    try:
+        return whole_body(model, u, r, label=label, solver=solver)
+    except ValueError as e:
+        raise ConfigurationError(str(e).splitlines()[0]) from None
+
+
+def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[np.ndarray, np.ndarray]:
+    """(u_local, r_local) of one solution of the sign pattern (C = contact, G = the other nodes)
+    at mu, normalised to sum r_n = 1: conic.feasible on pattern_rows of the parametrisation."""
+    from .build import contact_problem
+    from .conic import FEASIBLE, feasible, pattern_rows
+    from .problem import parametrize
+    problem = contact_problem(scene, model)
+    param = parametrize(problem)
+    m = problem.m
+    zero_u = np.isin(np.arange(m), contact)
+    status, x = feasible(pattern_rows(param, m, zero_u, ~zero_u), mu)
+    if status != FEASIBLE:
+        raise ConfigurationError(f"pattern with contact {list(contact)} at mu = {mu:.6g}: the solvers "
+                                 f"return {status}, no configuration to export")
+    u, r = param.U @ x, param.R @ x
+    s = r[:m].sum()
+    return u / s, r / s
+
+
+def rebuild_model(path: str):
+    """(Scene, Model) of the result file `path`, from its stored scene text.
+
+    Files named in the scene (a mesh's model.file) are relative to the scene's folder, which
+    the result records (attribute scene_dir); if the file is not there, the result's own
+    folder is tried. The rebuilt model must match the result's /model (coordinates and
+    contact nodes), else ConfigurationError (the mesh file changed since the run).
+    """
+    from .build import build_model
+    from .scene import SceneError, parse_scene
+    with h5py.File(path, "r") as f:
+        text = _text(f["scene_text"])
+        scene_dir = _text(f.attrs["scene_dir"]) if "scene_dir" in f.attrs else None
+        stored = ({k: f["model"][k][()] for k in ("coords", "contact_nodes")} if "model" in f else None)
+    result_dir = os.path.dirname(os.path.abspath(path))
+    try:
+        data = tomllib.loads(text)
+        kind = data.get("model", {}).get("kind")
+        if kind == "stiffness":
+            raise ConfigurationError("the scene is of kind \"stiffness\" (a condensed K only): "
+                                     "there is no body to export")
+        dirs = [d for d in (scene_dir, result_dir) if d]
+        base = dirs[0]
+        name = data.get("model", {}).get("file")
+        if isinstance(name, str):
+            found = [d for d in dirs if os.path.exists(os.path.join(d, name))]
+            if not found:
+                raise ConfigurationError(f"model.file: {name} not found in the scene's folder or the "
+                                         f"result's ({' or '.join(dict.fromkeys(dirs))})")
+            base = found[0]
+        scene = parse_scene(data, text=text, base_dir=base)
+        model = build_model(scene)
+    except (SceneError, tomllib.TOMLDecodeError) as e:
+        raise ConfigurationError(f"cannot rebuild the body from the stored scene: {str(e).splitlines()[0]}") from None
+    if stored is not None:
+        X, c = np.asarray(stored["coords"], float), np.asarray(stored["contact_nodes"])
+        scale = max(float(np.abs(X).max(initial=0.0)), 1e-300)
+        if (X.shape != model.coords.shape or not np.array_equal(c, model.contact_nodes)
+                or np.abs(X - model.coords).max() > MODEL_MATCH_RTOL * scale):
+            raise ConfigurationError("the body rebuilt from the stored scene differs from the result's "
+                                     "/model (was the mesh file changed since the run?)")
+    return scene, model
+
+
+def _text(v) -> str:
+    v = v[()] if isinstance(v, h5py.Dataset) else v
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+# --------------------------------------------------------------------------- VTU
+
+def write_vtu(config: Configuration, path: str) -> None:
+    """Write the configuration as a VTK XML unstructured grid (meshio), atomically.
+
+    points: model.coords padded to 3 components. Point data: "displacement" (n, 3) and
+    "reaction" (n, 3) (global axes, padded with 0 in 2D; reaction nonzero at contact nodes
+    only), "contact" (n,) int: position in the contact list, -1 elsewhere. Cell data per
+    block of model.cells: "von_mises" (continuum) and/or "axial_force" (bars), NaN on blocks
+    of the other family.
+    """
+    import meshio
+    mdl = config.model
+    n, dim = mdl.coords.shape
+
+    def pad(a):
+        out = np.zeros((len(a), 3))
+        out[:, :dim] = a
+        return out
+
+    contact = np.full(n, -1, dtype=np.int64)
+    contact[mdl.contact_nodes] = np.arange(mdl.m)
+    blocks = [(c, np.asarray(q, dtype=np.int64)) for c, q in mdl.cells.items()]
+    cell_data = {name: [np.asarray(vals[c], dtype=float) if c in vals else np.full(len(q), math.nan)
+                        for c, q in blocks]
+                 for name, vals in config.element_values.items()}
+    mesh = meshio.Mesh(pad(mdl.coords), blocks,
+                       point_data={"displacement": pad(config.displacement),
+                                   "reaction": pad(config.reaction), "contact": contact},
+                       cell_data=cell_data)
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".vtu", dir=folder)
+    os.close(fd)
+    try:
+        meshio.write(tmp, mesh, file_format="vtu")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
