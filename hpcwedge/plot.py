@@ -1,9 +1,12 @@
 """`hpcwedge plot` (SPEC §4): one wedged configuration and the cones' mu^c, as a PNG.
 
-Left panel: with a /model group, the undeformed body (light grey) and the body with
-only its contact nodes displaced by the chosen wedged ray (interior displacements are
-not stored in a result), the reactions at the contact nodes and the obstacle walls;
-without one (raw stiffness scenes), bars of r_n and u_n per contact node.
+Left panel: with a /model group, the undeformed body (light grey) and the whole body
+deformed by the chosen wedged ray (configuration.load_configuration: interior nodes from
+the condensation, on the body rebuilt from the stored scene), coloured by the element
+values — von Mises stress of continuum elements, axial force of bars — with the reactions
+at the contact nodes and the obstacle walls. When the body cannot be rebuilt (e.g. its
+mesh file is gone) only the contact nodes are displaced, and the title says so. Without
+a /model group (raw stiffness scenes), bars of r_n and u_n per contact node.
 Right panel: the mu^c of every cone of the run, with the run's mu and the global mu^c.
 
 Drawn with matplotlib's Agg canvas on a bare Figure (no pyplot, no display).
@@ -100,6 +103,13 @@ def _read(f, path: str, run: int, ray: int) -> dict:
                 or mdl["normals"].shape != (m, 2):
             raise ValueError(f"plot: {path}: /model does not match dim 2 and m = {m}")
         out["model"] = mdl
+        out["config"], out["config_note"] = None, None
+        if n_rays:
+            from .configuration import ConfigurationError, load_configuration
+            try:
+                out["config"] = load_configuration(path, run=k, ray=j)
+            except ConfigurationError as e:
+                out["config_note"] = str(e)
     return out
 
 
@@ -129,7 +139,7 @@ def _config_panel(ax, d: dict) -> None:
     if d["model"] is None:
         _bars_panel(ax, un, rn, head)
     else:
-        _body_panel(ax, d["model"], un, ut, rn, rt, head)
+        _body_panel(ax, d["model"], un, ut, rn, rt, head, d.get("config"), d.get("config_note"))
 
 
 def _bars_panel(ax, un, rn, head: str) -> None:
@@ -147,7 +157,7 @@ def _bars_panel(ax, un, rn, head: str) -> None:
     ax.set_title(f"{head}: r_n and u_n per contact node\n(raw stiffness scene, no geometry)", fontsize=10)
 
 
-def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str) -> None:
+def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str | None = None) -> None:
     from matplotlib.collections import LineCollection
 
     X = mdl["coords"]
@@ -155,14 +165,17 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str) -> None:
     n = mdl["normals"]
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     t = np.stack([n[:, 1], -n[:, 0]], axis=1)          # 2D tangent t = (n_y, -n_x)
-    disp = un[:, None] * n + ut[:, None] * t
     reac = rn[:, None] * n + rt[:, None] * t
+    if config is not None:
+        D = config.displacement
+    else:                                                # contact nodes only
+        D = np.zeros_like(X)
+        D[c] = un[:, None] * n + ut[:, None] * t
     size = float(np.max(np.ptp(X, axis=0))) if len(X) > 1 else 1.0
     size = size if size > 0 else 1.0
-    dmax = float(np.max(np.linalg.norm(disp, axis=1)))
+    dmax = float(np.max(np.linalg.norm(D, axis=1)))
     scale = DISP_FRACTION * size / dmax if dmax > 0 else 0.0
-    Y = X.copy()
-    Y[c] += scale * disp
+    Y = X + scale * D
 
     def segments(P):
         segs = []
@@ -177,10 +190,15 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str) -> None:
                     segs.append(P[np.append(cell, cell[0])])
         return segs
 
+    what = "whole body" if config is not None else "contact nodes"
+    values = config.element_values if config is not None else {}
     ax.add_collection(LineCollection(segments(X), colors="0.78", linewidths=1.2, zorder=1,
                                      label="undeformed"))
-    ax.add_collection(LineCollection(segments(Y), colors="tab:blue", linewidths=1.4, zorder=2,
-                                     label=f"contact nodes displaced (x{scale:.3g})"))
+    if values:
+        _coloured_body(ax, mdl["cells"], Y, values, f"{what} displaced (x{scale:.3g})")
+    else:
+        ax.add_collection(LineCollection(segments(Y), colors="tab:blue", linewidths=1.4, zorder=2,
+                                         label=f"{what} displaced (x{scale:.3g})"))
     if not mdl["cells"]:
         ax.plot(X[:, 0], X[:, 1], ".", color="0.7")
 
@@ -214,9 +232,36 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str) -> None:
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_aspect("equal", adjustable="box")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=4, fontsize=8, frameon=False)
-    ax.set_title(f"{head}: only contact nodes are displaced (interior displacements not stored)\n"
-                 f"displacement x{scale:.3g} (largest = {DISP_FRACTION:.0%} of body size); "
+    first = (f"{head}: the whole body (interior from the condensation)" if config is not None else
+             f"{head}: only contact nodes displaced ({note or 'body not rebuilt'})")
+    ax.set_title(f"{first}\ndisplacement x{scale:.3g} (largest = {DISP_FRACTION:.0%} of body size); "
                  f"arrows: reactions", fontsize=9)
+
+
+def _coloured_body(ax, cells: dict, Y: np.ndarray, values: dict, label: str) -> None:
+    """The deformed body Y (n, 2): continuum cells filled by von Mises stress, bars coloured
+    by axial force (diverging, tension red), each with a colour bar."""
+    from matplotlib.collections import LineCollection, PolyCollection
+    from matplotlib.colors import TwoSlopeNorm
+
+    from .configuration import AXIAL_FORCE, VON_MISES
+    fig = ax.figure
+    if VON_MISES in values:
+        polys, vals = [], []
+        for kind, v in values[VON_MISES].items():
+            polys.extend(Y[np.asarray(cells[kind]).reshape(len(v), -1)])
+            vals.append(v)
+        pc = PolyCollection(polys, array=np.concatenate(vals), cmap="viridis", edgecolors="0.25",
+                            linewidths=0.4, zorder=2, label=label)
+        ax.add_collection(pc)
+        fig.colorbar(pc, ax=ax, shrink=0.8, label="von Mises stress (element centroid)")
+    if AXIAL_FORCE in values:
+        v = values[AXIAL_FORCE]["line"]
+        lim = max(float(np.abs(v).max()), 1e-300)
+        lc = LineCollection(Y[np.asarray(cells["line"]).reshape(-1, 2)], array=v, cmap="coolwarm",
+                            norm=TwoSlopeNorm(0.0, -lim, lim), linewidths=2.0, zorder=2, label=label)
+        ax.add_collection(lc)
+        fig.colorbar(lc, ax=ax, shrink=0.8, label="bar axial force (tension > 0)")
 
 
 # --------------------------------------------------------------------------- right panel
