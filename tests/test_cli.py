@@ -95,3 +95,62 @@ def test_run_show_json_3d(tmp_path, capsys):
     assert "socp_statuses" in got["stats"]
     assert main(["show", out]) == 0
     assert "pattern" in capsys.readouterr().out
+
+
+# ----------------------------------------------------------------------------- export
+
+def _run_quiet(tmp_path, text, name):
+    s = write(tmp_path, text, name + ".toml")
+    out = str(tmp_path / (name + ".h5"))
+    assert main(["run", s, "-o", out, "-q"]) == 0
+    return out
+
+
+def test_export_vtu(tmp_path, capsys):
+    """`export` writes a VTU that meshio reads back: displacement and reaction (n, 3) point
+    data, von Mises (block2d, Q4) or axial force (plug3d, bars) per cell."""
+    import meshio
+    import numpy as np
+    b2 = _run_quiet(tmp_path, 'name = "b"\ndim = 2\n[model]\nkind = "block2d"\nrows = 2\n'
+                    '[friction]\nmu = [0.65]\n', "b2")
+    p3 = _run_quiet(tmp_path, 'name = "p"\ndim = 3\n[model]\nkind = "plug3d"\nring = 4\n'
+                    '[friction]\nmu = [0.65]\n', "p3")
+    for res, args, n, cells, field in ((b2, ["--ray", "0"], 9, ("quad", 4), "von_mises"),
+                                       (b2, ["--cone", "-1", "--run", "0"], 9, ("quad", 4), "von_mises"),
+                                       (p3, ["--pattern", "2"], 10, ("line", 37), "axial_force")):
+        vtu = str(tmp_path / "out.vtu")
+        assert main(["export", res, *args, "-o", vtu]) == 0
+        assert "wrote" in capsys.readouterr().err
+        got = meshio.read(vtu)
+        assert got.points.shape == (n, 3)
+        assert got.point_data["displacement"].shape == (n, 3) and got.point_data["reaction"].shape == (n, 3)
+        assert np.abs(got.point_data["displacement"]).max() > 0
+        assert (got.cells[0].type, len(got.cells[0].data)) == cells
+        assert got.cell_data[field][0].shape == (cells[1],) and np.isfinite(got.cell_data[field][0]).all()
+
+
+@pytest.mark.parametrize("args,phrase", [
+    (["--run", "4", "--ray", "0"], "run 4 out of range"),
+    (["--ray", "500"], "ray 500 out of range"),
+    (["--pattern", "0"], "has no patterns"),
+    (["--cone", "7"], "cone 7 out of range"),
+])
+def test_export_errors_exit_2(tmp_path, capsys, args, phrase):
+    res = _run_quiet(tmp_path, 'name = "p"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 2\n'
+                     '[friction]\nmu = [0.65]\n', "p2")
+    vtu = tmp_path / "x.vtu"
+    assert main(["export", res, *args, "-o", str(vtu)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert phrase in err and err.startswith("hpcwedge: error: export:") and len(err.splitlines()) == 1
+    assert not vtu.exists() and not [p for p in os.listdir(tmp_path) if p.startswith(".tmp")]
+
+
+def test_export_stiffness_scene_and_missing_file(tmp_path, capsys):
+    res = _run_quiet(tmp_path, 'name = "k"\ndim = 2\n[model]\nkind = "stiffness"\n'
+                     'K = [[2.0, 0.5], [0.5, 1.0]]\n[friction]\nmu = [2.5]\n', "k")
+    assert main(["export", res, "--ray", "0", "-o", str(tmp_path / "x.vtu")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no body to export" in err and len(err.splitlines()) == 1
+    assert main(["export", str(tmp_path / "none.h5"), "--ray", "0", "-o", str(tmp_path / "x.vtu")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert not (tmp_path / "x.vtu").exists()

@@ -191,3 +191,30 @@ def test_model_panel_without_condensation(tmp_path):
         _check_png(png)
     with pytest.raises(ValueError, match=r"^plot: ray 3 out of range"):
         plot_result(h5, str(tmp_path / "bad.png"), ray=3)
+
+
+BLOCK2D_TOML = PLUG2D_TOML.replace('"plug2d"', '"block2d"').replace("plug2d-rows2", "block2d")
+
+
+@pytest.mark.skipif(_plug2d_available() is not None, reason=str(_plug2d_available()))
+def test_block2d_whole_body_von_mises(tmp_path):
+    """A continuum body is drawn whole (interior nodes displaced too), coloured by von Mises;
+    when the body cannot be rebuilt the contact-only drawing remains and the title says why."""
+    from hpcwedge.configuration import VON_MISES
+    from hpcwedge.plot import _load
+    h5 = _result_file(tmp_path, BLOCK2D_TOML)
+    d = _load(h5, -1, 1)
+    cfg = d["config"]
+    assert cfg is not None and d["config_note"] is None
+    assert cfg.element_values[VON_MISES]["quad"].shape == (len(d["model"]["cells"]["quad"]),)
+    interior = np.setdiff1d(np.arange(len(cfg.displacement)), d["model"]["contact_nodes"])
+    assert np.abs(cfg.displacement[interior]).max() > 0
+    png = tmp_path / "block.png"
+    plot_result(h5, str(png), ray=1)
+    _check_png(png)
+    with h5py.File(h5, "r+") as f:
+        f["model/coords"][0, 0] += 0.5                 # no longer the scene's body
+    d = _load(h5, -1, 1)
+    assert d["config"] is None and "differs" in d["config_note"]
+    plot_result(h5, str(png), ray=1)
+    _check_png(png)
