@@ -50,7 +50,8 @@ def solve(folder, text, name="s.toml", out="r.h5"):
 def results(tmp_path_factory):
     d = tmp_path_factory.mktemp("configuration")
     return {k: solve(d, text, f"{k}.toml", f"{k}.h5") for k, text in
-            [("plug2d", PLUG2D), ("block2d", BLOCK2D), ("plug3d", PLUG3D), ("pinned", _supported_truss()),
+            [("plug2d", PLUG2D), ("plug2d_patterns", PLUG2D + '[compute]\nenumerate = "patterns"\n'),
+             ("block2d", BLOCK2D), ("plug3d", PLUG3D), ("pinned", _supported_truss()),
              ("stiffness", STIFFNESS)]}
 
 
@@ -71,7 +72,7 @@ def _truss_K(coords, bars, EA):
 
 
 def _full_K(model, kind):
-    if kind == "block2d":
+    if kind.startswith("block2d"):
         return q4_stiffness(model.coords, model.cells["quad"], E=2.0, nu=0.25).toarray()
     return _truss_K(model.coords, model.cells["line"], 1.0)
 
@@ -84,7 +85,7 @@ def _frame_vectors(model, v_local):
     return np.einsum("ia,iaj->ij", comps, axes)
 
 
-CASES = [("plug2d", {"ray": 5}), ("plug2d", {"cone": 0}), ("block2d", {"ray": -1}),
+CASES = [("plug2d", {"ray": 5}), ("plug2d", {"cone": 0}), ("plug2d_patterns", {"pattern": 0}), ("block2d", {"ray": -1}),
          ("block2d", {"cone": 1}), ("plug3d", {"pattern": 0}), ("plug3d", {"pattern": -1}),
          ("pinned", {"ray": 0})]
 
