@@ -151,7 +151,7 @@ def plot(summary: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6.5, 4.8))
+    fig, ax = plt.subplots(figsize=(7, 6))
     for (key, sm), color in zip(summary.items(), ("C0", "C1")):
         solver = "LP" if key == "2d" else "SOCP"
         for prefix, style, what in (("bisection", "o-", "default"), ("tight bisection", "s--", "tight")):
@@ -167,7 +167,7 @@ def plot(summary: dict) -> None:
     ax.set_xlabel("mean time per mu^c [ms]")
     ax.set_ylabel("worst relative error vs analytic")
     ax.set_title("mu^c: run time against error (analytic scenes)")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     fig.tight_layout()
     fig.savefig(os.path.join(OUT, "bench_mu_c.png"), dpi=120)
 
