@@ -47,7 +47,7 @@ file = "plug{m}.npz"
 mu = {mus}
 [compute]
 enumerate = true
-mu_c = "cones"
+mu_c = "{mu_c}"
 [run]
 checkpoint_every_s = {every}
 """
@@ -66,11 +66,12 @@ def _write_raw_plug(tmp_path, rows: int) -> None:
     np.savez(tmp_path / f"plug{2 * rows}.npz", **_RAW[rows])
 
 
-def write_rays_scene(tmp_path, rows: int, mus=(0.65,), every: float = 60.0, name: str = "rays.toml") -> str:
+def write_rays_scene(tmp_path, rows: int, mus=(0.65,), every: float = 60.0, name: str = "rays.toml",
+                     mu_c: str = "cones") -> str:
     """RAYS_SCENE for plug2d with `rows` rows (m = 2 rows) in tmp_path."""
     _write_raw_plug(tmp_path, rows)
     p = tmp_path / name
-    p.write_text(RAYS_SCENE.format(m=2 * rows, mus=list(mus), every=every))
+    p.write_text(RAYS_SCENE.format(m=2 * rows, mus=list(mus), every=every, mu_c=mu_c))
     return str(p)
 
 
@@ -115,16 +116,25 @@ def launch(ranks, *args) -> subprocess.Popen:
                             stderr=subprocess.PIPE, text=True)
 
 
-def show_json(path: str) -> dict:
-    """The object `hpcwedge show PATH --json` prints (run in-process: the same code)."""
+def show_json(path: str, rays: bool = True) -> dict:
+    """The object `hpcwedge show PATH --json [--no-rays]` prints (run in-process: the same code)."""
     import contextlib
     import io
 
     from hpcwedge.cli import main
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        assert main(["show", path, "--json"]) == 0
+        assert main(["show", path, "--json"] + ([] if rays else ["--no-rays"])) == 0
     return json.loads(buf.getvalue())
+
+
+def ray_arrays(path: str) -> list:
+    """Per run of a result file, its rays, trivial_rays and ray_zero datasets (for
+    results with many rays, where the JSON of `show` is slow)."""
+    import h5py
+    with h5py.File(path, "r") as f:
+        return [[f["runs"][k][name][()] for name in ("rays", "trivial_rays", "ray_zero")]
+                for k in sorted(f["runs"])]
 
 
 def answers(d: dict) -> dict:
