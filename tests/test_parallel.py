@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -379,6 +380,23 @@ def test_idle_ranks_do_not_spin():
     assert max(idle) <= 0.03 * period, got            # idle workers: < 3% of a core
     assert b["cpu"][0] <= 0.05 * period, got          # the waiting master: < 5%
     assert min(c["cpu"][1:]) >= 0.1 * c["seconds"], got   # control: a blocking recv spins
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigterm_cancels_long_tasks():
+    """SIGTERM to the master while every worker is in a 60 s task that calls
+    task_tick(): the workers drop their tasks at the master's stop, close()
+    returns within seconds, and the whole job ends long before the tasks would."""
+    t = time.monotonic()
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
+                        sys.executable, os.path.join(ROOT, "tests", "engine_driver.py"), "cancel"],
+                       env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    assert got["interrupted"] is not None and got["interrupted"] < 10, got
+    assert got["closed"] - got["interrupted"] < 5, got
+    assert time.monotonic() - t < 40, got
 
 
 @pytest.mark.mpi
