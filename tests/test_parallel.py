@@ -163,8 +163,6 @@ def test_worker_error_in_serial_mode_propagates():
         parallel.run_tasks("boom", None, [1])
 
 
-@pytest.mark.parametrize("rows,taper,mus", [(2, 10.0, [0.2, 0.65]), (3, 10.0, [0.65]),
-                                            (3, 31.0, [0.62, 2.0]), (4, 20.0, [0.5])])
 def _plug_rows(rows: int, mus, exact: bool = False):
     """friction_rows_2d of plug2d (rows x 3, taper 10 deg) at every mu; m = 2 rows."""
     from hpcwedge.condense import condense
@@ -242,6 +240,8 @@ def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
         job.load(read_checkpoint(ckpt)["jobs"]["rays"])
 
 
+@pytest.mark.parametrize("rows,taper,mus", [(2, 10.0, [0.2, 0.65]), (3, 10.0, [0.65]),
+                                            (3, 31.0, [0.62, 2.0]), (4, 20.0, [0.5])])
 def test_2d_patterns_agree_with_rays(rows, taper, mus):
     """SPEC §2: (C, G) is feasible iff some wedged ray has supp(r_n) in C and
     supp(u_n) in G — the engine's patterns against the double description's rays."""
