@@ -59,10 +59,14 @@ import socket
 import time
 import traceback
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .checkpoint import CheckpointError, read_checkpoint, write_checkpoint
+
+if TYPE_CHECKING:
+    from .dd import DDResult
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
 EXIT_INTERRUPTED = 75
@@ -405,7 +409,7 @@ def face_task(ctx: FaceContext, payload: tuple) -> dict:
     return out
 
 
-def face_result(res: dict):
+def face_result(res: dict) -> "DDResult":
     """The dd.DDResult of a face_task result (as returned, or as read back from a
     checkpoint); stats["face"] is the face, as dd.merge_results expects."""
     from .dd import DDResult
@@ -853,9 +857,9 @@ class Engine:
     def close(self, timeout: float = 60.0, restore_signals: bool = True) -> None:
         """Master: stop every worker — one in a task that calls task_tick() drops it
         and says so — and collect what is still in flight (a worker blocked in a
-        large send would never read the stop; at most `timeout` seconds); restore the signal handlers (the command line keeps its own to
-        the end: a signal after mark_done() must not turn a finished run into a
-        failed one)."""
+        large send would never read the stop; at most `timeout` seconds); restore
+        the signal handlers (the command line keeps its own to the end: a signal
+        after mark_done() must not turn a finished run into a failed one)."""
         if self.comm is not None and self.is_master and not self._stopped:
             from mpi4py import MPI
             self._stopped = True
