@@ -945,7 +945,7 @@ def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, 
 
 
 def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = None,
-              nodes=None, name: str = "rays") -> list:
+              nodes=None, name: str = "rays") -> list["DDResult"]:
     """The complementary rays at every mu, the double description split over the
     faces of the branching nodes `nodes` (SPEC §5; default dd.branching_nodes for
     the engine's workers), one "face" task per (mu, face), through the engine.
