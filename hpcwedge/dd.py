@@ -42,6 +42,7 @@ uint64 word i // 21, so each node's test stays inside one word.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -301,6 +302,29 @@ def merge_results(results: list[DDResult]) -> DDResult:
              "seconds": float(sum(r.stats.get("seconds", 0.0) for r in results)),
              "face_seconds": [float(r.stats.get("seconds", 0.0)) for r in results]}
     return DDResult(X=X, zero=zero, stats=stats)
+
+
+#: faces per worker the split aims at (branching_nodes)
+FACE_TASKS_PER_WORKER = 4
+#: at most this many branching nodes: the face where every branching node is in
+#: contact holds ~97% of plug2d's rays and costs ~40% of the full run whatever k is,
+#: so more faces only add work (scripts/bench_dd_faces.py, plug2d m = 18: k = 3
+#: sums 6.4 s CPU, largest face 2.8 s; k = 4 sums 8.6 s, largest 4.2 s)
+MAX_BRANCHING_NODES = 3
+
+
+def branching_nodes(m: int, workers: int) -> list[int]:
+    """The nodes whose faces split the DD over `workers` worker ranks: none when
+    workers = 0 (the serial run stays one DD); else the last k nodes m-k..m-1, k the
+    least with 2^k >= FACE_TASKS_PER_WORKER * workers, at most MAX_BRANCHING_NODES
+    and m - 1. (On plug2d the last nodes are the top of the right wall; splitting
+    there was the cheapest of the node sets measured: the bottom nodes or both top
+    corners cost 1.5-2x more CPU in total.)"""
+    if workers < 1 or m < 2:
+        return []
+    k = max(1, math.ceil(math.log2(FACE_TASKS_PER_WORKER * workers)))
+    k = min(k, MAX_BRANCHING_NODES, m - 1)
+    return list(range(m - k, m))
 
 
 def canonical_order(zero: np.ndarray, return_words: bool = False):

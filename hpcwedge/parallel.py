@@ -4,11 +4,15 @@ Vocabulary
 - *task* = (kind, payload). A kind names a handler ``handler(context, payload)
   -> result``; ``context`` is the job's shared read-only data (a picklable
   object: the parametrisation, the mu list, ...), sent once to each worker.
-  The engines (patterns.py, mu_critical.py, dd.py) know nothing of MPI.
+  The engines (patterns.py, mu_critical.py, dd.py) know nothing of MPI. Kinds:
+  "subtree" (sign patterns), "mu_c", "face" (the 2D double description of one
+  face of a few branching nodes, SPEC §5; run_faces). A long task calls
+  ``task_tick()`` now and then, where a stopping engine may cancel it.
 - *job*: a pool of tasks and the merge of their results. ``SubtreeJob``
   (branch and bound: a task explores a subtree with a node budget and gives
   back the subtrees it left open, which return to the pool) and ``TaskJob``
-  (a fixed list of independent tasks: mu^c, faces).
+  (a fixed list of independent tasks: mu^c, faces; a face split depends on the
+  rank count, so its job saves the split and a resumed run keeps it).
 - ``Engine`` runs jobs. One process (no MPI launcher, or size 1): the same
   task loop in-process. Under mpirun: rank 0 is the master — it holds the
   pool, hands a task to each worker that is free, merges results and alone
@@ -28,7 +32,8 @@ every round trip cost ~140 ms instead of ~0.2 ms.
 
 Checkpoints (checkpoint.py has the file layout): every ``checkpoint_every_s``
 seconds, at SIGUSR1 (then the run goes on) and at SIGTERM/SIGINT (then the
-master stops the workers and the command exits with EXIT_INTERRUPTED). Signal
+master stops the workers — a task in progress is dropped at its next
+task_tick() — and the command exits with EXIT_INTERRUPTED). Signal
 handlers only set a flag inside the task loop, which acts on it between two
 merges (a task is done only once its result is merged into the master's
 state; tasks in flight are saved as open). Outside the loop, SIGTERM raises
@@ -54,10 +59,14 @@ import socket
 import time
 import traceback
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .checkpoint import CheckpointError, read_checkpoint, write_checkpoint
+
+if TYPE_CHECKING:
+    from .dd import DDResult
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
 EXIT_INTERRUPTED = 75
@@ -75,7 +84,7 @@ BUDGET_SCALE = 16
 #: default node budget of a subtree task (scene key run.task_budget)
 DEFAULT_BUDGET = 64
 
-_TASK, _RESULT, _ERROR, _STOP, _HELLO = 1, 2, 3, 4, 5
+_TASK, _RESULT, _ERROR, _STOP, _HELLO, _CANCELLED = 1, 2, 3, 4, 5, 6
 #: how often an idle worker checks that its master (same host) is still alive
 MASTER_CHECK_S = 0.2
 
@@ -88,17 +97,55 @@ class Interrupted(Exception):
     """SIGTERM/SIGINT reached the master: write the checkpoint and stop."""
 
 
+class TaskCancelled(Exception):
+    """Raised by task_tick() inside a task the engine is stopping."""
+
+
+#: set by the engine while it runs a task: returns True when the task should stop
+_cancel_check = None
+_TICK_EVERY_S = 0.05
+_last_tick = 0.0
+
+
+def task_tick() -> None:
+    """Long task handlers call this now and then (face_task: after every DD step).
+    Raises TaskCancelled when the engine is stopping — a worker whose master sent
+    stop (after SIGTERM: the master checkpoints, then stops the workers; without
+    this a worker would finish its task first, and mpirun would wait for it), or
+    the in-process engine after SIGTERM. A cancelled task counts as not done (it is
+    in flight, so the checkpoint keeps it as open). Cheap: checks at most every
+    50 ms; a no-op outside a task."""
+    global _last_tick
+    if _cancel_check is None:
+        return
+    now = time.monotonic()
+    if now - _last_tick < _TICK_EVERY_S:
+        return
+    _last_tick = now
+    if _cancel_check():
+        raise TaskCancelled()
+
+
+def _run_cancellable(handler, ctx, payload, check):
+    global _cancel_check, _last_tick
+    _cancel_check, _last_tick = check, time.monotonic()
+    try:
+        return handler(ctx, payload)
+    finally:
+        _cancel_check = None
+
+
 # ---------------------------------------------------------------- task kinds
 
 KINDS: dict = {
     "subtree": "hpcwedge.parallel:explore_task",
     "mu_c": "hpcwedge.parallel:mu_c_task",
-    # "face": "hpcwedge.dd:face_task",      # the 2D split over faces (SPEC §5) goes here
+    "face": "hpcwedge.parallel:face_task",  # the 2D double description split over faces (SPEC §5)
 }
 
 
 #: modules a worker imports before its first task (the engines' heavy imports)
-WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical"]
+WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical", "hpcwedge.dd"]
 
 
 def register(kind: str, handler) -> None:
@@ -321,14 +368,90 @@ def mu_c_task(solve, payload) -> dict:
             "lps": int(r.lps), "undecided": int(r.undecided)}
 
 
+@dataclass
+class FaceContext:
+    """The shared data of "face" tasks: the constraint rows A of every mu
+    (problem.friction_rows_2d: float, or exact integer object arrays), m, and
+    whether the DD runs in exact arithmetic."""
+
+    rows: list
+    m: int
+    exact: bool = False
+
+
+def face_payloads(n_mu: int, m: int, nodes) -> list[tuple]:
+    """The "face" tasks of a split: (mu index, face) for every mu and every face of
+    dd.split_faces(m, nodes), face by face (the face where every branching node is in
+    contact, usually the largest, first for every mu: big tasks start first)."""
+    from .dd import split_faces
+    return [(i, f) for f in split_faces(m, nodes) for i in range(n_mu)]
+
+
+def face_task(ctx: FaceContext, payload: tuple) -> dict:
+    """Task "face": payload (mu index, (contact, gap)) -> the DD of that face
+    (dd.complementary_rays(..., face=...); task_tick() after every step) as a dict
+    of numbers and arrays, so that checkpoints can hold it: mu_index; contact, gap
+    ((m,) bool masks of the face); X (R, d) float64 rays, or exact integers as
+    decimal strings (bytes); zero (R, ceil(3m / 8)) uint8, the zero flags packed
+    along rows (np.packbits); the counters initial_rays, pairs_tested,
+    pairs_adjacent, max_rays and seconds. face_result() turns it back into a
+    dd.DDResult."""
+    from .dd import complementary_rays
+    i, (contact, gap) = payload
+    dd = complementary_rays(ctx.rows[i], ctx.m, exact=ctx.exact, face=(contact, gap),
+                            progress=lambda info: task_tick())
+    nodes = np.arange(ctx.m)
+    out = {"mu_index": int(i), "contact": np.isin(nodes, list(contact)), "gap": np.isin(nodes, list(gap)),
+           "X": _encode_rays(dd.X), "zero": np.packbits(dd.zero, axis=1)}
+    for key in ("initial_rays", "pairs_tested", "pairs_adjacent", "max_rays"):
+        out[key] = int(dd.stats[key])
+    out["seconds"] = float(dd.stats["seconds"])
+    return out
+
+
+def face_result(res: dict) -> "DDResult":
+    """The dd.DDResult of a face_task result (as returned, or as read back from a
+    checkpoint); stats["face"] is the face, as dd.merge_results expects."""
+    from .dd import DDResult
+    contact, gap = np.asarray(res["contact"], dtype=bool), np.asarray(res["gap"], dtype=bool)
+    m = len(contact)
+    zero = np.unpackbits(np.asarray(res["zero"], dtype=np.uint8).reshape(-1, -(-3 * m // 8)),
+                         axis=1, count=3 * m).astype(bool)
+    stats = {k: res[k] for k in ("initial_rays", "pairs_tested", "pairs_adjacent", "max_rays", "seconds")}
+    stats["face"] = (tuple(np.flatnonzero(contact).tolist()), tuple(np.flatnonzero(gap).tolist()))
+    return DDResult(X=_decode_rays(res["X"]), zero=zero, stats=stats)
+
+
+def _encode_rays(X: np.ndarray) -> np.ndarray:
+    """Float rays as they are; exact ones (object ints) as decimal strings."""
+    if X.dtype != object:
+        return X
+    return X.astype(str).astype("S") if X.size else np.zeros(X.shape, dtype="S1")
+
+
+def _decode_rays(X: np.ndarray) -> np.ndarray:
+    X = np.asarray(X)
+    if X.dtype.kind != "S":
+        return X
+    return np.frompyfunc(int, 1, 1)(X).astype(object)
+
+
 class TaskJob:
     """A fixed list of independent tasks of one kind; results are dicts whose
     values are numbers/bools (stored as one column per key) or arrays (stored
     concatenated along axis 0, with <key>_offsets). Checkpoint data: done (the
-    indices whose result is in), the result columns."""
+    indices whose result is in), the result columns.
 
-    def __init__(self, name: str, kind: str, context, payloads: list):
+    layout: optional JSON value from which the payloads were made (e.g. the face
+    split, which depends on the rank count); it is saved, and a resumed job whose
+    layout differs takes the saved one, with payloads_for(saved layout) as its
+    payloads, so that the finished tasks stay valid (without payloads_for a
+    differing layout is a CheckpointError). Results should then say which task they
+    answer: their order follows the adopted payloads."""
+
+    def __init__(self, name: str, kind: str, context, payloads: list, layout=None, payloads_for=None):
         self.name, self.kind, self.context = name, kind, context
+        self.layout, self.payloads_for = _json_value(layout), payloads_for
         self.payloads = list(payloads)
         self.results: list = [None] * len(self.payloads)
         self._todo = list(range(len(self.payloads)))[::-1]
@@ -359,10 +482,17 @@ class TaskJob:
                 arrs = [np.atleast_1d(np.asarray(v)) for v in vals]
                 data[key] = np.concatenate(arrs, axis=0)
                 data[key + "_offsets"] = np.cumsum([0] + [len(a) for a in arrs])
-        return {"attrs": {"n_tasks": len(self.payloads), "result_keys": json.dumps(keys)}, "data": data}
+        return {"attrs": {"n_tasks": len(self.payloads), "result_keys": json.dumps(keys),
+                          "layout": json.dumps(self.layout)}, "data": data}
 
     def load(self, state: dict) -> None:
         a, d = state["attrs"], state["data"]
+        saved = json.loads(a.get("layout", "null"))
+        if saved != self.layout:
+            if self.payloads_for is None:
+                raise CheckpointError(f"job {self.name!r}: the checkpoint's task layout {saved!r} is not "
+                                      f"this run's {self.layout!r}")
+            self.layout, self.payloads = saved, list(self.payloads_for(saved))
         if int(a["n_tasks"]) != len(self.payloads):
             raise CheckpointError(f"job {self.name!r}: the checkpoint has {a['n_tasks']} tasks, "
                                   f"this run {len(self.payloads)}")
@@ -383,6 +513,11 @@ class TaskJob:
 
     def output(self) -> list:
         return self.results
+
+
+def _json_value(v):
+    """v as it reads back from JSON (tuples become lists), for comparisons."""
+    return json.loads(json.dumps(v))
 
 
 # ---------------------------------------------------------------- the engine
@@ -456,6 +591,12 @@ class Engine:
         self._elapsed_before = float(a["elapsed_s"])
         self.resumes = int(a["resumes"]) + 1
         return True
+
+    def restored(self, name: str) -> bool:
+        """The checkpoint this run resumed from holds a job `name` not run yet in
+        this session (the pipeline then runs that stage as jobs again, so that the
+        saved work is used)."""
+        return name in self._restored
 
     def elapsed(self) -> float:
         return self._elapsed_before + time.monotonic() - self._t0
@@ -588,7 +729,10 @@ class Engine:
                 return
             token, payload = taken
             self._inflight[0] = token
-            result = handler(job.context, payload)
+            try:
+                result = _run_cancellable(handler, job.context, payload, self._stop_flag)
+            except TaskCancelled:
+                raise Interrupted(self._stop_flag()) from None
             job.merge(token, result)           # done: in the master's state
             del self._inflight[0]
             self.tasks_per_rank[0] += 1
@@ -701,21 +845,26 @@ class Engine:
             try:
                 if ctx_id != job_id:
                     raise RuntimeError(f"task of job {job_id} without its context")
-                result = handler_for(kind)(ctx, payload)
+                result = _run_cancellable(handler_for(kind), ctx, payload,
+                                          lambda: _probe(comm, 0, _STOP, status))
+            except TaskCancelled:
+                comm.send(None, dest=0, tag=_CANCELLED)     # the stop is read next
             except Exception:
                 comm.send(traceback.format_exc(), dest=0, tag=_ERROR)
             else:
                 comm.send(result, dest=0, tag=_RESULT)
 
     def close(self, timeout: float = 60.0, restore_signals: bool = True) -> None:
-        """Master: collect the results still in flight (a worker blocked in a large
-        send would never see the stop; at most `timeout` seconds), then stop every
-        worker; restore the signal handlers (the command line keeps its own to
-        the end: a signal after mark_done() must not turn a finished run into a
-        failed one)."""
+        """Master: stop every worker — one in a task that calls task_tick() drops it
+        and says so — and collect what is still in flight (a worker blocked in a
+        large send would never read the stop; at most `timeout` seconds); restore
+        the signal handlers (the command line keeps its own to the end: a signal
+        after mark_done() must not turn a finished run into a failed one)."""
         if self.comm is not None and self.is_master and not self._stopped:
             from mpi4py import MPI
             self._stopped = True
+            for w in self.workers:
+                self.comm.send(None, dest=w, tag=_STOP)
             status = MPI.Status()
             end = time.monotonic() + timeout
             while self._inflight and time.monotonic() < end:
@@ -725,8 +874,6 @@ class Engine:
                     self._inflight.pop(src, None)
                 else:
                     time.sleep(0.005)
-            for w in self.workers:
-                self.comm.send(None, dest=w, tag=_STOP)
         if restore_signals:
             for sig, h in self._old_handlers.items():
                 signal.signal(sig, h)
@@ -788,11 +935,48 @@ def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> 
                 lps=int(r["lps"]), undecided=int(r["undecided"])) for r in out]
 
 
-def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, name: str | None = None) -> list:
+def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, name: str | None = None,
+              layout=None, payloads_for=None) -> list:
     """Results of independent tasks of a registered kind (e.g. "face"), in order.
-    Results must be dicts of numbers/bools/arrays (so that checkpoints can hold them)."""
+    Results must be dicts of numbers/bools/arrays (so that checkpoints can hold them).
+    layout, payloads_for: see TaskJob (a resumed run keeps the saved layout)."""
     engine = engine or Engine()
-    return engine.run(TaskJob(name or kind, kind, context, payloads)).output()
+    return engine.run(TaskJob(name or kind, kind, context, payloads, layout, payloads_for)).output()
+
+
+def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = None,
+              nodes=None, name: str = "rays") -> list["DDResult"]:
+    """The complementary rays at every mu, the double description split over the
+    faces of the branching nodes `nodes` (SPEC §5; default dd.branching_nodes for
+    the engine's workers), one "face" task per (mu, face), through the engine.
+
+    rows: the constraint rows A of every mu (problem.friction_rows_2d). Returns one
+    dd.DDResult per mu (merge_results of its faces: canonical order, duplicates
+    removed, stats with faces, face_seconds and branching_nodes). A resumed run
+    keeps the split its checkpoint was made with, so finished faces are reused
+    whatever the rank count now is. The zero flags, and so every count, cone and
+    mu^c, are those of the unsplit run; the float ray vectors equal them to
+    rounding (a ray's floats depend on the DD's path to it: ~1e-13 relative)."""
+    from .dd import branching_nodes, merge_results
+    engine = engine or Engine()
+    nodes = branching_nodes(m, engine.size - 1) if nodes is None else [int(i) for i in nodes]
+
+    def payloads_for(layout):
+        return face_payloads(len(rows), m, layout["branching_nodes"])
+
+    layout = {"branching_nodes": nodes}
+    out = run_tasks("face", FaceContext(list(rows), m, exact), payloads_for(layout), engine, name,
+                    layout=layout, payloads_for=payloads_for)
+    per_mu: list = [[] for _ in rows]
+    for res in out:
+        per_mu[int(res["mu_index"])].append(face_result(res))
+    merged = []
+    for faces in per_mu:
+        dd = merge_results(faces)
+        split = sorted({i for f in faces for part in f.stats["face"] for i in part})
+        dd.stats["branching_nodes"] = split
+        merged.append(dd)
+    return merged
 
 
 def strip_exact(param):

@@ -8,7 +8,9 @@ Result whose lists are in canonical order (SPEC §4).
 mu^c per pattern and global (2D too with enumerate = "patterns"). The units
 of work the parallel layer distributes (parallel.run_patterns: budgeted
 PatternTree.explore calls over subtrees; parallel.run_mu_c: mu^c of one
-cone or pattern) are the same in both dimensions.
+cone or pattern) are the same in both dimensions; under mpirun the 2D double
+description is split too (parallel.run_faces: the DD of one face of a few
+branching nodes, at one mu).
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from .cones import maximal_cones
 from .dd import canonical_order, complementary_rays
 from .model import Model
 from .mu_critical import mu_critical
-from .parallel import Engine, run_mu_c, run_patterns, strip_exact
+from .parallel import Engine, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, global_mu_critical
 from .problem import ContactProblem, parametrize, friction_rows_2d, ray_vectors
 from .progress import Progress
@@ -77,7 +79,11 @@ class Result:
 def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None) -> Result:
     """Every answer the scene asks for (see Scene.plan). Sign patterns and mu^c
     run as tasks of `engine` (parallel.py: in-process by default; the master of
-    an MPI run, with checkpoints, from the command line)."""
+    an MPI run, with checkpoints, from the command line). The 2D rays run as one
+    double description per mu on the master when the engine has no workers, and
+    split over faces as "face" tasks (parallel.run_faces) when it has some or when
+    the checkpoint it resumed from holds that split: the same zero sets, counts,
+    cones and mu^c; the ray vectors equal to rounding (~1e-13 relative)."""
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
     t0 = time.perf_counter()
@@ -107,11 +113,13 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     if plan.rays:
         t = time.perf_counter()
         stages.append("enumerate")
-        for run in result.runs:
-            progress.stage(f"rays mu={run.mu:g}")
-            A = friction_rows_2d(param, run.mu, m, exact=scene.exact)
-            dd = complementary_rays(A, m, exact=scene.exact, progress=progress)
-            progress.close()
+        if engine.size > 1 or engine.restored(RAYS_JOB):
+            # split over faces, one task per (mu, face) (SPEC §5); resumed: the saved split
+            rows = [friction_rows_2d(param, run.mu, m, exact=scene.exact) for run in result.runs]
+            dds = run_faces(rows, m, exact=scene.exact, engine=engine, name=RAYS_JOB)
+        else:
+            dds = (_rays_serial(param, run.mu, m, scene.exact, progress) for run in result.runs)
+        for run, dd in zip(result.runs, dds):
             _fill_rays(run, dd, param, m, plan.cones)
             stats["dd"].append({"mu": run.mu, **dd.stats})
         timings["enumerate"] = time.perf_counter() - t
@@ -197,6 +205,19 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     stats["parallel"] = engine.summary()
     result.stats = stats
     return result
+
+
+#: the engine job of the 2D rays stage (when split over faces)
+RAYS_JOB = "rays"
+
+
+def _rays_serial(param, mu: float, m: int, exact: bool, progress: Progress):
+    """One double description on the master (no split: a serial run)."""
+    progress.stage(f"rays mu={mu:g}")
+    dd = complementary_rays(friction_rows_2d(param, mu, m, exact=exact), m, exact=exact, progress=progress)
+    progress.close()
+    dd.stats.update(faces=1, branching_nodes=[])
+    return dd
 
 
 def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:

@@ -2,7 +2,11 @@
 ranks while (A) the master is busy and no worker has a task, (B) one worker
 runs a long task and the others have nothing, and (C, the control) a worker
 waits in a plain blocking comm.recv, which Open MPI busy-polls. Prints one
-JSON line: seconds of CPU per rank and phase, and each phase's length."""
+JSON line: seconds of CPU per rank and phase, and each phase's length.
+
+With the argument "cancel": every worker runs a 60 s task that calls
+parallel.task_tick(); the master gets SIGTERM after 0.5 s and closes the
+engine; prints when the job was interrupted and when close() returned."""
 import json
 import os
 import sys
@@ -14,7 +18,8 @@ from hpcwedge import parallel
 def spin(ctx, seconds):
     t = time.perf_counter()
     while time.perf_counter() - t < seconds:
-        pass
+        if ctx == "tick":
+            parallel.task_tick()
     return {"pid": os.getpid()}
 
 
@@ -57,5 +62,26 @@ def main(period):
     print(json.dumps(out), flush=True)
 
 
+def cancel():
+    import signal
+    import threading
+    comm = parallel.world()
+    engine = parallel.Engine(comm)
+    if comm.rank:
+        engine.serve()
+        return
+    engine.install_signals()
+    threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
+    t = time.perf_counter()
+    out = {"interrupted": None}
+    try:
+        parallel.run_tasks("spin", "tick", [60.0] * (comm.size - 1), engine=engine)
+    except parallel.Interrupted:
+        out["interrupted"] = time.perf_counter() - t
+    engine.close(timeout=30.0)
+    out["closed"] = time.perf_counter() - t
+    print(json.dumps(out), flush=True)
+
+
 if __name__ == "__main__":
-    main(float(sys.argv[1]))
+    cancel() if sys.argv[1] == "cancel" else main(float(sys.argv[1]))

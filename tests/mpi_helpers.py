@@ -35,7 +35,44 @@ task_budget = 4
 PLUG_MODEL = 'kind = "plug2d"\nrows = 4'
 #: the same plug as a raw condensed K (no PETSc start-up: quicker kill/resume cycles)
 RAW_MODEL = 'kind = "stiffness"\nfile = "plug8.npz"'
-_RAW = {}
+_RAW: dict = {}
+
+#: a 2D rays scene: plug2d (cols 3, taper 10 deg) as a raw condensed K, m = 2 rows
+RAYS_SCENE = """name = "plug{m}-rays"
+dim = 2
+[model]
+kind = "stiffness"
+file = "plug{m}.npz"
+[friction]
+mu = {mus}
+[compute]
+enumerate = true
+mu_c = "{mu_c}"
+[run]
+checkpoint_every_s = {every}
+"""
+
+
+def _write_raw_plug(tmp_path, rows: int) -> None:
+    """plug{2 rows}.npz in tmp_path: plug2d's condensed K and rigid modes."""
+    import numpy as np
+    if rows not in _RAW:
+        from hpcwedge.build import contact_problem
+        from hpcwedge.scene import parse_scene
+        sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": rows},
+                          "friction": {"mu": 1.0}})
+        prob = contact_problem(sc)
+        _RAW[rows] = {"K": prob.K, "null_space": prob.N}
+    np.savez(tmp_path / f"plug{2 * rows}.npz", **_RAW[rows])
+
+
+def write_rays_scene(tmp_path, rows: int, mus=(0.65,), every: float = 60.0, name: str = "rays.toml",
+                     mu_c: str = "cones") -> str:
+    """RAYS_SCENE for plug2d with `rows` rows (m = 2 rows) in tmp_path."""
+    _write_raw_plug(tmp_path, rows)
+    p = tmp_path / name
+    p.write_text(RAYS_SCENE.format(m=2 * rows, mus=list(mus), every=every, mu_c=mu_c))
+    return str(p)
 
 
 def scene_text(every: float = 0.1, raw: bool = True) -> str:
@@ -45,14 +82,7 @@ def scene_text(every: float = 0.1, raw: bool = True) -> str:
 def write_scene(tmp_path, every: float = 0.1, name: str = "scene.toml", text: str | None = None,
                 raw: bool = True) -> str:
     """The pattern scene in tmp_path (with plug8.npz, the condensed K and rigid modes)."""
-    import numpy as np
-    if not _RAW:
-        from hpcwedge.build import contact_problem
-        from hpcwedge.scene import parse_scene
-        sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 4}, "friction": {"mu": 1.0}})
-        prob = contact_problem(sc)
-        _RAW.update(K=prob.K, null_space=prob.N)
-    np.savez(tmp_path / "plug8.npz", **_RAW)
+    _write_raw_plug(tmp_path, 4)
     p = tmp_path / name
     p.write_text(text if text is not None else scene_text(every, raw))
     return str(p)
@@ -86,16 +116,25 @@ def launch(ranks, *args) -> subprocess.Popen:
                             stderr=subprocess.PIPE, text=True)
 
 
-def show_json(path: str) -> dict:
-    """The object `hpcwedge show PATH --json` prints (run in-process: the same code)."""
+def show_json(path: str, rays: bool = True) -> dict:
+    """The object `hpcwedge show PATH --json [--no-rays]` prints (run in-process: the same code)."""
     import contextlib
     import io
 
     from hpcwedge.cli import main
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        assert main(["show", path, "--json"]) == 0
+        assert main(["show", path, "--json"] + ([] if rays else ["--no-rays"])) == 0
     return json.loads(buf.getvalue())
+
+
+def ray_arrays(path: str) -> list:
+    """Per run of a result file, its rays, trivial_rays and ray_zero datasets (for
+    results with many rays, where the JSON of `show` is slow)."""
+    import h5py
+    with h5py.File(path, "r") as f:
+        return [[f["runs"][k][name][()] for name in ("rays", "trivial_rays", "ray_zero")]
+                for k in sorted(f["runs"])]
 
 
 def answers(d: dict) -> dict:
@@ -109,6 +148,31 @@ def answers(d: dict) -> dict:
     d["stats"].pop("socp_statuses", None)
     d["stats"]["bnb"] = {k: v for k, v in d["stats"].get("bnb", {}).items() if k in ("nodes", "partitions")}
     return d
+
+
+def rays_answers(d: dict) -> tuple[dict, list]:
+    """A `show --json` object of a 2D rays scene split into what must be identical
+    for every rank count — answers() without stats.dd (the DD's counters and
+    seconds depend on the face split) and without the ray vectors — and the ray
+    vectors per run ([rays, trivial_rays] as arrays), which a different face split
+    reproduces to rounding only (a ray's floats depend on the DD's path to it)."""
+    import numpy as np
+    d = answers(d)
+    d["stats"].pop("dd")
+    vectors = []
+    for run in d["runs"]:
+        vectors.append([np.array(run.pop(k) or [], dtype=float) for k in ("rays", "trivial_rays")])
+    return d, vectors
+
+
+def same_vectors(a: list, b: list, rtol: float = 1e-9) -> bool:
+    """Ray vectors of rays_answers equal to rounding (relative to each array's largest entry)."""
+    import numpy as np
+    for ra, rb in zip(a, b, strict=True):
+        for x, y in zip(ra, rb, strict=True):
+            if x.shape != y.shape or not np.all(np.abs(x - y) <= rtol * max(1.0, np.abs(y).max(initial=0))):
+                return False
+    return True
 
 
 def show(path: str) -> dict:

@@ -1,9 +1,11 @@
 """Checkpoints and --resume (SPEC §5) on the real command line: kill -9 of the
 master at random moments (serially and under mpirun), SIGTERM, SIGUSR1, a
-killed worker — then --resume gives exactly the uninterrupted answers; a
-checkpoint of another scene or a damaged one is refused (exit 2) and left as is."""
+killed worker, and both in the middle of a 2D double description split over
+faces — then --resume gives exactly the uninterrupted answers; a checkpoint of
+another scene or a damaged one is refused (exit 2) and left as is."""
 import os
 import random
+import shutil
 import signal
 import time
 
@@ -13,8 +15,9 @@ import pytest
 
 from hpcwedge.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
 from hpcwedge.parallel import EXIT_INTERRUPTED
-from mpi_helpers import (all_gone, answers, interrupt_cycles, launch, needs_mpirun, rank_pids, run, scene_text,
-                         show, show_json, usr1_handled, wait_for_checkpoint, write_scene)
+from mpi_helpers import (all_gone, answers, interrupt_cycles, launch, needs_mpirun, rank_pids, ray_arrays,
+                         rays_answers, run, scene_text, show, show_json, usr1_handled, wait_for_checkpoint,
+                         write_rays_scene, write_scene)
 
 
 @pytest.fixture(scope="module")
@@ -39,10 +42,10 @@ def _kill9_master(ranks):
     return how
 
 
-def _finish(scene, out, ranks=None):
+def _finish(scene, out, ranks=None, rays=True):
     run(ranks, "run", scene, "-o", out, "-q", "--resume")
     assert not os.path.exists(checkpoint_path(out)) and not os.path.exists(checkpoint_path(out) + ".tmp")
-    return show_json(out)
+    return show_json(out, rays=rays)
 
 
 # ---------------------------------------------------------------- kill -9
@@ -193,6 +196,133 @@ def test_sigusr1_checkpoints_and_goes_on(tmp_path, reference):
         pytest.fail("the run always ended before a SIGUSR1 checkpoint")
     want = dict(reference, scene_hash=got["scene_hash"])   # the scene differs in checkpoint_every_s only
     assert answers(got) == want and not os.path.exists(ckpt)
+
+
+# ---------------------------------------------------------------- in the middle of the 2D double description
+
+#: plug2d rows 8 (m = 16) at mu 0.65, no mu^c: 8 face tasks of 0.05-0.6 s CPU (1.3 s in
+#: all) under mpirun -n 3; a checkpoint every 0.3 s (each writes the finished faces' rays)
+DD_ROWS, DD_EVERY = 8, 0.3
+
+
+def _dd_scene(tmp_path) -> str:
+    return write_rays_scene(tmp_path, DD_ROWS, every=DD_EVERY, mu_c="none")
+
+
+@pytest.fixture(scope="module")
+def dd_reference(tmp_path_factory):
+    """The uninterrupted mpirun -n 3 run of the DD scene: show --json --no-rays and
+    the ray arrays (mpi_helpers.ray_arrays)."""
+    if shutil.which("mpirun") is None:
+        pytest.skip("mpirun not found")
+    tmp = tmp_path_factory.mktemp("dd")
+    scene = _dd_scene(tmp)
+    out = str(tmp / "ref.h5")
+    run(3, "run", scene, "-o", out, "-q")
+    return show_json(out, rays=False), ray_arrays(out)
+
+
+def _same_arrays(a: list, b: list) -> bool:
+    return all(np.array_equal(x, y) and x.dtype == y.dtype
+               for ra, rb in zip(a, b, strict=True) for x, y in zip(ra, rb, strict=True))
+
+
+def _faces_done(ckpt: str, since: float):
+    """(done, total) faces of the rays job in a checkpoint written after `since`, or None."""
+    try:
+        if os.stat(ckpt).st_mtime < since:
+            return None
+        job = read_checkpoint(ckpt)["jobs"].get("rays")
+    except (OSError, CheckpointError):
+        return None
+    if job is None:
+        return None
+    return len(job["data"]["done"]), int(job["attrs"]["n_tasks"])
+
+
+def _interrupt_mid_dd(tmp_path, how, attempts: int = 6):
+    """Run the DD scene under mpirun -n 3 until a checkpoint holds some but not all
+    faces, then how(proc, pids). A run whose DD ends first is started again.
+    Returns (scene, out, faces done in that checkpoint, exit status)."""
+    scene = _dd_scene(tmp_path)
+    out = str(tmp_path / "r.h5")
+    ckpt = checkpoint_path(out)
+    for attempt in range(attempts):
+        for f in (out, ckpt):
+            if os.path.exists(f):
+                os.unlink(f)
+        since = time.time()
+        p = launch(3, "run", scene, "-o", out, "-q")
+        pids = rank_pids(p.pid, 3, proc=p)
+        state = None
+        while p.poll() is None:
+            state = _faces_done(ckpt, since)
+            if state is not None and state[0] > 0:
+                break
+            time.sleep(0.01)
+        if state is not None and 0 < state[0] < state[1] and p.poll() is None:
+            how(p, pids)
+            code = p.wait(timeout=60)
+            p.stdout.close()
+            p.stderr.close()
+            assert all_gone(pids.values()), "ranks left behind"
+            if code != 0:
+                print(f"interrupted in attempt {attempt + 1}, {state[0]} of {state[1]} faces done")
+                return scene, out, state[0], code
+        assert p.wait(timeout=120) == 0, p.stderr.read()
+        p.stdout.close()
+        p.stderr.close()
+    pytest.fail("the DD always ended before a checkpoint caught it half-way")
+
+
+def _tasks(d: dict) -> int:
+    return sum(d["stats"]["parallel"]["tasks_per_rank"])
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigterm_mid_dd_then_resume_serially(tmp_path, dd_reference):
+    """SIGTERM to rank 0 while the faces run (mpirun -n 3): exit 75, every rank
+    gone, a checkpoint holding the finished faces. --resume without mpirun keeps
+    the saved split (3 branching nodes, where a serial run would not split), runs
+    only the missing faces and gives bit for bit the uninterrupted answers."""
+    ref, ref_arrays = dd_reference
+    t = {}
+
+    def how(p, pids):
+        t["sent"] = time.monotonic()
+        os.kill(pids[0], signal.SIGTERM)
+    scene, out, _, code = _interrupt_mid_dd(tmp_path, how)
+    assert code == EXIT_INTERRUPTED
+    assert time.monotonic() - t["sent"] < 30
+    ck = read_checkpoint(checkpoint_path(out))
+    assert ck["attrs"]["reason"] == "SIGTERM"
+    done = len(ck["jobs"]["rays"]["data"]["done"])
+    assert 0 < done < int(ck["jobs"]["rays"]["attrs"]["n_tasks"])
+    got = _finish(scene, out, rays=False)
+    assert got["stats"]["parallel"]["ranks"] == 1 and got["stats"]["parallel"]["resumes"] == 1
+    assert _tasks(got) == _tasks(ref) - done                  # finished faces are not run again
+    assert got["stats"]["parallel"]["jobs"]["rays"]["tasks"] == ref["stats"]["parallel"]["jobs"]["rays"]["tasks"]
+    assert rays_answers(got)[0] == rays_answers(ref)[0]
+    assert _same_arrays(ray_arrays(out), ref_arrays)          # the ray vectors too, bit for bit
+    assert got["stats"]["dd"][0]["branching_nodes"] == ref["stats"]["dd"][0]["branching_nodes"]
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_kill9_master_mid_dd_then_resume_on_2_ranks(tmp_path, dd_reference):
+    """kill -9 of rank 0 while the faces run (mpirun -n 3), --resume under
+    mpirun -n 2 (which alone would split on 2 nodes): the saved split is kept,
+    the faces of the last checkpoint are not run again, same answers bit for bit."""
+    ref, ref_arrays = dd_reference
+    scene, out, done, code = _interrupt_mid_dd(tmp_path, lambda p, pids: os.kill(pids[0], signal.SIGKILL))
+    assert code != 0 and os.path.exists(checkpoint_path(out))
+    got = _finish(scene, out, 2, rays=False)
+    assert got["stats"]["parallel"]["ranks"] == 2 and got["stats"]["parallel"]["resumes"] == 1
+    assert _tasks(got) <= _tasks(ref) - done
+    assert rays_answers(got)[0] == rays_answers(ref)[0]
+    assert _same_arrays(ray_arrays(out), ref_arrays)
+    assert got["stats"]["dd"][0]["branching_nodes"] == ref["stats"]["dd"][0]["branching_nodes"]
 
 
 # ---------------------------------------------------------------- refusing bad checkpoints

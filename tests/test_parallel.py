@@ -1,27 +1,30 @@
 """The master/worker engine: the same answers serially, in-process and under the
-real mpirun with 1-4 ranks; subtrees really move (budgets, hand-backs); idle
-ranks sleep (CPU time from /proc); 2D sign patterns agree with the rays; the
-SLURM_NTASKS check."""
+real mpirun with 1-4 ranks; subtrees really move (budgets, hand-backs); the 2D
+rays split over faces (tasks "face") give the unsplit answers and survive a
+checkpoint; idle ranks sleep (CPU time from /proc); 2D sign patterns agree with
+the rays; the SLURM_NTASKS check."""
 import itertools
 import json
 import os
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
 from hpcwedge import parallel
-from hpcwedge.checkpoint import CheckpointError
+from hpcwedge.checkpoint import CheckpointError, read_checkpoint
+from hpcwedge.dd import branching_nodes, canonical_order, complementary_rays
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.patterns import PatternTree, sign_patterns
 from hpcwedge.pipeline import run_scene
-from hpcwedge.problem import parametrize
+from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.scene import parse_scene
 from instances import random_problem
-from mpi_helpers import (MPIRUN, ROOT, answers, env, needs_mpirun, run, show, show_json,
-                         write_scene)
+from mpi_helpers import (MPIRUN, ROOT, answers, env, needs_mpirun, rays_answers, run, same_vectors, show,
+                         show_json, write_rays_scene, write_scene)
 
 
 def _tree_factory(seed, m=5, free=False):
@@ -160,6 +163,83 @@ def test_worker_error_in_serial_mode_propagates():
         parallel.run_tasks("boom", None, [1])
 
 
+def _plug_rows(rows: int, mus, exact: bool = False):
+    """friction_rows_2d of plug2d (rows x 3, taper 10 deg) at every mu; m = 2 rows."""
+    from hpcwedge.condense import condense
+    from hpcwedge.models.library import plug2d
+    from hpcwedge.problem import ContactProblem
+    param = parametrize(ContactProblem(2, *condense(plug2d(rows, 3, 10.0))), exact=exact)
+    return [friction_rows_2d(param, mu, 2 * rows, exact=exact) for mu in mus]
+
+
+def test_branching_nodes():
+    assert branching_nodes(16, 0) == []                       # serial: one DD, no split
+    assert branching_nodes(16, 1) == [14, 15]                 # 4 faces for one worker
+    assert branching_nodes(16, 2) == branching_nodes(16, 7) == [13, 14, 15]
+    assert branching_nodes(3, 4) == [1, 2] and branching_nodes(1, 4) == []
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
+    """run_faces gives the unsplit DD's zero flags (and, exact, its rays). SIGTERM
+    during the 5th face task: the task is dropped at its first task_tick(), the
+    checkpoint holds the 4 finished faces (HDF5 round trip: float rays, exact ones
+    as decimal strings), and a resumed engine asked for another split (as another
+    rank count would choose) keeps the saved one, runs only the 12 missing faces
+    and gives bit for bit the uninterrupted answer."""
+    rows_n, nodes = (3, [3, 4, 5]) if exact else (5, [7, 8, 9])
+    m, mus = 2 * rows_n, [0.65, 1.0]
+    rows = _plug_rows(rows_n, mus, exact)
+    ref = parallel.run_faces(rows, m, exact, nodes=nodes)
+    for A, dd in zip(rows, ref):
+        full = complementary_rays(A, m, exact=exact)
+        order = canonical_order(full.zero)
+        assert dd.stats["faces"] == 8 and dd.stats["branching_nodes"] == nodes
+        assert np.array_equal(dd.zero, full.zero[order])
+        if exact:
+            assert dd.X.dtype == object and np.array_equal(dd.X, full.X[order])
+        else:
+            assert np.allclose(dd.X, full.X[order], rtol=0, atol=1e-11)
+    ckpt = str(tmp_path / "f.ckpt")
+    calls, kill_at = [], [5]
+
+    def task(ctx, payload):
+        calls.append(payload)
+        if len(calls) in kill_at:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return parallel.face_task(ctx, payload)
+
+    monkeypatch.setitem(parallel.KINDS, "face", task)
+    monkeypatch.setattr(parallel, "_TICK_EVERY_S", 0.0)   # cancel at the first tick
+    eng = parallel.Engine()
+    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
+    eng.install_signals()
+    try:
+        with pytest.raises(parallel.Interrupted):
+            parallel.run_faces(rows, m, exact, engine=eng, nodes=nodes)
+        assert eng.write_checkpoint("SIGTERM")
+    finally:
+        eng.close()
+    saved = read_checkpoint(ckpt)["jobs"]["rays"]
+    assert not saved["attrs"]["finished"]
+    assert saved["data"]["done"].tolist() == [0, 1, 2, 3]
+    assert saved["data"]["X"].dtype.kind == ("S" if exact else "f")
+    assert json.loads(saved["attrs"]["layout"]) == {"branching_nodes": nodes}
+    calls.clear()
+    kill_at.clear()
+    eng = parallel.Engine()
+    assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True) and eng.restored("rays")
+    out = parallel.run_faces(rows, m, exact, engine=eng, nodes=[m - 1])
+    assert len(calls) == 2 * 8 - 4
+    for a, b in zip(out, ref):
+        assert a.stats["branching_nodes"] == nodes and a.stats["faces"] == 8
+        assert np.array_equal(a.zero, b.zero) and np.array_equal(a.X, b.X) and a.X.dtype == b.X.dtype
+    # without payloads_for, another layout is refused
+    with pytest.raises(CheckpointError, match="layout"):
+        job = parallel.TaskJob("rays", "face", None, [], layout={"branching_nodes": [1]})
+        job.load(read_checkpoint(ckpt)["jobs"]["rays"])
+
+
 @pytest.mark.parametrize("rows,taper,mus", [(2, 10.0, [0.2, 0.65]), (3, 10.0, [0.65]),
                                             (3, 31.0, [0.62, 2.0]), (4, 20.0, [0.5])])
 def test_2d_patterns_agree_with_rays(rows, taper, mus):
@@ -231,6 +311,78 @@ def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
             assert st["tasks_per_rank"][0] == 0                   # the master only dispatches
 
 
+@pytest.fixture(scope="module")
+def rays_reference(tmp_path_factory):
+    """The serial run of a 2D rays scene (plug2d m = 12, two mu): (scene, show JSON)."""
+    tmp = tmp_path_factory.mktemp("rays")
+    scene = write_rays_scene(tmp, 6, mus=(0.65, 1.0))
+    out = str(tmp / "ref.h5")
+    run(None, "run", scene, "-o", out, "-q")
+    return scene, show_json(out)
+
+
+@pytest.mark.mpi
+@needs_mpirun
+@pytest.mark.parametrize("ranks", [(1, 2), (3, 4)])
+def test_2d_rays_same_result_for_1_to_4_ranks(tmp_path, rays_reference, ranks):
+    """2D rays under mpirun: one DD per mu on the master with 1 rank; with workers,
+    split over the faces of branching_nodes(m, ranks - 1), every face a task. The
+    counts, zero flags, cones and mu^c equal the serial run's; the ray vectors equal
+    them to rounding, and bit for bit between runs with the same split (3 and 4
+    ranks both split on 3 nodes)."""
+    scene, ref = rays_reference
+    want, want_vectors = rays_answers(ref)
+    m = ref["m"]
+    seen = {}
+    for n in ranks:
+        out = str(tmp_path / f"r{n}.h5")
+        p = run(n, "run", scene, "-o", out)
+        assert p.stdout == "" and p.stderr.count("wrote") == 1
+        got = show_json(out)
+        answers_, vectors = rays_answers(got)
+        assert answers_ == want, f"{n} ranks"
+        assert same_vectors(vectors, want_vectors), f"{n} ranks"
+        st, dd = got["stats"]["parallel"], got["stats"]["dd"]
+        assert st["ranks"] == n
+        nodes = branching_nodes(m, n - 1)
+        for run_dd in dd:
+            assert run_dd["branching_nodes"] == nodes and run_dd["faces"] == 2 ** len(nodes)
+        if n == 1:
+            assert vectors_equal(vectors, want_vectors) and "rays" not in st["jobs"]
+        else:
+            assert dd[0]["faces"] > 1 and len(dd[0]["face_seconds"]) == dd[0]["faces"]
+            assert st["jobs"]["rays"]["tasks"] == 2 ** len(nodes) * len(ref["runs"])
+            assert st["tasks_per_rank"][0] == 0 and all(t > 0 for t in st["tasks_per_rank"][1:])
+        seen[n] = vectors
+    if 3 in seen and 4 in seen:
+        assert vectors_equal(seen[3], seen[4])
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_2d_exact_rays_identical_under_mpirun(tmp_path):
+    """Exact arithmetic: a ray is a primitive integer vector, whatever the DD's path,
+    so the face split under mpirun gives the serial answers bit for bit, ray vectors
+    included (the exact rays travel and are checkpointed as decimal strings)."""
+    scene = tmp_path / "exact.toml"
+    scene.write_text('name = "plug6-exact"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 3\n'
+                     '[friction]\nmu = [0.65, 1.0]\n[compute]\nenumerate = true\nmu_c = "cones"\nexact = true\n')
+    want = str(tmp_path / "s.h5")
+    run(None, "run", str(scene), "-o", want, "-q")
+    got = str(tmp_path / "p.h5")
+    run(3, "run", str(scene), "-o", got, "-q")
+    a, b = show_json(got), show_json(want)
+    assert a["stats"]["dd"][0]["faces"] == 8 and b["stats"]["dd"][0]["faces"] == 1
+    a, b = answers(a), answers(b)
+    a["stats"].pop("dd")
+    b["stats"].pop("dd")
+    assert a == b and a["runs"][0]["n_wedged_rays"] == 44
+
+
+def vectors_equal(a: list, b: list) -> bool:
+    return all(np.array_equal(x, y) for ra, rb in zip(a, b, strict=True) for x, y in zip(ra, rb, strict=True))
+
+
 @pytest.mark.mpi
 @needs_mpirun
 def test_idle_ranks_do_not_spin():
@@ -249,6 +401,23 @@ def test_idle_ranks_do_not_spin():
     assert max(idle) <= 0.03 * period, got            # idle workers: < 3% of a core
     assert b["cpu"][0] <= 0.05 * period, got          # the waiting master: < 5%
     assert min(c["cpu"][1:]) >= 0.1 * c["seconds"], got   # control: a blocking recv spins
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigterm_cancels_long_tasks():
+    """SIGTERM to the master while every worker is in a 60 s task that calls
+    task_tick(): the workers drop their tasks at the master's stop, close()
+    returns within seconds, and the whole job ends long before the tasks would."""
+    t = time.monotonic()
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
+                        sys.executable, os.path.join(ROOT, "tests", "engine_driver.py"), "cancel"],
+                       env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    assert got["interrupted"] is not None and got["interrupted"] < 10, got
+    assert got["closed"] - got["interrupted"] < 5, got
+    assert time.monotonic() - t < 40, got
 
 
 @pytest.mark.mpi
