@@ -42,7 +42,6 @@ uint64 word i // 21, so each node's test stays inside one word.
 from __future__ import annotations
 
 import itertools
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -304,8 +303,8 @@ def merge_results(results: list[DDResult]) -> DDResult:
     return DDResult(X=X, zero=zero, stats=stats)
 
 
-#: faces per worker the split aims at (branching_nodes)
-FACE_TASKS_PER_WORKER = 4
+#: run.face_split = "auto" splits from this m on (below, one DD takes < 1 s)
+FACE_SPLIT_MIN_M = 16
 #: at most this many branching nodes: the face where every branching node is in
 #: contact holds ~97% of plug2d's rays and costs ~40% of the full run whatever k is,
 #: so more faces only add work (scripts/bench_dd_faces.py, plug2d m = 18: k = 3
@@ -313,17 +312,18 @@ FACE_TASKS_PER_WORKER = 4
 MAX_BRANCHING_NODES = 3
 
 
-def branching_nodes(m: int, workers: int) -> list[int]:
-    """The nodes whose faces split the DD over `workers` worker ranks: none when
-    workers = 0 (the serial run stays one DD); else the last k nodes m-k..m-1, k the
-    least with 2^k >= FACE_TASKS_PER_WORKER * workers, at most MAX_BRANCHING_NODES
-    and m - 1. (On plug2d the last nodes are the top of the right wall; splitting
-    there was the cheapest of the node sets measured: the bottom nodes or both top
-    corners cost 1.5-2x more CPU in total.)"""
-    if workers < 1 or m < 2:
-        return []
-    k = max(1, math.ceil(math.log2(FACE_TASKS_PER_WORKER * workers)))
-    k = min(k, MAX_BRANCHING_NODES, m - 1)
+def branching_nodes(m: int, split: int | str = "auto") -> list[int]:
+    """The nodes whose faces split the DD (SPEC §5): the last k nodes m-k..m-1, k
+    from the scene's run.face_split — "auto": MAX_BRANCHING_NODES when m >=
+    FACE_SPLIT_MIN_M, else 0 (one DD); an integer: that many — at most m - 1.
+
+    A function of the scene alone, never of the rank count: a ray's floats depend on
+    the DD's path to it, so one split gives the same bits on 1 or 100 ranks. (On
+    plug2d the last nodes are the top of the right wall; splitting there was the
+    cheapest of the node sets measured: the bottom nodes or both top corners cost
+    1.5-2x more CPU in total.)"""
+    k = (MAX_BRANCHING_NODES if m >= FACE_SPLIT_MIN_M else 0) if split == "auto" else int(split)
+    k = max(0, min(k, m - 1))
     return list(range(m - k, m))
 
 

@@ -945,10 +945,11 @@ def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, 
 
 
 def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = None,
-              nodes=None, name: str = "rays") -> list["DDResult"]:
+              nodes=(), name: str = "rays") -> list["DDResult"]:
     """The complementary rays at every mu, the double description split over the
-    faces of the branching nodes `nodes` (SPEC §5; default dd.branching_nodes for
-    the engine's workers), one "face" task per (mu, face), through the engine.
+    faces of the branching nodes `nodes` (SPEC §5; the scene's choice,
+    dd.branching_nodes; none: one face, the whole cone), one "face" task per
+    (mu, face), through the engine.
 
     rows: the constraint rows A of every mu (problem.friction_rows_2d). Returns one
     dd.DDResult per mu (merge_results of its faces: canonical order, duplicates
@@ -956,10 +957,11 @@ def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = N
     keeps the split its checkpoint was made with, so finished faces are reused
     whatever the rank count now is. The zero flags, and so every count, cone and
     mu^c, are those of the unsplit run; the float ray vectors equal them to
-    rounding (a ray's floats depend on the DD's path to it: ~1e-13 relative)."""
-    from .dd import branching_nodes, merge_results
+    rounding (a ray's floats depend on the DD's path to it: ~1e-13 relative), and
+    bit for bit those of any run with the same split, on any number of ranks."""
+    from .dd import merge_results
     engine = engine or Engine()
-    nodes = branching_nodes(m, engine.size - 1) if nodes is None else [int(i) for i in nodes]
+    nodes = [int(i) for i in nodes]
 
     def payloads_for(layout):
         return face_payloads(len(rows), m, layout["branching_nodes"])

@@ -22,7 +22,7 @@ import numpy as np
 
 from .build import build_model, contact_problem
 from .cones import maximal_cones
-from .dd import canonical_order, complementary_rays
+from .dd import branching_nodes, canonical_order, complementary_rays
 from .model import Model
 from .mu_critical import mu_critical
 from .parallel import Engine, run_faces, run_mu_c, run_patterns, strip_exact
@@ -80,10 +80,10 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     """Every answer the scene asks for (see Scene.plan). Sign patterns and mu^c
     run as tasks of `engine` (parallel.py: in-process by default; the master of
     an MPI run, with checkpoints, from the command line). The 2D rays run as one
-    double description per mu on the master when the engine has no workers, and
-    split over faces as "face" tasks (parallel.run_faces) when it has some or when
-    the checkpoint it resumed from holds that split: the same zero sets, counts,
-    cones and mu^c; the ray vectors equal to rounding (~1e-13 relative)."""
+    double description per mu, or split over the faces the scene asks for
+    (run.face_split; "auto": 3 nodes from m = 16 on) as "face" tasks
+    (parallel.run_faces) — the split, and so every bit of the result, depends on
+    the scene, not on the rank count; a resumed run keeps its checkpoint's split."""
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
     t0 = time.perf_counter()
@@ -113,10 +113,11 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     if plan.rays:
         t = time.perf_counter()
         stages.append("enumerate")
-        if engine.size > 1 or engine.restored(RAYS_JOB):
+        nodes = branching_nodes(m, scene.face_split)
+        if nodes or engine.restored(RAYS_JOB):
             # split over faces, one task per (mu, face) (SPEC §5); resumed: the saved split
             rows = [friction_rows_2d(param, run.mu, m, exact=scene.exact) for run in result.runs]
-            dds = run_faces(rows, m, exact=scene.exact, engine=engine, name=RAYS_JOB)
+            dds = run_faces(rows, m, exact=scene.exact, engine=engine, nodes=nodes, name=RAYS_JOB)
         else:
             dds = (_rays_serial(param, run.mu, m, scene.exact, progress) for run in result.runs)
         for run, dd in zip(result.runs, dds):

@@ -24,7 +24,7 @@ MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", 
 MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
-RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True}
+RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto"}
 
 
 class SceneError(ValueError):
@@ -62,6 +62,7 @@ class Scene:
     base_dir: str = "."
     task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
     symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
+    face_split: int | str = "auto"  # run.face_split: branching nodes of the 2D DD split (dd.branching_nodes)
     obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
     obstacle_key: str = "obstacle"  # where they came from, for messages
 
@@ -152,6 +153,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
     if not isinstance(run["symmetry"], bool):
         raise SceneError(f"run.symmetry: true or false, got {run['symmetry']!r}")
+    v = run["face_split"]
+    if v != "auto" and (isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 8):
+        raise SceneError(f"run.face_split: \"auto\" or a whole number 0..8 (branching nodes), got {v!r}")
     contact = data.get("contact", {})
     if not isinstance(contact, dict):
         raise SceneError("contact: must be a table")
@@ -179,7 +183,7 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
                  text=text, base_dir=base_dir, task_budget=run["task_budget"],
-                 symmetry=run["symmetry"], obstacles=obstacles, obstacle_key=obstacle_key)
+                 symmetry=run["symmetry"], face_split=run["face_split"], obstacles=obstacles, obstacle_key=obstacle_key)
 
 
 def _unknown(table, allowed, prefix):

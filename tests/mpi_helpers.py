@@ -50,6 +50,7 @@ enumerate = true
 mu_c = "{mu_c}"
 [run]
 checkpoint_every_s = {every}
+face_split = {split}
 """
 
 
@@ -67,11 +68,12 @@ def _write_raw_plug(tmp_path, rows: int) -> None:
 
 
 def write_rays_scene(tmp_path, rows: int, mus=(0.65,), every: float = 60.0, name: str = "rays.toml",
-                     mu_c: str = "cones") -> str:
-    """RAYS_SCENE for plug2d with `rows` rows (m = 2 rows) in tmp_path."""
+                     mu_c: str = "cones", split: int | str = "auto") -> str:
+    """RAYS_SCENE for plug2d with `rows` rows (m = 2 rows) in tmp_path; run.face_split = split."""
     _write_raw_plug(tmp_path, rows)
     p = tmp_path / name
-    p.write_text(RAYS_SCENE.format(m=2 * rows, mus=list(mus), every=every, mu_c=mu_c))
+    p.write_text(RAYS_SCENE.format(m=2 * rows, mus=list(mus), every=every, mu_c=mu_c,
+                                   split=f'"{split}"' if isinstance(split, str) else split))
     return str(p)
 
 
@@ -163,16 +165,6 @@ def rays_answers(d: dict) -> tuple[dict, list]:
     for run in d["runs"]:
         vectors.append([np.array(run.pop(k) or [], dtype=float) for k in ("rays", "trivial_rays")])
     return d, vectors
-
-
-def same_vectors(a: list, b: list, rtol: float = 1e-9) -> bool:
-    """Ray vectors of rays_answers equal to rounding (relative to each array's largest entry)."""
-    import numpy as np
-    for ra, rb in zip(a, b, strict=True):
-        for x, y in zip(ra, rb, strict=True):
-            if x.shape != y.shape or not np.all(np.abs(x - y) <= rtol * max(1.0, np.abs(y).max(initial=0))):
-                return False
-    return True
 
 
 def show(path: str) -> dict:

@@ -23,7 +23,7 @@ from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.scene import parse_scene
 from instances import random_problem
-from mpi_helpers import (MPIRUN, ROOT, answers, env, needs_mpirun, rays_answers, run, same_vectors, show,
+from mpi_helpers import (MPIRUN, ROOT, answers, env, needs_mpirun, rays_answers, run, show,
                          show_json, write_rays_scene, write_scene)
 
 
@@ -173,9 +173,8 @@ def _plug_rows(rows: int, mus, exact: bool = False):
 
 
 def test_branching_nodes():
-    assert branching_nodes(16, 0) == []                       # serial: one DD, no split
-    assert branching_nodes(16, 1) == [14, 15]                 # 4 faces for one worker
-    assert branching_nodes(16, 2) == branching_nodes(16, 7) == [13, 14, 15]
+    assert branching_nodes(16) == [13, 14, 15] and branching_nodes(15) == []    # "auto"
+    assert branching_nodes(12, 2) == [10, 11] and branching_nodes(12, 0) == []
     assert branching_nodes(3, 4) == [1, 2] and branching_nodes(1, 4) == []
 
 
@@ -313,9 +312,10 @@ def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
 
 @pytest.fixture(scope="module")
 def rays_reference(tmp_path_factory):
-    """The serial run of a 2D rays scene (plug2d m = 12, two mu): (scene, show JSON)."""
+    """The serial run of a 2D rays scene (plug2d m = 12, two mu, split on 3 nodes):
+    (scene, show JSON)."""
     tmp = tmp_path_factory.mktemp("rays")
-    scene = write_rays_scene(tmp, 6, mus=(0.65, 1.0))
+    scene = write_rays_scene(tmp, 6, mus=(0.65, 1.0), split=3)
     out = str(tmp / "ref.h5")
     run(None, "run", scene, "-o", out, "-q")
     return scene, show_json(out)
@@ -325,15 +325,15 @@ def rays_reference(tmp_path_factory):
 @needs_mpirun
 @pytest.mark.parametrize("ranks", [(1, 2), (3, 4)])
 def test_2d_rays_same_result_for_1_to_4_ranks(tmp_path, rays_reference, ranks):
-    """2D rays under mpirun: one DD per mu on the master with 1 rank; with workers,
-    split over the faces of branching_nodes(m, ranks - 1), every face a task. The
-    counts, zero flags, cones and mu^c equal the serial run's; the ray vectors equal
-    them to rounding, and bit for bit between runs with the same split (3 and 4
-    ranks both split on 3 nodes)."""
+    """2D rays under mpirun with the scene's split (run.face_split = 3: 8 faces per
+    mu, each a task; serially the same tasks in-process): the answers equal the
+    serial run's bit for bit, ray vectors included, on 1 to 4 ranks; with workers,
+    the workers ran every face."""
     scene, ref = rays_reference
     want, want_vectors = rays_answers(ref)
     m = ref["m"]
-    seen = {}
+    nodes = branching_nodes(m, 3)
+    assert all(d["branching_nodes"] == nodes and d["faces"] == 8 for d in ref["stats"]["dd"])
     for n in ranks:
         out = str(tmp_path / f"r{n}.h5")
         p = run(n, "run", scene, "-o", out)
@@ -341,41 +341,38 @@ def test_2d_rays_same_result_for_1_to_4_ranks(tmp_path, rays_reference, ranks):
         got = show_json(out)
         answers_, vectors = rays_answers(got)
         assert answers_ == want, f"{n} ranks"
-        assert same_vectors(vectors, want_vectors), f"{n} ranks"
+        assert vectors_equal(vectors, want_vectors), f"{n} ranks"
         st, dd = got["stats"]["parallel"], got["stats"]["dd"]
         assert st["ranks"] == n
-        nodes = branching_nodes(m, n - 1)
         for run_dd in dd:
-            assert run_dd["branching_nodes"] == nodes and run_dd["faces"] == 2 ** len(nodes)
-        if n == 1:
-            assert vectors_equal(vectors, want_vectors) and "rays" not in st["jobs"]
-        else:
-            assert dd[0]["faces"] > 1 and len(dd[0]["face_seconds"]) == dd[0]["faces"]
-            assert st["jobs"]["rays"]["tasks"] == 2 ** len(nodes) * len(ref["runs"])
+            assert run_dd["branching_nodes"] == nodes and len(run_dd["face_seconds"]) == 8
+        assert st["jobs"]["rays"]["tasks"] == 8 * len(ref["runs"])
+        if n > 1:
             assert st["tasks_per_rank"][0] == 0 and all(t > 0 for t in st["tasks_per_rank"][1:])
-        seen[n] = vectors
-    if 3 in seen and 4 in seen:
-        assert vectors_equal(seen[3], seen[4])
 
 
 @pytest.mark.mpi
 @needs_mpirun
 def test_2d_exact_rays_identical_under_mpirun(tmp_path):
     """Exact arithmetic: a ray is a primitive integer vector, whatever the DD's path,
-    so the face split under mpirun gives the serial answers bit for bit, ray vectors
-    included (the exact rays travel and are checkpointed as decimal strings)."""
-    scene = tmp_path / "exact.toml"
-    scene.write_text('name = "plug6-exact"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 3\n'
-                     '[friction]\nmu = [0.65, 1.0]\n[compute]\nenumerate = true\nmu_c = "cones"\nexact = true\n')
+    so the face split (8 faces) under mpirun gives the unsplit serial answers bit for
+    bit, ray vectors included (the exact rays travel and are checkpointed as decimal
+    strings)."""
+    text = ('name = "plug6-exact"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 3\n[friction]\n'
+            'mu = [0.65, 1.0]\n[compute]\nenumerate = true\nmu_c = "cones"\nexact = true\n[run]\nface_split = {}\n')
+    whole, split = tmp_path / "whole.toml", tmp_path / "split.toml"
+    whole.write_text(text.format(0))
+    split.write_text(text.format(3))
     want = str(tmp_path / "s.h5")
-    run(None, "run", str(scene), "-o", want, "-q")
+    run(None, "run", str(whole), "-o", want, "-q")
     got = str(tmp_path / "p.h5")
-    run(3, "run", str(scene), "-o", got, "-q")
+    run(3, "run", str(split), "-o", got, "-q")
     a, b = show_json(got), show_json(want)
     assert a["stats"]["dd"][0]["faces"] == 8 and b["stats"]["dd"][0]["faces"] == 1
     a, b = answers(a), answers(b)
-    a["stats"].pop("dd")
-    b["stats"].pop("dd")
+    for d in (a, b):
+        d["stats"].pop("dd")
+        d.pop("scene_hash")
     assert a == b and a["runs"][0]["n_wedged_rays"] == 44
 
 
