@@ -24,7 +24,9 @@ MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", 
 MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
-RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True}
+RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "condense": "auto"}
+#: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
+CONDENSE_MODES = ("auto", "serial", "distributed")
 
 
 class SceneError(ValueError):
@@ -62,6 +64,7 @@ class Scene:
     base_dir: str = "."
     task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
     symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
+    condense: str = "auto"         # run.condense: auto | serial | distributed (under mpirun)
     obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
     obstacle_key: str = "obstacle"  # where they came from, for messages
 
@@ -152,6 +155,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
     if not isinstance(run["symmetry"], bool):
         raise SceneError(f"run.symmetry: true or false, got {run['symmetry']!r}")
+    if run["condense"] not in CONDENSE_MODES:
+        raise SceneError(f"run.condense: one of {', '.join(CONDENSE_MODES)}, got {run['condense']!r}")
     contact = data.get("contact", {})
     if not isinstance(contact, dict):
         raise SceneError("contact: must be a table")
@@ -179,7 +184,7 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
                  text=text, base_dir=base_dir, task_budget=run["task_budget"],
-                 symmetry=run["symmetry"], obstacles=obstacles, obstacle_key=obstacle_key)
+                 symmetry=run["symmetry"], condense=run["condense"], obstacles=obstacles, obstacle_key=obstacle_key)
 
 
 def _unknown(table, allowed, prefix):

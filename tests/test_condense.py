@@ -188,3 +188,61 @@ def test_distributed_without_comm_is_condense():
     K, N = condense_distributed(m, None)
     K0, N0 = condense(m)
     assert np.array_equal(K, K0) and np.array_equal(N, N0)
+
+
+PLUG_SCENE = """name = "plug-dist"
+dim = 2
+[model]
+kind = "plug2d"
+rows = 4
+[friction]
+mu = [0.65, 1.0]
+[compute]
+enumerate = "patterns"
+mu_c = "cones"
+[run]
+condense = "{mode}"
+"""
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_run_condense_distributed_on_the_command_line(tmp_path):
+    # run.condense = "distributed" under mpirun -n 2: the same answers as a serial run (the
+    # condensed K agrees to rounding, so mu^c values to ~1e-12)
+    from mpi_helpers import run, show
+    outs = {}
+    for ranks, mode in [(None, "serial"), (2, "distributed")]:
+        scene = tmp_path / f"{mode}.toml"
+        scene.write_text(PLUG_SCENE.format(mode=mode))
+        outs[mode] = str(tmp_path / f"{mode}.h5")
+        run(ranks, "run", str(scene), "-o", outs[mode], "-q", timeout=120)
+    a, b = show(outs["serial"]), show(outs["distributed"])
+    assert b["mu_c"] == pytest.approx(a["mu_c"], rel=1e-10)
+    assert len(a["runs"]) == len(b["runs"]) == 2
+    for ra, rb in zip(a["runs"], b["runs"]):
+        assert [p["contact"] for p in ra["patterns"]] == [p["contact"] for p in rb["patterns"]]
+        assert [p["mu_c"] for p in rb["patterns"]] == pytest.approx([p["mu_c"] for p in ra["patterns"]], rel=1e-10)
+        assert len(ra["patterns"]) > 0
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_run_condense_distributed_singular_exit_2_once(tmp_path):
+    # a singular K_ii found collectively: one message from the master, status 2, no hang
+    from mpi_helpers import run
+    scene = tmp_path / "flat.toml"
+    scene.write_text('name = "flat"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = 1\n'
+                     '[friction]\nmu = [1.0]\n[run]\ncondense = "distributed"\n')
+    p = run(2, "run", str(scene), "-o", str(tmp_path / "r.h5"), timeout=60, check=False)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.count("hpcwedge: error: model: condense: the stiffness of the non-contact DOFs") == 1
+
+
+def test_run_condense_key_checked():
+    from hpcwedge.scene import SceneError, parse_scene
+    base = {"name": "p", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": 1.0}}
+    assert parse_scene(base).condense == "auto"
+    assert parse_scene({**base, "run": {"condense": "distributed"}}).condense == "distributed"
+    with pytest.raises(SceneError, match=r"run.condense: one of auto, serial, distributed, got 'mumps'"):
+        parse_scene({**base, "run": {"condense": "mumps"}})
