@@ -130,18 +130,14 @@ def _run(args) -> int:
     from .results import write_result
     from .scene import SceneError, load_scene
     progress = Progress(quiet=args.quiet)
-    try:
-        condensed = _condense_together(comm, args.scene) if comm is not None else None
-    except SceneError as e:                     # reported below, once the workers are served
-        condensed = e
     engine = Engine(comm, progress=None if args.quiet else progress)
     engine.install_signals()
     ckpt = checkpoint_path(args.output)
     try:
         try:
+            # collective (under mpirun): after the signal handlers, before anything is written
+            condensed = _condense_together(comm, args.scene) if comm is not None else None
             scene = load_scene(args.scene)
-            if isinstance(condensed, SceneError):
-                raise condensed
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume):
                 progress.note(f"resuming from {ckpt}")
             elif os.path.exists(ckpt):
