@@ -62,14 +62,16 @@ def _mesh_model(scene: Scene) -> Model:
                            support_dofs=m.get("support_dofs"))
 
 
-def contact_problem(scene: Scene, model: Model | None = None) -> ContactProblem:
-    """ContactProblem of a scene: condensed from `model`, or the raw K of a stiffness scene."""
+def contact_problem(scene: Scene, model: Model | None = None, comm=None) -> ContactProblem:
+    """ContactProblem of a scene: condensed from `model`, or the raw K of a stiffness scene.
+    comm (mpi4py communicator, or None): condense collectively over it (every rank calls this
+    with the same scene; condense.condense_distributed); None: this process alone."""
     if scene.kind != "stiffness":
-        from .condense import condense
+        from .condense import condense_distributed
         if model is None:
             model = build_model(scene)
         try:
-            K, N = condense(model)
+            K, N = condense_distributed(model, comm)
         except ValueError as e:
             raise SceneError(f"model: {str(e).splitlines()[0]}") from None
         return ContactProblem(scene.dim, K, N)

@@ -64,6 +64,55 @@ class _UserError(Exception):
     pass
 
 
+#: run.condense = "auto" condenses collectively over all ranks from this many model DOFs on
+DISTRIBUTED_MIN_DOFS = 2_000_000
+
+
+def _condense_together(comm, path: str | None):
+    """The distributed condensation of an MPI run (run.condense, SCENE §run): collective over
+    `comm`, called by every rank before the task engine starts; the master passes the scene
+    path, workers None. Every rank builds the model from the scene the master broadcasts and
+    condenses it with condense.condense_distributed when run.condense = "distributed", or
+    "auto" and the model has >= DISTRIBUTED_MIN_DOFS DOFs. Returns (model, problem, seconds)
+    on the master if it did, else None (then the master condenses alone, as serially, and
+    reports any error in the scene or model there). A singular K_ii is found on every rank
+    alike: SceneError on the master, None on the workers. Ranks never wait on each other for
+    ever: a model that fails to build on any rank sends everyone on."""
+    import time
+
+    from mpi4py import MPI
+
+    from .build import build_model, contact_problem
+    from .scene import SceneError, load_scene
+    scene = None
+    if comm.rank == 0:
+        try:
+            scene = load_scene(path)
+        except SceneError:
+            scene = None                         # reported by the master's own run
+        if scene is not None and (not scene.plan().condense or scene.condense == "serial"):
+            scene = None
+    scene = comm.bcast(scene, root=0)
+    if scene is None:
+        return None
+    t = time.perf_counter()
+    try:
+        model = build_model(scene)
+    except Exception:                            # noqa: BLE001  (the master's own run reports it)
+        model = None
+    if not comm.allreduce(model is not None, op=MPI.LAND):
+        return None
+    if scene.condense == "auto" and model.n_dofs < DISTRIBUTED_MIN_DOFS:
+        return None
+    try:
+        problem = contact_problem(scene, model, comm)
+    except SceneError:
+        if comm.rank == 0:
+            raise
+        return None
+    return (model, problem, time.perf_counter() - t) if comm.rank == 0 else None
+
+
 def _run(args) -> int:
     from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, world
     try:
@@ -72,6 +121,7 @@ def _run(args) -> int:
         raise _UserError(str(e)) from None
     if comm is not None and comm.rank != 0:
         sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
+        _condense_together(comm, None)
         Engine(comm).serve()
         return 0
     from .checkpoint import CheckpointError, checkpoint_path
@@ -85,6 +135,8 @@ def _run(args) -> int:
     ckpt = checkpoint_path(args.output)
     try:
         try:
+            # collective (under mpirun): after the signal handlers, before anything is written
+            condensed = _condense_together(comm, args.scene) if comm is not None else None
             scene = load_scene(args.scene)
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume):
                 progress.note(f"resuming from {ckpt}")
@@ -92,7 +144,7 @@ def _run(args) -> int:
                 print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
                       f"({'it is missing' if args.resume else 'use --resume to continue from it'})",
                       file=sys.stderr)
-            result = run_scene(scene, progress, engine=engine)
+            result = run_scene(scene, progress, engine=engine, condensed=condensed)
             write_result(args.output, result)
             engine.remove_checkpoint()
             engine.mark_done()

@@ -1,6 +1,8 @@
 """Static condensation (Schur complement) of a Model onto its contact DOFs, in local frames.
 
-The only module that imports petsc4py. Serial (PETSc.COMM_SELF).
+The only module that imports petsc4py. `condense` is serial (PETSc.COMM_SELF);
+`condense_distributed` is the same condensation collective over an MPI communicator
+(K_ii an MPIAIJ matrix, rows split between the ranks, factored by parallel MUMPS).
 
     K_local = T (K_cc - K_ci K_ii^-1 K_ic) T^T      (dim*m, dim*m), block ordering (SPEC §1)
     N_local = orth(T R_c)                           (dim*m, k), R_c = rigid modes on contact DOFs
@@ -54,11 +56,12 @@ def split_dofs(model: Model) -> DofSplit:
     return DofSplit(contact=c, interior=np.flatnonzero(keep), T=model.local_map(), Rc=model.rigid_modes[c])
 
 
-def _blocks(model: Model, sp_: DofSplit):
-    """Kcc (p, p) dense, Kic (n_i, p) CSR, Kii (n_i, n_i) CSR, p = dim*m (node-major contact DOFs)."""
+def _blocks(model: Model, sp_: DofSplit, lo: int = 0, hi: int | None = None):
+    """Kcc (p, p) dense, Kic (hi-lo, p) CSR, Kii (hi-lo, n_i) CSR, p = dim*m (node-major contact
+    DOFs): the interior rows [lo, hi) (default all) of K_ic and K_ii."""
     K = sp.csr_matrix(model.K)
     Kcc = K[sp_.contact][:, sp_.contact].toarray()
-    Ki = K[sp_.interior]
+    Ki = K[sp_.interior[lo:hi]]
     return Kcc, Ki[:, sp_.contact].tocsr(), Ki[:, sp_.interior].tocsr()
 
 
@@ -130,11 +133,29 @@ def condense(model: Model, solver: str | None = None) -> tuple[np.ndarray, np.nd
     ValueError if K_ii is singular (null pivot) or the result does not annihilate the model's
     rigid modes.
     """
+    return condense_distributed(model, None, solver)
+
+
+def condense_distributed(model: Model, comm=None, solver: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """`condense`, collective over the mpi4py communicator `comm` (None: this process alone).
+
+    Every rank of `comm` calls it with the same `model`. Rank r assembles the rows
+    [r n_i / P, (r+1) n_i / P) of K_ii (and of K_ic) into a parallel PETSc MPIAIJ matrix on
+    `comm`; K_ii is factored once by parallel MUMPS ("petsc" native LU is serial only:
+    ValueError with more than one rank); each rank multiplies its rows of X = K_ii^-1 K_ic by
+    its rows of K_ic, and the (dim*m)^2 partial sums are allreduced. Every rank returns the
+    same (K_local, N_local), equal to `condense`'s up to rounding. Errors (singular K_ii, rigid
+    modes) are raised on every rank alike.
+    """
     sp_ = split_dofs(model)
-    Kcc, Kic, Kii = _blocks(model, sp_)
-    if sp_.interior.size == 0:
+    n = sp_.interior.size
+    size, rank = (1, 0) if comm is None else (comm.size, comm.rank)
+    if size > 1 and solver == "petsc":
+        raise ValueError("condense: the native PETSc LU is serial; use MUMPS with more than one rank")
+    Kcc, Kic, Kii = _blocks(model, sp_, n * rank // size, n * (rank + 1) // size)
+    if n == 0:
         return to_local(model, sp_, Kcc)
-    return to_local(model, sp_, _schur_petsc(Kcc, Kic, Kii, model, solver))
+    return to_local(model, sp_, Kcc - _kci_kii_inv_kic(Kic, Kii, model, solver, comm))
 
 
 #: contact columns per MatMatSolve (bounds the two dense n_i x COLUMN_BLOCK work arrays)
@@ -143,17 +164,21 @@ COLUMN_BLOCK = 64
 _ZERO_PIVOT_ERRORS = {71, 73, 81}   # MAT_LU_ZRPVT, ARG_WRONGSTATE (missing diagonal), MAT_CH_ZRPVT
 
 
-def _schur_petsc(Kcc: np.ndarray, Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model,
-                 solver: str | None = None) -> np.ndarray:
-    """S = Kcc - Kic^T Kii^-1 Kic (global node-major contact DOFs), Kii factored by PETSc."""
-    with _factored(Kii, model, solver, probe=Kic[:, 0].toarray().ravel()) as solve:
-        S = np.array(Kcc, dtype=float, copy=True)
+def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solver: str | None,
+                     comm=None) -> np.ndarray:
+    """K_ci K_ii^-1 K_ic (p, p), global node-major contact DOFs, on every rank of `comm`.
+    Kic (n_loc, p), Kii (n_loc, n_i): this rank's rows (all rows serially)."""
+    p = Kic.shape[1]
+    probe = Kic[:, 0].toarray().ravel()
+    with _factored(Kii, model, solver, probe=probe, comm=comm) as solve:
+        P = np.zeros((p, p))
         KicT = Kic.T.tocsr()
-        p = Kic.shape[1]
         for lo in range(0, p, COLUMN_BLOCK):
             hi = min(p, lo + COLUMN_BLOCK)
-            S[:, lo:hi] -= KicT @ solve(Kic[:, lo:hi].toarray())
-        return S
+            P[:, lo:hi] = KicT @ solve(Kic[:, lo:hi].toarray())
+    if comm is not None and comm.size > 1:
+        P = comm.allreduce(P)
+    return P
 
 
 def interior_response(model: Model, uc: np.ndarray, solver: str | None = None) -> np.ndarray:
@@ -178,18 +203,21 @@ def interior_response(model: Model, uc: np.ndarray, solver: str | None = None) -
 
 
 @contextmanager
-def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.ndarray):
-    """Factor Kii once with PETSc (MUMPS or native LU, see `condense`) and yield
-    solve(B (n, q) dense) -> Kii^-1 B (n, q). `probe` (n,): a right-hand side solved once
-    to detect a failed factorisation. Every PETSc object is destroyed on exit."""
+def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.ndarray, comm=None):
+    """Factor K_ii once with PETSc (MUMPS or native LU, see `condense`) and yield
+    solve(B (n_loc, q) dense) -> the same rows of K_ii^-1 B. Collective over the mpi4py
+    communicator `comm` (None: PETSc.COMM_SELF): Kii (n_loc, n) is this rank's block of
+    consecutive rows (all n rows serially; ranks in order), B and the result likewise.
+    `probe` (n_loc,): a right-hand side solved once to detect a failed factorisation.
+    Every PETSc object is destroyed on exit."""
     if solver not in (None, "mumps", "petsc"):
         raise ValueError(f"condense: unknown solver {solver!r} (mumps, petsc)")
     PETSc = _petsc()
-    comm = PETSc.COMM_SELF
+    comm = PETSc.COMM_SELF if comm is None else comm
     Kii = sp.csr_matrix(Kii)
     Kii.sort_indices()
-    n = Kii.shape[0]
-    A = PETSc.Mat().createAIJ(size=(n, n), csr=(Kii.indptr.astype(PETSc.IntType),
+    nloc, n = Kii.shape
+    A = PETSc.Mat().createAIJ(size=((nloc, n), (nloc, n)), csr=(Kii.indptr.astype(PETSc.IntType),
                                                 Kii.indices.astype(PETSc.IntType), Kii.data), comm=comm)
     A.assemble()
     ksp = PETSc.KSP().create(comm=comm)
@@ -202,7 +230,7 @@ def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.nd
         # MUMPS: symmetric LDL^T (SYM = 2, with pivoting) when K_ii is exactly symmetric (as the
         # truss / Q4 assemblies guarantee): half the factor memory and ~35% less time than LU
         # (block2d refine 200, 8e5 DOFs). Otherwise, and natively, LU.
-        symmetric = use_mumps and (Kii != Kii.T).nnz == 0
+        symmetric = use_mumps and A.isSymmetric(0.0)
         pc.setType("cholesky" if symmetric else "lu")
         if use_mumps:
             pc.setFactorSolverType("mumps")
@@ -241,8 +269,10 @@ def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.nd
             raise _singular(model, f"factorisation failed, KSP reason {reason}")
 
         def solve(B: np.ndarray) -> np.ndarray:
-            Bm = PETSc.Mat().createDense((n, B.shape[1]), array=np.asfortranarray(B, dtype=float), comm=comm)
-            Xm = PETSc.Mat().createDense((n, B.shape[1]), comm=comm)
+            q = B.shape[1]
+            Bm = PETSc.Mat().createDense(((nloc, n), (None, q)), array=np.asfortranarray(B, dtype=float),
+                                         comm=comm)
+            Xm = PETSc.Mat().createDense(((nloc, n), (None, q)), comm=comm)
             try:
                 Xm.setUp()
                 Bm.assemble()

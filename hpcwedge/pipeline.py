@@ -76,14 +76,18 @@ class Result:
     problem: ContactProblem | None = None
 
 
-def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None) -> Result:
+def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None,
+              condensed: tuple[Model, ContactProblem, float] | None = None) -> Result:
     """Every answer the scene asks for (see Scene.plan). Sign patterns and mu^c
     run as tasks of `engine` (parallel.py: in-process by default; the master of
     an MPI run, with checkpoints, from the command line). The 2D rays run as one
     double description per mu, or split over the faces the scene asks for
     (run.face_split; "auto": 3 nodes from m = 16 on) as "face" tasks
     (parallel.run_faces) — the split, and so every bit of the result, depends on
-    the scene, not on the rank count; a resumed run keeps its checkpoint's split."""
+    the scene, not on the rank count; a resumed run keeps its checkpoint's split.
+    `condensed`: (model, problem, seconds) of this scene condensed already (the
+    command line's distributed condensation under mpirun); None: built and
+    condensed here."""
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
     t0 = time.perf_counter()
@@ -92,7 +96,10 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     stages = []
     model = None
     t = time.perf_counter()
-    if plan.condense:
+    if plan.condense and condensed is not None:
+        model, problem, timings["condense"] = condensed
+        stages.append("condense")
+    elif plan.condense:
         model = build_model(scene)
         problem = contact_problem(scene, model)
         timings["condense"] = time.perf_counter() - t

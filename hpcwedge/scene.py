@@ -24,7 +24,10 @@ MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", 
 MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
-RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto"}
+RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
+                "condense": "auto"}
+#: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
+CONDENSE_MODES = ("auto", "serial", "distributed")
 
 
 class SceneError(ValueError):
@@ -63,6 +66,7 @@ class Scene:
     task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
     symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
     face_split: int | str = "auto"  # run.face_split: branching nodes of the 2D DD split (dd.branching_nodes)
+    condense: str = "auto"         # run.condense: auto | serial | distributed (under mpirun)
     obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
     obstacle_key: str = "obstacle"  # where they came from, for messages
 
@@ -156,6 +160,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     v = run["face_split"]
     if v != "auto" and (isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 8):
         raise SceneError(f"run.face_split: \"auto\" or a whole number 0..8 (branching nodes), got {v!r}")
+    if run["condense"] not in CONDENSE_MODES:
+        raise SceneError(f"run.condense: one of {', '.join(CONDENSE_MODES)}, got {run['condense']!r}")
     contact = data.get("contact", {})
     if not isinstance(contact, dict):
         raise SceneError("contact: must be a table")
@@ -183,7 +189,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
                  text=text, base_dir=base_dir, task_budget=run["task_budget"],
-                 symmetry=run["symmetry"], face_split=run["face_split"], obstacles=obstacles, obstacle_key=obstacle_key)
+                 symmetry=run["symmetry"], face_split=run["face_split"], condense=run["condense"],
+                 obstacles=obstacles, obstacle_key=obstacle_key)
 
 
 def _unknown(table, allowed, prefix):

@@ -1,12 +1,19 @@
 """Condensation onto the contact DOFs: PETSc (MUMPS / native LU) against dense numpy, by hand."""
 import dataclasses
+import json
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
-from hpcwedge.condense import condense, schur_dense, split_dofs
+from hpcwedge import models
+from hpcwedge.condense import condense, condense_distributed, schur_dense, split_dofs
 from hpcwedge.models import block2d, plug2d, plug3d, truss_model, vgroove_bar
+
+from mpi_helpers import MPIRUN, ROOT, env, needs_mpirun
 
 
 def _supported_truss(pins):
@@ -150,3 +157,92 @@ def test_wrong_rigid_modes_detected():
     bad = dataclasses.replace(m, rigid_modes=np.linalg.qr(np.random.default_rng(0).normal(size=(m.n_dofs, 3)))[0])
     with pytest.raises(ValueError, match=r"does not annihilate the rigid modes"):
         condense(bad)
+
+
+DISTRIBUTED = {"block2d-r2c2f4": ("block2d", {"rows": 2, "cols": 2, "refine": 4}),
+               "plug3d-l3r4": ("plug3d", {"levels": 3, "ring": 4, "taper_deg": 5.0})}
+
+
+@pytest.mark.mpi
+@needs_mpirun
+@pytest.mark.parametrize("ranks", [1, 2, 3])
+@pytest.mark.parametrize("name", sorted(DISTRIBUTED))
+def test_distributed_matches_dense_under_mpirun(tmp_path, name, ranks):
+    # condense_distributed collective over the real mpirun's world (K_ii rows split between the
+    # ranks, parallel MUMPS): every rank gets the same K_local, equal to a dense Schur complement
+    kind, kw = DISTRIBUTED[name]
+    out = tmp_path / "k.npz"
+    cmd = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), "-x", "PYTHONPATH",
+           sys.executable, os.path.join(ROOT, "tests", "condense_driver.py"), str(out), kind, json.dumps(kw)]
+    p = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = np.load(out)
+    assert int(got["ranks"]) == ranks and float(got["spread"]) == 0.0
+    Kd, Nd = schur_dense(getattr(models, kind)(**kw))
+    assert np.abs(got["K"] - Kd).max() <= 1e-10 * np.abs(Kd).max()
+    np.testing.assert_allclose(got["N"] @ got["N"].T, Nd @ Nd.T, atol=1e-12)
+
+
+def test_distributed_without_comm_is_condense():
+    m = block2d(2, 2, 2)
+    K, N = condense_distributed(m, None)
+    K0, N0 = condense(m)
+    assert np.array_equal(K, K0) and np.array_equal(N, N0)
+
+
+PLUG_SCENE = """name = "plug-dist"
+dim = 2
+[model]
+kind = "plug2d"
+rows = 4
+[friction]
+mu = [0.65, 1.0]
+[compute]
+enumerate = "patterns"
+mu_c = "cones"
+[run]
+condense = "{mode}"
+"""
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_run_condense_distributed_on_the_command_line(tmp_path):
+    # run.condense = "distributed" under mpirun -n 2: the same answers as a serial run (the
+    # condensed K agrees to rounding, so mu^c values to ~1e-12)
+    from mpi_helpers import run, show
+    outs = {}
+    for ranks, mode in [(None, "serial"), (2, "distributed")]:
+        scene = tmp_path / f"{mode}.toml"
+        scene.write_text(PLUG_SCENE.format(mode=mode))
+        outs[mode] = str(tmp_path / f"{mode}.h5")
+        run(ranks, "run", str(scene), "-o", outs[mode], "-q", timeout=120)
+    a, b = show(outs["serial"]), show(outs["distributed"])
+    assert b["mu_c"] == pytest.approx(a["mu_c"], rel=1e-10)
+    assert len(a["runs"]) == len(b["runs"]) == 2
+    for ra, rb in zip(a["runs"], b["runs"]):
+        assert [p["contact"] for p in ra["patterns"]] == [p["contact"] for p in rb["patterns"]]
+        assert [p["mu_c"] for p in rb["patterns"]] == pytest.approx([p["mu_c"] for p in ra["patterns"]], rel=1e-10)
+        assert len(ra["patterns"]) > 0
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_run_condense_distributed_singular_exit_2_once(tmp_path):
+    # a singular K_ii found collectively: one message from the master, status 2, no hang
+    from mpi_helpers import run
+    scene = tmp_path / "flat.toml"
+    scene.write_text('name = "flat"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = 1\n'
+                     '[friction]\nmu = [1.0]\n[run]\ncondense = "distributed"\n')
+    p = run(2, "run", str(scene), "-o", str(tmp_path / "r.h5"), timeout=60, check=False)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.count("hpcwedge: error: model: condense: the stiffness of the non-contact DOFs") == 1
+
+
+def test_run_condense_key_checked():
+    from hpcwedge.scene import SceneError, parse_scene
+    base = {"name": "p", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": 1.0}}
+    assert parse_scene(base).condense == "auto"
+    assert parse_scene({**base, "run": {"condense": "distributed"}}).condense == "distributed"
+    with pytest.raises(SceneError, match=r"run.condense: one of auto, serial, distributed, got 'mumps'"):
+        parse_scene({**base, "run": {"condense": "mumps"}})
