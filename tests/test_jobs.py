@@ -50,6 +50,7 @@ mu = [1.0]
 enumerate = true
 mu_c = "cones"
 [run]
+symmetry = false           # the long way round (~10 s), so that signals land mid-run
 checkpoint_every_s = 2
 """
 
