@@ -21,6 +21,8 @@ bench: setup-bench
 	$(PY) scripts/bench_mu_c.py
 	PYTHONPATH=. $(PY) scripts/bench_socp_count.py --brute-max 14
 	$(PY) scripts/bench_parallel.py
+	PYTHONPATH=. $(PY) scripts/bench_convergence.py --refine 1 2 4 8 16 32 64
+	PYTHONPATH=. $(PY) scripts/bench_condense.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick

@@ -1,0 +1,101 @@
+#!/usr/bin/env python3
+"""Mesh convergence of mu^c (issue 5): block2d, rows = 5 (m = 12 contact nodes),
+each coarse element refined r x r times inside (r = 1, 2, 4, 8, 16 by default).
+
+For every refinement: the condensed stiffness, the wedged rays and cones at one
+mu, the mu^c of each cone and the global mu^c. Cones are matched across
+refinements by their zero sets (a cone that exists at one refinement and not at
+another is listed with a gap). Writes results/bench_convergence.{csv,json,png}
+and prints the table with the change of each cone's mu^c from one refinement to
+the next (it must settle: the interior refinement changes K by less and less).
+
+    PYTHONPATH=. .venv/bin/python scripts/bench_convergence.py [--refine 1 2 4 8 16] [--mu 0.65]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import time
+
+from hpcwedge.pipeline import run_scene
+from hpcwedge.scene import parse_scene
+
+OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "results")
+
+
+def cones_at(refine: int, mu: float, rows: int) -> dict:
+    """{"dofs", "seconds", "mu_c", "cones": {zero-set key: mu^c}} of block2d at one refinement."""
+    scene = parse_scene({"name": f"block2d-r{refine}", "dim": 2, "friction": {"mu": [mu]},
+                         "model": {"kind": "block2d", "rows": rows, "refine": refine},
+                         "compute": {"enumerate": True, "mu_c": "cones"}})
+    t = time.perf_counter()
+    res = run_scene(scene)
+    sec = time.perf_counter() - t
+    cones = {f"u{c['zero_u']} r{c['zero_r']}": c["mu_c"] for c in res.runs[0].cones}
+    return {"refine": refine, "dofs": int(res.model.K.shape[0]), "m": res.m, "seconds": sec,
+            "mu_c": res.mu_c, "n_rays": res.runs[0].n_wedged_rays, "cones": cones}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--refine", type=int, nargs="+", default=[1, 2, 4, 8, 16])
+    ap.add_argument("--rows", type=int, default=5)
+    ap.add_argument("--mu", type=float, default=0.65)
+    args = ap.parse_args()
+    levels = []
+    for r in args.refine:
+        levels.append(cones_at(r, args.mu, args.rows))
+        lv = levels[-1]
+        print(f"refine {r:3d}: {lv['dofs']:8d} DOFs, {lv['n_rays']:6d} wedged rays, {len(lv['cones']):3d} cones, "
+              f"global mu^c {lv['mu_c']:.12f}  ({lv['seconds']:.1f} s)", flush=True)
+    keys = sorted({k for lv in levels for k in lv["cones"]},
+                  key=lambda k: min(lv["cones"].get(k, 9e9) for lv in levels))
+    rows = []
+    for k in keys:
+        vals = [lv["cones"].get(k) for lv in levels]
+        row = {"cone": k}
+        for lv, v in zip(levels, vals):
+            row[f"r{lv['refine']}"] = v
+        known = [(lv["refine"], v) for lv, v in zip(levels, vals) if v is not None]
+        row["last_change_rel"] = (abs(known[-1][1] - known[-2][1]) / known[-1][1]) if len(known) > 1 else None
+        rows.append(row)
+    os.makedirs(OUT, exist_ok=True)
+    fields = ["cone"] + [f"r{lv['refine']}" for lv in levels] + ["last_change_rel"]
+    with open(os.path.join(OUT, "bench_convergence.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+    with open(os.path.join(OUT, "bench_convergence.json"), "w") as f:
+        json.dump({"rows_model": args.rows, "mu": args.mu, "levels": levels, "cones": rows}, f, indent=1)
+    plot(levels, rows)
+    print(f"\n{'cone (zero sets)':<44}" + "".join(f"{'r=' + str(lv['refine']):>15}" for lv in levels)
+          + f"{'last change':>13}")
+    for row in rows:
+        cells = [row[f"r{lv['refine']}"] for lv in levels]
+        vals = "".join(f"{v:>15.10f}" if v is not None else f"{'-':>15}" for v in cells)
+        ch = row["last_change_rel"]
+        print(f"{row['cone'][:43]:<44}{vals}{(f'{ch:13.2e}' if ch is not None else '-'):>13}")
+    print("wrote results/bench_convergence.{csv,json,png}")
+
+
+def plot(levels: list[dict], rows: list[dict]) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    refs = [lv["refine"] for lv in levels]
+    for row in rows:
+        pts = [(r, row[f"r{r}"]) for r in refs if row[f"r{r}"] is not None]
+        ax.semilogx([p[0] for p in pts], [p[1] for p in pts], "o-", lw=1, ms=4)
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("interior refinement r (each coarse element split r x r)")
+    ax.set_ylabel("mu^c of the cone")
+    ax.set_title("block2d rows = 5: mu^c of each cone against refinement")
+    fig.tight_layout()
+    fig.savefig(os.path.join(OUT, "bench_convergence.png"), dpi=120)
+
+
+if __name__ == "__main__":
+    main()
