@@ -14,7 +14,7 @@
 Both are free bodies (no supports) whose contact nodes lie exactly on the obstacle, so
 the global mu^c should come out as tan(taper) (the rigid-translation bound of a V / cone).
 The script also writes examples.json: the structure of each mesh (`mesh_summary`) and the
-counts of a run of cork2d (`run_counts`), which tests/test_examples.py checks.
+counts of a run of each scene (`run_counts`), which tests/test_examples.py checks.
 
     PYTHONPATH=. python scripts/make_examples.py [--out DIR] [--no-run]
 """
@@ -203,7 +203,8 @@ def main() -> int:
     if args.no_run:
         return 0
     record = {name: mesh_summary(os.path.join(args.out, name + ".msh"), dim) for name, (dim, _) in BUILDERS.items()}
-    record["cork2d"]["result"] = run_counts(os.path.join(args.out, "cork2d.toml"))
+    for name in record:
+        record[name]["result"] = run_counts(os.path.join(args.out, name + ".toml"))
     with open(os.path.join(args.out, "examples.json"), "w") as f:
         json.dump(record, f, indent=1)
         f.write("\n")
