@@ -28,6 +28,8 @@ import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLES = os.path.join(ROOT, "scripts", "examples")
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)         # hpcwedge from this checkout (imported lazily: gmsh-free import)
 
 TAPER_2D_DEG = 8.0      # neck walls from the vertical
 BOTTOM_HALF_WIDTH = 0.5
@@ -163,7 +165,6 @@ BUILDERS = {"cork2d": (2, build_cork2d), "plug3d": (3, build_plug3d)}
 def mesh_summary(path: str, dim: int) -> dict:
     """The structure of an example mesh as hpcwedge reads it: node count, body cells per
     type, group names, and the contact group's size and node coordinates (rounded to 1e-9)."""
-    sys.path.insert(0, ROOT)
     from hpcwedge.models.mesh import group_nodes, read_mesh
     mesh = read_mesh(path, dim)
     contact = group_nodes(mesh, "contact", "contact.group")
@@ -176,7 +177,6 @@ def mesh_summary(path: str, dim: int) -> dict:
 def run_counts(scene_path: str) -> dict:
     """Run a scene in process and return what the example test compares: m, the global
     mu^c and per mu the wedged / trivial ray, cone and pattern counts."""
-    sys.path.insert(0, ROOT)
     from hpcwedge.pipeline import run_scene
     from hpcwedge.scene import load_scene
     res = run_scene(load_scene(scene_path))
