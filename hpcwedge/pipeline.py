@@ -20,12 +20,13 @@ import numpy as np
 
 from .build import build_model, contact_problem
 from .cones import maximal_cones
-from .dd import canonical_order, complementary_rays
+from .dd import canonical_order
 from .model import Model
 from .mu_critical import mu_critical
+from .numerics import Numerics, enumerate_2d
 from .parallel import Engine, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, global_mu_critical
-from .problem import ContactProblem, parametrize, friction_rows_2d, ray_vectors
+from .problem import ContactProblem, parametrize, ray_vectors
 from .progress import Progress
 from .scene import Scene
 
@@ -97,16 +98,17 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     result = Result(scene=scene, m=m, runs=[Run(mu=mu) for mu in scene.mu], model=model,
                     problem=problem, stages=stages, timings=timings)
     stats = {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
+    numerics = Numerics.of(problem, scene.exact_fallback_max_m)
 
     if plan.rays:
         t = time.perf_counter()
         stages.append("enumerate")
+        exact_param = _once(lambda: parametrize(problem, exact=True))
         for run in result.runs:
             progress.stage(f"rays mu={run.mu:g}")
-            A = friction_rows_2d(param, run.mu, m, exact=scene.exact)
-            dd = complementary_rays(A, m, exact=scene.exact, progress=progress)
+            dd, p_run = enumerate_2d(param, m, run.mu, numerics, exact_param, progress)
             progress.close()
-            _fill_rays(run, dd, param, m, plan.cones)
+            _fill_rays(run, dd, p_run, m, plan.cones)
             stats["dd"].append({"mu": run.mu, **dd.stats})
         timings["enumerate"] = time.perf_counter() - t
         if plan.cones:
@@ -178,10 +180,24 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     if stats["mu_c_unpolished"]:
         progress.note(f"warning: {stats['mu_c_unpolished']} mu^c value(s) not polished "
                       f"(accurate to the bracket, {1e-7:g} relative)")
+    for line in numerics.warnings():
+        progress.note(line)
+    stats["numerics"] = numerics.as_dict()
     timings["total"] = time.perf_counter() - t0
     stats["parallel"] = engine.summary()
     result.stats = stats
     return result
+
+
+def _once(make):
+    """make() on the first call, the same object afterwards."""
+    box = []
+
+    def get():
+        if not box:
+            box.append(make())
+        return box[0]
+    return get
 
 
 def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:

@@ -20,7 +20,8 @@ KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 
 TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
-                    "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
+                    "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
+                    "exact_fallback_max_m": 10}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64}
 
 
@@ -58,6 +59,9 @@ class Scene:
     text: str = field(repr=False, default="")
     base_dir: str = "."
     task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
+    #: compute.exact_fallback_max_m: a 2D float enumeration whose decisions were too close to
+    #: call is redone in exact arithmetic when m is at most this (0: never; pipeline.py)
+    exact_fallback_max_m: int = 10
 
     @property
     def hash(self) -> str:
@@ -135,6 +139,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
             raise SceneError(f"compute.{key}: must be a finite number > 0, got {v!r}")
     if not isinstance(compute["exact"], bool):
         raise SceneError(f"compute.exact: true or false, got {compute['exact']!r}")
+    v = compute["exact_fallback_max_m"]
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise SceneError(f"compute.exact_fallback_max_m: must be a whole number >= 0, got {v!r}")
     if compute["exact"] and dim == 3:
         raise SceneError("compute.exact: exact arithmetic is for 2D scenes (3D problems are conic)")
     run = dict(RUN_DEFAULTS)
@@ -157,7 +164,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  mu_c=compute["mu_c"], mu_c_method=compute["mu_c_method"],
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
-                 text=text, base_dir=base_dir, task_budget=run["task_budget"])
+                 text=text, base_dir=base_dir, task_budget=run["task_budget"],
+                 exact_fallback_max_m=compute["exact_fallback_max_m"])
 
 
 def _unknown(table, allowed, prefix):

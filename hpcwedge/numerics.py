@@ -1,0 +1,119 @@
+"""Run-time checks of the float decisions, and the exact fallback (README, "Numerical
+stress"; scripts/stress.py measures them).
+
+A float enumeration can differ from exact arithmetic where rounding decides a sign:
+  - a double-description zero test |a.x| within dd.CLOSE_CALL_FACTOR of its tolerance
+    (dd.complementary_rays counts them: stats "close_calls");
+  - a new ray computed with catastrophic cancellation (stats "cancellation" below
+    dd.CANCELLATION_MIN): its rounding error reaches the zero tolerance;
+  - an ill-conditioned stiffness: the parametrisation u = F r carries relative errors of
+    about cond(K) eps, which reach the zero tolerance above COND_SUSPECT.
+Any of them makes the enumeration at that mu *suspect*. A suspect enumeration is redone in
+exact rational arithmetic when m <= the scene's compute.exact_fallback_max_m (the answer
+is then exact); otherwise it is kept and reported as unresolved. mu^c values that are
+not polished and LP solves that no solver decided are reported too. Everything goes to
+Result.stats["numerics"] and, when something is unresolved, to a warning line.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .dd import CANCELLATION_MIN, FLOAT_ZERO_TOL, DDResult, complementary_rays
+from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d
+
+#: cond(K on range K) above this makes a float enumeration suspect: relative errors of
+#: cond * eps in u reach the DD's zero tolerance
+COND_SUSPECT = FLOAT_ZERO_TOL / float(np.finfo(float).eps)
+
+
+def stiffness_range(problem: ContactProblem) -> tuple[float, float]:
+    """(smallest, largest) eigenvalue of K on range(K) = N^perp: the k smallest
+    eigenvalues (the rigid modes, zero up to rounding) left out."""
+    lam = np.linalg.eigvalsh(problem.K)
+    k = problem.N.shape[1]
+    return (float(lam[k]), float(lam[-1])) if lam.size > k else (1.0, 1.0)
+
+
+@dataclass
+class Numerics:
+    """What the run-time checks found (the stats["numerics"] entry, see as_dict).
+
+    lam_min, lam_max: stiffness_range of the problem; runs: one record per enumerated mu
+    ({"mu", "exact", "suspect", and for a float DD "close_calls", "closest",
+    "cancellation" (dd stats), "cond_T" (problem.balanced_2d)}); exact_fallback /
+    unresolved: the mu values redone exactly / left suspect; notes: other findings
+    (mu^c not polished, undecided solves), each one line."""
+
+    lam_min: float
+    lam_max: float
+    fallback_max_m: int
+    runs: list = field(default_factory=list)
+    exact_fallback: list = field(default_factory=list)
+    unresolved: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+
+    @classmethod
+    def of(cls, problem: ContactProblem, fallback_max_m: int) -> "Numerics":
+        return cls(*stiffness_range(problem), fallback_max_m)
+
+    @property
+    def cond(self) -> float:
+        """cond(K) on range(K) (inf if the smallest eigenvalue there is not positive)."""
+        return self.lam_max / self.lam_min if self.lam_min > 0 else float("inf")
+
+    @property
+    def scale(self) -> float:
+        """The stiffness that weighs u_n against r in the float DD (problem.balanced_2d)."""
+        return float(np.sqrt(self.lam_min * self.lam_max)) if self.lam_min > 0 else self.lam_max
+
+    def as_dict(self) -> dict:
+        return {"flagged": bool(self.exact_fallback or self.unresolved or self.notes),
+                "stiffness_cond": self.cond, "exact_fallback": self.exact_fallback,
+                "unresolved": self.unresolved, "notes": self.notes, "runs": self.runs}
+
+    def warnings(self) -> list[str]:
+        """One line per finding that leaves the answer possibly inexact."""
+        out = []
+        if self.unresolved:
+            mus = ", ".join(f"{mu:g}" for mu in self.unresolved)
+            out.append(f"warning: float enumeration at mu = {mus} made decisions too close to call "
+                       f"(stiffness cond {self.cond:.1e}) and m > compute.exact_fallback_max_m = "
+                       f"{self.fallback_max_m}: counts may differ from exact arithmetic "
+                       "(stats.numerics; rerun with compute.exact = true)")
+        out += [f"warning: {n}" for n in self.notes]
+        return out
+
+
+def enumerate_2d(param: Parametrization, m: int, mu: float, numerics: Numerics,
+                 exact_param: Callable[[], Parametrization], progress=None) -> tuple[DDResult, Parametrization]:
+    """Complementary rays of P(mu) and the parametrisation they are expressed in.
+
+    param exact (param.exact): the exact DD. Otherwise the float DD in balanced
+    coordinates (problem.balanced_2d); if it is suspect (module doc) and m <=
+    numerics.fallback_max_m, the exact DD on exact_param() (called at most when
+    needed; the caller caches it). Appends the mu's record to numerics."""
+    if param.exact:
+        dd = complementary_rays(friction_rows_2d(param, mu, m, exact=True), m, exact=True, progress=progress)
+        numerics.runs.append({"mu": mu, "exact": True, "suspect": False})
+        return dd, param
+    p_mu, cond_T = balanced_2d(param, mu, m, numerics.scale)
+    dd = complementary_rays(friction_rows_2d(p_mu, mu, m), m, progress=progress)
+    st = dd.stats
+    suspect = (st["close_calls"] > 0 or st["cancellation"] < CANCELLATION_MIN
+               or numerics.cond > COND_SUSPECT)
+    record = {"mu": mu, "exact": False, "suspect": suspect, "close_calls": st["close_calls"],
+              "closest": st["closest"], "cancellation": st["cancellation"], "cond_T": cond_T}
+    numerics.runs.append(record)
+    if not suspect:
+        return dd, p_mu
+    if m > numerics.fallback_max_m:
+        numerics.unresolved.append(mu)
+        return dd, p_mu
+    pq = exact_param()
+    dd = complementary_rays(friction_rows_2d(pq, mu, m, exact=True), m, exact=True, progress=progress)
+    record["exact"] = True
+    numerics.exact_fallback.append(mu)
+    return dd, pq
