@@ -10,9 +10,13 @@ A float enumeration can differ from exact arithmetic where rounding decides a si
     about cond(K) eps, which reach the zero tolerance above COND_SUSPECT.
 Any of them makes the enumeration at that mu *suspect*. A suspect enumeration is redone in
 exact rational arithmetic when m <= the scene's compute.exact_fallback_max_m (the answer
-is then exact); otherwise it is kept and reported as unresolved. mu^c values that are
-not polished and LP solves that no solver decided are reported too. Everything goes to
-Result.stats["numerics"] and, when something is unresolved, to a warning line.
+is then exact); otherwise it is kept and reported as unresolved. The 2D sign patterns of
+the LP branch and bound are suspect when a found pattern's LP point is feasible only to
+HiGHS's tolerance (patterns.NEAR_BOUNDARY_TOL), a solve was undecided, or K is
+ill-conditioned; they are then taken from the exact rays (SPEC §2), under the same size
+limit. mu^c values that are not polished and LP solves that no solver decided are
+reported. Everything goes to Result.stats["numerics"] and, when something may be
+inexact, to a warning line.
 """
 from __future__ import annotations
 
@@ -22,6 +26,7 @@ from typing import Callable
 import numpy as np
 
 from .dd import CANCELLATION_MIN, FLOAT_ZERO_TOL, DDResult, complementary_rays
+from .patterns import implied_patterns
 from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d
 
 #: cond(K on range K) above this makes a float enumeration suspect: relative errors of
@@ -44,8 +49,9 @@ class Numerics:
     lam_min, lam_max: stiffness_range of the problem; runs: one record per enumerated mu
     ({"mu", "exact", "suspect", and for a float DD "close_calls", "closest",
     "cancellation" (dd stats), "cond_T" (problem.balanced_2d)}); exact_fallback /
-    unresolved: the mu values redone exactly / left suspect; notes: other findings
-    (mu^c not polished, undecided solves), each one line."""
+    unresolved: the mu values redone exactly / left suspect; patterns: the 2D sign
+    patterns' check (settle_patterns_2d); notes: other findings (mu^c not polished,
+    undecided solves, suspect patterns left as they are), each one line."""
 
     lam_min: float
     lam_max: float
@@ -54,6 +60,7 @@ class Numerics:
     exact_fallback: list = field(default_factory=list)
     unresolved: list = field(default_factory=list)
     notes: list = field(default_factory=list)
+    patterns: dict | None = None
 
     @classmethod
     def of(cls, problem: ContactProblem, fallback_max_m: int) -> "Numerics":
@@ -72,7 +79,8 @@ class Numerics:
     def as_dict(self) -> dict:
         return {"flagged": bool(self.exact_fallback or self.unresolved or self.notes),
                 "stiffness_cond": self.cond, "exact_fallback": self.exact_fallback,
-                "unresolved": self.unresolved, "notes": self.notes, "runs": self.runs}
+                "unresolved": self.unresolved, "notes": self.notes, "runs": self.runs,
+                "patterns": self.patterns}
 
     def warnings(self) -> list[str]:
         """One line per finding that leaves the answer possibly inexact."""
@@ -96,7 +104,7 @@ def enumerate_2d(param: Parametrization, m: int, mu: float, numerics: Numerics,
     numerics.fallback_max_m, the exact DD on exact_param() (called at most when
     needed; the caller caches it). Appends the mu's record to numerics."""
     if param.exact:
-        dd = complementary_rays(friction_rows_2d(param, mu, m, exact=True), m, exact=True, progress=progress)
+        dd = exact_rays(param, m, mu, progress)
         numerics.runs.append({"mu": mu, "exact": True, "suspect": False})
         return dd, param
     p_mu, cond_T = balanced_2d(param, mu, m, numerics.scale)
@@ -113,7 +121,49 @@ def enumerate_2d(param: Parametrization, m: int, mu: float, numerics: Numerics,
         numerics.unresolved.append(mu)
         return dd, p_mu
     pq = exact_param()
-    dd = complementary_rays(friction_rows_2d(pq, mu, m, exact=True), m, exact=True, progress=progress)
+    dd = exact_rays(pq, m, mu, progress)
     record["exact"] = True
     numerics.exact_fallback.append(mu)
     return dd, pq
+
+
+def note_mu_c(numerics: Numerics, unpolished: int, undecided: int) -> None:
+    """Record mu^c values left unpolished and LP solves no solver decided."""
+    if unpolished:
+        numerics.notes.append(f"{unpolished} mu^c value(s) not polished: the upper end of a bisection "
+                              f"bracket (1e-7 relative{', less where LP solves were undecided' if undecided else ''})")
+    if undecided:
+        numerics.notes.append(f"{undecided} LP solve(s) of the mu^c stage undecided by every solver "
+                              "(taken as feasible)")
+
+
+def exact_rays(pq: Parametrization, m: int, mu: float, progress=None) -> DDResult:
+    """The exact DD of P(mu) on an exact parametrisation."""
+    return complementary_rays(friction_rows_2d(pq, mu, m, exact=True), m, exact=True, progress=progress)
+
+
+def settle_patterns_2d(numerics: Numerics, m: int, mus, counters: dict, undecided: int,
+                       exact_param: Callable[[], Parametrization],
+                       exact_scene: bool) -> list[set[tuple[int, ...]]] | None:
+    """The 2D sign patterns per mu from the exact rays (SPEC §2), when the LP branch and
+    bound's are suspect (module doc; counters: its status counts, undecided: patterns no
+    solver decided) and m <= the fallback limit, or the scene asks for exact arithmetic.
+    None: keep the branch and bound's (a suspect one is noted)."""
+    near = int(counters.get("status_near_boundary", 0))
+    suspect = bool(near or undecided or counters.get("undecided", 0) or numerics.cond > COND_SUSPECT)
+    numerics.patterns = {"suspect": suspect, "near_boundary": near, "undecided": undecided,
+                         "exact": False}
+    if not (suspect or exact_scene):
+        return None
+    if not exact_scene and m > numerics.fallback_max_m:
+        numerics.notes.append(f"2D sign patterns: {near} found near the LP tolerance, {undecided} undecided, "
+                              f"stiffness cond {numerics.cond:.1e}; m > compute.exact_fallback_max_m = "
+                              f"{numerics.fallback_max_m}: not redone in exact arithmetic")
+        return None
+    numerics.patterns["exact"] = True
+    pq = exact_param()
+    out = []
+    for mu in mus:
+        dd = exact_rays(pq, m, mu)
+        out.append(implied_patterns(dd.zero[dd.wedged()], m))
+    return out

@@ -16,12 +16,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .conic import (INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, infeasible_core, node_rows, pattern_rows,
+from .conic import (INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, infeasible_core, lp_violation, node_rows, pattern_rows,
                     problem_dim, violation)
 from .mu_critical import mu_critical
 from .problem import Parametrization
 
 MEETS_TOL = 1e-12
+#: 2D: a full pattern whose LP point violates a unit row by more than this (HiGHS points of
+#: clearly feasible patterns: <= 3e-16; at mu = mu^c (1 - 1e-9): 3e-14) is feasible
+#: only to HiGHS's tolerance: counted as statuses["near_boundary"] (pipeline: suspect)
+NEAR_BOUNDARY_TOL = 1e-14
 #: 3D: a child's condition counts as nearly met by the parent's x below this
 #: (relative to max |u|, |r|); the projected point must then verify
 NEAR_TOL = 1e-6
@@ -163,6 +167,8 @@ class PatternTree:
                 found.append(node)
                 if doubt:
                     undecided.append(node)
+                elif self.dim == 2 and self.friction and self._near_boundary(node, x, mu):
+                    _bump(stats.statuses, "near_boundary")
                 if first_only:
                     stack.clear()
                     break
@@ -179,6 +185,11 @@ class PatternTree:
             stack.extend(reversed(kids))
         stats.lps = stats.statuses.get("lp_calls", 0)
         return Explored(found, [node for node, _ in reversed(stack)], stats, undecided)
+
+    def _near_boundary(self, node: Subtree, x: np.ndarray, mu: float) -> bool:
+        """2D: the full pattern's LP point x violates a row by more than NEAR_BOUNDARY_TOL."""
+        zu, zr = node.masks(self.m)
+        return lp_violation(pattern_rows(self.param, self.m, zu, zr), mu, x) > NEAR_BOUNDARY_TOL
 
     def _static_next(self, node: Subtree) -> int:
         """The first node of `order` not fixed in `node`."""
@@ -284,9 +295,10 @@ def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool,
 
 
 def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: str = "accurate",
-                       tol: float = 1e-6, stats: BnBStats | None = None) -> tuple[float | None, str]:
+                       tol: float = 1e-6, stats: BnBStats | None = None,
+                       scale: float | None = None) -> tuple[float | None, str]:
     """Least mu with any solution, by branch and bound over patterns with an incumbent
-    (2D and 3D alike).
+    (2D and 3D alike). scale: passed to mu_critical (2D balanced coordinates).
 
     Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
     r_t free has no solution) or "none_up_to_mu_max".
@@ -301,7 +313,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         if not leaf:
             break
         zu, zr = leaf[0]
-        r = mu_critical(param, m, zu, zr, mu_hi=bound, method=method, tol=tol)
+        r = mu_critical(param, m, zu, zr, mu_hi=bound, method=method, tol=tol, scale=scale)
         _absorb(stats, r)
         if r.mu_c is None or (best is not None and r.mu_c >= best):
             break
@@ -312,7 +324,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     # patterns whose mu^c lies within the last step below `best`: settle them all
     top = best * (1 + 1e-9)
     for zu, zr in sign_patterns(param, m, top, stats=stats):
-        r = mu_critical(param, m, zu, zr, mu_hi=top, method=method, tol=tol)
+        r = mu_critical(param, m, zu, zr, mu_hi=top, method=method, tol=tol, scale=scale)
         _absorb(stats, r)
         if r.mu_c is not None:
             best = min(best, r.mu_c)

@@ -23,7 +23,7 @@ from .cones import maximal_cones
 from .dd import canonical_order
 from .model import Model
 from .mu_critical import mu_critical
-from .numerics import Numerics, enumerate_2d
+from .numerics import Numerics, enumerate_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, global_mu_critical
 from .problem import ContactProblem, parametrize, ray_vectors
@@ -99,11 +99,11 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
                     problem=problem, stages=stages, timings=timings)
     stats = {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
     numerics = Numerics.of(problem, scene.exact_fallback_max_m)
+    exact_param = (lambda: param) if scene.exact else _once(lambda: parametrize(problem, exact=True))
 
     if plan.rays:
         t = time.perf_counter()
         stages.append("enumerate")
-        exact_param = _once(lambda: parametrize(problem, exact=True))
         for run in result.runs:
             progress.stage(f"rays mu={run.mu:g}")
             dd, p_run = enumerate_2d(param, m, run.mu, numerics, exact_param, progress)
@@ -124,6 +124,14 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
                              "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)]
         c = pats.counters
         stats["patterns_undecided"] = sum(len(u) for u in pats.undecided)
+        if scene.dim == 2:
+            exact_sets = settle_patterns_2d(numerics, m, scene.mu, c, stats["patterns_undecided"],
+                                            exact_param, scene.exact)
+            if exact_sets is not None:
+                for run, sets in zip(result.runs, exact_sets):
+                    run.patterns = [{"contact": list(cs), "mu_c": None, "undecided": False}
+                                    for cs in sorted(sets, key=lambda cs: sum(1 << i for i in cs))]
+                stats["patterns_undecided"] = 0
         stats["bnb"] = {k: c.get(k, 0) for k in ("nodes", "solves", "skipped", "undecided")}
         stats["bnb"]["partitions"] = 2 ** m * len(scene.mu)       # what brute force would solve
         if scene.dim == 3:
@@ -153,8 +161,9 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         for run in wanted:
             for key, zu, zr, _ in keyed(run):
                 items.setdefault(key, (zu, zr, run.mu))
+        scale = numerics.scale if scene.dim == 2 else None       # 2D: balanced coordinates
         solve = partial(mu_critical, strip_exact(param), m, mu_max=scene.mu_max,
-                        method=scene.mu_c_method, tol=scene.mu_c_tol)
+                        method=scene.mu_c_method, tol=scene.mu_c_tol, scale=scale)
         cache = dict(zip(items, run_mu_c(solve, list(items.values()), engine=engine)))
         for r in cache.values():
             stats["lp_solves"] += r.lps
@@ -173,13 +182,14 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
             if result.mu_c is None:
                 bnb = BnBStats()
                 result.mu_c, result.mu_c_status = global_mu_critical(
-                    param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb)
+                    param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb,
+                    scale=scale)
                 stats["bnb"] = {"solves": bnb.solves, "skipped": bnb.skipped,
                                 "undecided": bnb.undecided, "nodes": bnb.nodes}
+                stats["mu_c_unpolished"] += bnb.extra.get("mu_c_unpolished", 0)
+                stats["mu_c_polished"] += bnb.extra.get("mu_c_polished", 0)
         timings["mu_c"] = time.perf_counter() - t
-    if stats["mu_c_unpolished"]:
-        progress.note(f"warning: {stats['mu_c_unpolished']} mu^c value(s) not polished "
-                      f"(accurate to the bracket, {1e-7:g} relative)")
+    note_mu_c(numerics, stats["mu_c_unpolished"], stats["lp_undecided"])
     for line in numerics.warnings():
         progress.note(line)
     stats["numerics"] = numerics.as_dict()
