@@ -177,3 +177,37 @@ def test_mechanism_is_an_input_error():
 def test_exact_fallback_key_is_validated():
     with pytest.raises(SceneError, match="exact_fallback_max_m"):
         grid._scene(grid.builtin("plug2d"), 0.65, {"exact_fallback_max_m": -1})
+
+
+def test_cancellation_alone_flags_a_run(monkeypatch):
+    """Stiff diagonals (EA 1e6 against 1): a DD step cancels to 4e-14 of its terms and
+    the float answer is wrong (500 rays, exact 198); the cancellation is detected even
+    with the conditioning test off."""
+    import hpcwedge.numerics as numerics
+    monkeypatch.setattr(numerics, "COND_SUSPECT", math.inf)
+    res = run(grid.plug_truss(4, ea_diag=1e6), 0.65, exact_fallback_max_m=0, mu_c="none")
+    rec = res.stats["numerics"]["runs"][0]
+    assert rec["suspect"] and rec["close_calls"] == 0
+    assert rec["cancellation"] < numerics.CANCELLATION_MIN
+    ok = run(grid.plug_truss(4), 0.65, mu_c="none").stats["numerics"]["runs"][0]
+    assert ok["cancellation"] > 1e-3 and not ok["suspect"]
+
+
+def test_undecided_simplex_is_retried_by_interior_point(monkeypatch):
+    """An LP the dual simplex leaves undecided is solved again by HiGHS's interior point
+    method (counted), not taken as feasible."""
+    import hpcwedge.conic as conic
+    rows = conic.pattern_rows(parametrize(random_problem(np.random.default_rng(3), 3, False)), 3,
+                              np.array([True, True, False]), np.array([False, False, True]))
+    plain = conic.lp_feasible(rows, 0.8)[0]
+    real = conic.lp_feasible
+    methods = []
+
+    def flaky(rows, mu, options=None, method="highs-ds"):
+        methods.append(method)
+        return (conic.UNDECIDED, None) if method == "highs-ds" else real(rows, mu, options, method)
+    monkeypatch.setattr(conic, "lp_feasible", flaky)
+    counts = {}
+    status, _ = conic.feasible(rows, 0.8, counts)
+    assert methods == ["highs-ds", "highs-ipm"] and status == plain != conic.UNDECIDED
+    assert counts == {"lp_undecided": 1, f"lp_retry_ipm_{plain}": 1}
