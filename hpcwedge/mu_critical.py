@@ -50,7 +50,9 @@ BRACKET_RTOL = 1e-7
 POLISH_TOL = 1e-9
 #: 2D with a scale: mu^c is recomputed in coordinates balanced at it when it lies below
 #: mu_hi / REBALANCE (the first coordinates were balanced at mu_hi)
-REBALANCE = 2.0
+REBALANCE = 10.0
+#: ... starting from the bracket mu^c (1 -/+ this) around the first value
+REBALANCE_BRACKET = 1e-6
 #: slack thresholds of the active sets tried after those scaled to the bracket width
 POLISH_WIDE_TAUS = (1e-5, 1e-3, 1e-2)
 #: 3D: Dinkelbach stops when a step lowers mu by less than this (relative)
@@ -99,15 +101,15 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
             return _mu_critical_3d(param, m, zero_u, zero_r, mu_hi, mu_max, method, tol, MuC(None))
         return mu_critical_rows(rows, mu_hi, mu_max, method, tol)
 
-    def solve(ref: float, hi: float | None) -> MuC:
+    def solve(ref: float, hi: float | None, lo: float | None = None) -> MuC:
         return mu_critical_rows(pattern_rows(balanced_2d(param, ref, m, scale)[0], m, zero_u, zero_r),
-                                hi, mu_max, method, tol)
+                                hi, mu_max, method, tol, mu_lo=lo)
 
     ref = mu_max if mu_hi is None else mu_hi
     out = solve(ref, mu_hi)
     if out.mu_c is None or method != "accurate" or out.mu_c * REBALANCE > ref:
         return out
-    again = solve(out.mu_c, out.mu_c * (1 + 1e-6))
+    again = solve(out.mu_c, out.mu_c * (1 + REBALANCE_BRACKET), out.mu_c * (1 - REBALANCE_BRACKET))
     again.lps += out.lps
     again.undecided += out.undecided
     for k, v in out.statuses.items():
@@ -116,9 +118,12 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
 
 
 def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100.0,
-                     method: str = "accurate", tol: float = 1e-6, out: MuC | None = None) -> MuC:
+                     method: str = "accurate", tol: float = 1e-6, out: MuC | None = None,
+                     mu_lo: float | None = None) -> MuC:
     """mu^c of an LP pattern problem given by its rows (2D patterns; also any
-    polyhedral problem of the same form, e.g. a 3D pattern with pyramids)."""
+    polyhedral problem of the same form, e.g. a 3D pattern with pyramids).
+    mu_lo: a guess of an infeasible mu below mu^c; the bisection starts from it when an
+    LP confirms it (else from 0)."""
     out = MuC(None) if out is None else out
 
     def feasible_at(mu: float):
@@ -134,6 +139,8 @@ def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100
             return out
         mu_hi = mu_max
     lo, hi = 0.0, float(mu_hi)
+    if mu_lo is not None and not feasible_at(mu_lo)[0]:
+        lo = mu_lo
     rtol = BRACKET_RTOL if method == "accurate" else tol
     x_hi = None
     while hi - lo > rtol * hi and hi > 1e-12 * mu_hi:
