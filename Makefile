@@ -21,10 +21,12 @@ bench: setup-bench
 	$(PY) scripts/bench_mu_c.py
 	PYTHONPATH=. $(PY) scripts/bench_socp_count.py --brute-max 14
 	$(PY) scripts/bench_parallel.py
+	$(PY) scripts/stress.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick
 	$(PY) scripts/bench_mu_c.py --quick
+	$(PY) scripts/stress.py --quick
 
 check: setup
 	../shared/acceptance/check_public

@@ -77,8 +77,10 @@ class Numerics:
         return float(np.sqrt(self.lam_min * self.lam_max)) if self.lam_min > 0 else self.lam_max
 
     def as_dict(self) -> dict:
+        cond = self.cond
         return {"flagged": bool(self.exact_fallback or self.unresolved or self.notes),
-                "stiffness_cond": self.cond, "exact_fallback": self.exact_fallback,
+                "stiffness_cond": cond if np.isfinite(cond) else None,      # None: singular
+                "exact_fallback": self.exact_fallback,
                 "unresolved": self.unresolved, "notes": self.notes, "runs": self.runs,
                 "patterns": self.patterns}
 
