@@ -57,8 +57,8 @@ FLOAT_ZERO_TOL = 1e-10   # on unit-norm rows and unit-norm rays
 #: a float sign decision |a.x| within this factor of FLOAT_ZERO_TOL (either side) is a
 #: close call: rounding may have decided it (stats["close_calls"]; numerics.py falls back
 #: to exact arithmetic or reports it). Measured (scripts/stress.py): every float result
-#: that differed from exact arithmetic had close calls on both sides of the tolerance;
-#: computed zeros of well-posed plug2d runs up to m = 16 lie below 1e-11.
+#: that differed from exact arithmetic had close calls, or cancelled (CANCELLATION_MIN), or
+#: came from an ill-conditioned K; plug2d at taper 10 deg up to m = 16 has none.
 CLOSE_CALL_FACTOR = 10.0
 #: a new ray whose computation cancels to this fraction of its terms carries a relative
 #: rounding error of eps / CANCELLATION_MIN = FLOAT_ZERO_TOL: its later zero tests are

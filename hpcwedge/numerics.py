@@ -64,6 +64,7 @@ class Numerics:
 
     @classmethod
     def of(cls, problem: ContactProblem, fallback_max_m: int) -> "Numerics":
+        """The record of a problem, before any check has run."""
         return cls(*stiffness_range(problem), fallback_max_m)
 
     @property
@@ -77,6 +78,8 @@ class Numerics:
         return float(np.sqrt(self.lam_min * self.lam_max)) if self.lam_min > 0 else self.lam_max
 
     def as_dict(self) -> dict:
+        """The stats["numerics"] entry (JSON-ready); flagged: something was redone exactly,
+        left unresolved or noted."""
         cond = self.cond
         return {"flagged": bool(self.exact_fallback or self.unresolved or self.notes),
                 "stiffness_cond": cond if np.isfinite(cond) else None,      # None: singular

@@ -3,7 +3,8 @@
 Runs only the stages the scene's plan asks for, times each, and returns a
 Result whose lists are in canonical order (SPEC §4).
 
-2D: rays (double description), cones, mu^c per cone and global.
+2D: rays (double description), cones, mu^c per cone and global; float decisions too
+close to call are detected and, on small problems, redone exactly (numerics.py).
 3D: feasible sign patterns per listed mu (branch and bound over SOCPs),
 mu^c per pattern and global (2D too with enumerate = "patterns"). The units
 of work the parallel layer distributes (parallel.run_patterns: budgeted
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from functools import partial
+from functools import cache as once, partial
 
 import numpy as np
 
@@ -99,7 +100,8 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
                     problem=problem, stages=stages, timings=timings)
     stats = {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
     numerics = Numerics.of(problem, scene.exact_fallback_max_m)
-    exact_param = (lambda: param) if scene.exact else _once(lambda: parametrize(problem, exact=True))
+    # the exact parametrisation, made once if a fallback needs it
+    exact_param = (lambda: param) if scene.exact else once(lambda: parametrize(problem, exact=True))
 
     if plan.rays:
         t = time.perf_counter()
@@ -197,17 +199,6 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     stats["parallel"] = engine.summary()
     result.stats = stats
     return result
-
-
-def _once(make):
-    """make() on the first call, the same object afterwards."""
-    box = []
-
-    def get():
-        if not box:
-            box.append(make())
-        return box[0]
-    return get
 
 
 def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
