@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
+sys.path[:0] = [ROOT, os.path.join(ROOT, "tests")]
 
 from hpcwedge.dd import complementary_rays                         # noqa: E402
 from hpcwedge.models.library import plug2d                          # noqa: E402
@@ -66,6 +66,7 @@ from hpcwedge.patterns import implied_patterns                      # noqa: E402
 from hpcwedge.pipeline import run_scene                              # noqa: E402
 from hpcwedge.problem import friction_rows_2d, parametrize          # noqa: E402
 from hpcwedge.scene import parse_scene                               # noqa: E402
+from instances import random_problem                                 # noqa: E402  (tests/)
 
 BRACKET_RTOL = 1e-8
 MU = 0.65
@@ -124,31 +125,21 @@ def plug_truss(rows: int, taper: float = 10.0, ea_diag: float = 1.0, angle_deg: 
 
 
 def builtin(kind: str, **params) -> dict:
+    """The model table of a built-in scene."""
     return {"model": {"kind": kind, **params}}
 
 
 def raw_stiffness(seed: int, m: int, free: bool) -> dict:
-    """A random raw-stiffness scene (tests/instances.py's construction, inline here)."""
-    rng = np.random.default_rng(seed)
-    n = 2 * m
-    if not free:
-        G = rng.standard_normal((n, n))
-        return {"model": {"kind": "stiffness", "K": (G @ G.T + 0.2 * np.eye(n)).tolist()}}
-    pts = rng.uniform(-1, 1, size=(m, 2))
-    ang = rng.uniform(0.2, np.pi - 0.2, size=m)
-    nrm = np.stack([np.cos(ang), np.sin(ang)], axis=1)
-    tang = np.stack([nrm[:, 1], -nrm[:, 0]], axis=1)
-    modes = [np.tile([1.0, 0.0], (m, 1)), np.tile([0.0, 1.0], (m, 1)),
-             np.stack([-pts[:, 1], pts[:, 0]], axis=1)]
-    N = np.stack([np.concatenate([(v * nrm).sum(1), (v * tang).sum(1)]) for v in modes], axis=1)
-    N = np.linalg.qr(N)[0]
-    B = np.linalg.svd(N.T)[2][N.shape[1]:].T
-    G = rng.standard_normal((B.shape[1], B.shape[1]))
-    K = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
-    return {"model": {"kind": "stiffness", "K": (0.5 * (K + K.T)).tolist(), "null_space": N.tolist()}}
+    """A `stiffness` scene of the tests' random problem (tests/instances.py) for seed."""
+    prob = random_problem(np.random.default_rng(seed), m, free)
+    model = {"kind": "stiffness", "K": prob.K.tolist()}
+    if free:
+        model["null_space"] = prob.N.tolist()
+    return {"model": model}
 
 
 def tan(deg: float) -> float:
+    """tan of an angle in degrees (the plug's analytic mu^c)."""
     return math.tan(math.radians(deg))
 
 
@@ -227,6 +218,8 @@ def cases(quick: bool, families: set[str] | None = None) -> list[Case]:
 # ------------------------------------------------------------------ runs
 
 def _scene(spec: dict, mu: float, compute: dict):
+    """The Scene of a case's tables at one mu, with these compute keys (default: rays,
+    cones and the global mu^c)."""
     data = {"name": "stress", "dim": 2, **spec, "friction": {"mu": [mu]},
             "compute": {"enumerate": True, "mu_c": "global", **compute}}
     return parse_scene(data)
@@ -243,6 +236,7 @@ def _answer(res) -> dict:
 
 
 def _timed(fn):
+    """(fn(), seconds)."""
     t = time.perf_counter()
     out = fn()
     return out, time.perf_counter() - t
@@ -323,6 +317,7 @@ def write(rows: list[dict], out_dir: str, meta: dict) -> None:
 
 
 def _plain(o):
+    """JSON for numpy scalars, arrays and tuples."""
     if isinstance(o, (np.integer,)):
         return int(o)
     if isinstance(o, (np.floating,)):
