@@ -23,10 +23,12 @@ bench: setup-bench
 	$(PY) scripts/bench_parallel.py
 	PYTHONPATH=. $(PY) scripts/bench_convergence.py --refine 1 2 4 8 16 32 64
 	PYTHONPATH=. $(PY) scripts/bench_condense.py
+	$(PY) scripts/stress.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick
 	$(PY) scripts/bench_mu_c.py --quick
+	$(PY) scripts/stress.py --quick
 
 check: setup
 	../shared/acceptance/check_public

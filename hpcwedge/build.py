@@ -17,6 +17,11 @@ from .scene import Scene, SceneError, array
 SYM_RTOL = 1e-10      # symmetry of a raw K, relative to max |K|
 PSD_RTOL = 1e-10      # lambda_min >= -PSD_RTOL * lambda_max
 SINGULAR_RTOL = 1e-10  # lambda_min <= SINGULAR_RTOL * lambda_max: numerically singular
+#: a condensed model K whose smallest eigenvalue outside the rigid modes is at most this
+#: times the largest is singular to rounding: the model is a mechanism (a plug truss held
+#: by ground bars that leave a rotation free: 2e-16; the stiffest legitimate case of
+#: scripts/stress.py, ground bars of EA 1e-8: 1.2e-10)
+MECHANISM_RTOL = 1e-12
 
 
 def build_model(scene: Scene) -> Model:
@@ -74,8 +79,22 @@ def contact_problem(scene: Scene, model: Model | None = None, comm=None) -> Cont
             K, N = condense_distributed(model, comm)
         except ValueError as e:
             raise SceneError(f"model: {str(e).splitlines()[0]}") from None
-        return ContactProblem(scene.dim, K, N)
+        problem = ContactProblem(scene.dim, K, N)
+        check_not_mechanism(problem)
+        return problem
     return raw_stiffness(scene)
+
+
+def check_not_mechanism(problem: ContactProblem) -> None:
+    """SceneError if the condensed K is singular beyond the model's rigid modes (a
+    mechanism that the geometry's rigid modes do not account for): its smallest
+    eigenvalue on range(K) at most MECHANISM_RTOL times its largest."""
+    from .numerics import stiffness_range
+    lo, hi = stiffness_range(problem)
+    if hi > 0 and lo <= MECHANISM_RTOL * hi:
+        raise SceneError(f"model: the condensed stiffness is singular apart from the {problem.N.shape[1]} "
+                         f"rigid mode(s) (smallest/largest eigenvalue {lo / hi:.1e} <= {MECHANISM_RTOL:g}): "
+                         "the body is a mechanism (add bars/elements or supports)")
 
 
 def raw_stiffness(scene: Scene) -> ContactProblem:

@@ -64,6 +64,8 @@ VERIFY_TOL = 1e-8
 #: an infeasibility certificate z holds when ||A^T z|| and the dual-cone violation are
 #: <= CERT_TOL * |b^T z| (b^T z < 0 strictly)
 CERT_TOL = 1e-7
+#: HiGHS options of the 2D pattern LPs (None: HiGHS's defaults, feasibility tolerance 1e-7)
+LP_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
 #: facets per node of the polyhedral pyramids, tried in turn
 PYRAMID_SIDES = (16, 64, 256)
 
@@ -188,8 +190,11 @@ def feasible(rows: Rows | ConeRows, mu: float, counts: dict | None = None) -> tu
     to sum r_n = 1. 2D / LP -> HiGHS; 3D -> the SOCP status policy (module doc).
     `counts` (optional) accumulates how each problem was decided."""
     if isinstance(rows, Rows):
-        status, x = lp_feasible(rows, mu)
+        status, x = lp_feasible(rows, mu, LP_OPTIONS)
         _count(counts, "lp_" + status)
+        if status == UNDECIDED:          # HiGHS's simplex gave up: its interior point method
+            status, x = lp_feasible(rows, mu, LP_OPTIONS, method="highs-ipm")
+            _count(counts, "lp_retry_ipm_" + status)
         return status, x
     return socp_feasible(rows, mu, counts)
 
@@ -212,8 +217,10 @@ def solver_tolerances(mode: str) -> None:
     _SETTINGS.clear()
 
 
-def lp_feasible(rows: Rows, mu: float, options: dict | None = None) -> tuple[str, np.ndarray | None]:
-    """Feasibility of {rows(mu) x (>=,==) 0, sum r_n = 1}: (status, x or None)."""
+def lp_feasible(rows: Rows, mu: float, options: dict | None = None,
+                method: str = "highs-ds") -> tuple[str, np.ndarray | None]:
+    """Feasibility of {rows(mu) x (>=,==) 0, sum r_n = 1}: (status, x or None), by
+    HiGHS (`method`: "highs-ds", dual simplex, which returns a vertex; "highs-ipm")."""
     if options is None and _TOLERANCES["mode"] == "tight":
         options = _LP_TIGHT
     A = rows.a0 + mu * rows.a1
@@ -226,13 +233,26 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None) -> tuple[str
     b_eq[-1] = 1.0
     res = linprog(np.zeros(d), A_ub=-A[~E] if (~E).any() else None,
                   b_ub=np.zeros((~E).sum()) if (~E).any() else None,
-                  A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * d, method="highs-ds",
+                  A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * d, method=method,
                   options=options)
     if res.status == 0:
         return FEASIBLE, res.x
     if res.status == 2:
         return INFEASIBLE, None
     return UNDECIDED, None
+
+
+def lp_violation(rows: Rows, mu: float, x: np.ndarray) -> float:
+    """Largest violation of the LP pattern problem at x: |a.x| of the equalities and
+    max(0, -a.x) of the inequalities, on the rows at mu scaled to unit norm, relative to
+    ||x||. A HiGHS point of a feasible problem meets its rows to its tolerance
+    (LP_OPTIONS); a larger violation than rounding means feasible only to that tolerance."""
+    A = rows.a0 + mu * rows.a1
+    scale = np.linalg.norm(A, axis=1)
+    live = scale > 0
+    v = (A[live] @ x) / (scale[live] * max(np.linalg.norm(x), 1e-300))
+    eq = rows.eq[live]
+    return float(max(np.abs(v[eq]).max(initial=0.0), (-v[~eq]).max(initial=0.0)))
 
 
 # ----------------------------------------------------------------------- 3D: SOCP

@@ -42,6 +42,7 @@ uint64 word i // 21, so each node's test stays inside one word.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -53,6 +54,16 @@ from .problem import F_MINUS, F_PLUS, U_N
 
 NODES_PER_WORD = 21
 FLOAT_ZERO_TOL = 1e-10   # on unit-norm rows and unit-norm rays
+#: a float sign decision |a.x| within this factor of FLOAT_ZERO_TOL (either side) is a
+#: close call: rounding may have decided it (stats["close_calls"]; numerics.py falls back
+#: to exact arithmetic or reports it). Measured (scripts/stress.py): every float result
+#: that differed from exact arithmetic had close calls, or cancelled (CANCELLATION_MIN), or
+#: came from an ill-conditioned K; plug2d at taper 10 deg up to m = 16 has none.
+CLOSE_CALL_FACTOR = 10.0
+#: a new ray whose computation cancels to this fraction of its terms carries a relative
+#: rounding error of eps / CANCELLATION_MIN = FLOAT_ZERO_TOL: its later zero tests are
+#: decided by rounding (stats["cancellation"], numerics.py)
+CANCELLATION_MIN = float(np.finfo(float).eps) / FLOAT_ZERO_TOL
 
 
 @dataclass
@@ -185,6 +196,8 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
     rest += [c for c in range(nc) if c not in added and c not in rest]
     stats = {"initial_rays": int(X.shape[0]), "pairs_tested": 0, "pairs_adjacent": 0,
              "max_rays": int(X.shape[0])}
+    if not exact:
+        stats.update(close_calls=0, closest=None, cancellation=1.0)
     if face is not None:
         stats["face"] = _canonical_face(face)
     total = len(rest)
@@ -299,6 +312,9 @@ def merge_results(results: list[DDResult]) -> DDResult:
              "pairs_adjacent": int(sum(r.stats.get("pairs_adjacent", 0) for r in results)),
              "max_rays": int(max(r.stats.get("max_rays", 0) for r in results)),
              "seconds": float(sum(r.stats.get("seconds", 0.0) for r in results)),
+             "close_calls": int(sum(r.stats.get("close_calls", 0) for r in results)),
+             "cancellation": float(min(r.stats.get("cancellation", 1.0) for r in results)),
+             "closest": _closest(r.stats.get("closest") for r in results),
              "face_seconds": [float(r.stats.get("seconds", 0.0)) for r in results]}
     return DDResult(X=X, zero=zero, stats=stats)
 
@@ -325,6 +341,13 @@ def branching_nodes(m: int, split: int | str = "auto") -> list[int]:
     k = (MAX_BRANCHING_NODES if m >= FACE_SPLIT_MIN_M else 0) if split == "auto" else int(split)
     k = max(0, min(k, m - 1))
     return list(range(m - k, m))
+
+
+def _closest(values) -> float | None:
+    """Of the face runs' "closest" values (None: no close call), the one nearest to
+    FLOAT_ZERO_TOL in ratio."""
+    vals = [v for v in values if v is not None]
+    return min(vals, key=lambda v: abs(math.log(v / FLOAT_ZERO_TOL))) if vals else None
 
 
 def canonical_order(zero: np.ndarray, return_words: bool = False):
@@ -407,6 +430,7 @@ def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats
         neg = np.array([v < 0 for v in s], dtype=bool)
     else:
         pos, neg = s > FLOAT_ZERO_TOL, s < -FLOAT_ZERO_TOL
+        _count_close_calls(s, stats)
     zer = ~(pos | neg)
     P, M = np.flatnonzero(pos), np.flatnonzero(neg)
     w, bit = bits.pos(h)
@@ -436,8 +460,32 @@ def _add_constraint(a, h, X, Z, done, done_after, fixed, nz1, bits, exact, stats
             np.take(X, p, axis=0, out=t)
             t *= s[q][:, None]
             o -= t
-            o /= np.sqrt(np.einsum("ij,ij->i", o, o))[:, None]
+            nrm = np.sqrt(np.einsum("ij,ij->i", o, o))
+            o /= nrm[:, None]
+            _note_cancellation(nrm, s[p], s[q], stats)
     return Xo, np.concatenate([Z[keep], Zn])
+
+
+def _count_close_calls(s: np.ndarray, stats: dict) -> None:
+    """Count the values of s (one float DD step's a.x) within CLOSE_CALL_FACTOR of
+    FLOAT_ZERO_TOL into stats["close_calls"]; stats["closest"]: the |a.x| nearest to the
+    tolerance (in ratio) so far. One pass over s; the log only over the close ones."""
+    a = np.abs(s)
+    close = a[(a > FLOAT_ZERO_TOL / CLOSE_CALL_FACTOR) & (a < FLOAT_ZERO_TOL * CLOSE_CALL_FACTOR)]
+    if close.size == 0:
+        return
+    stats["close_calls"] += int(close.size)
+    v = float(close[np.argmin(np.abs(np.log(close / FLOAT_ZERO_TOL)))])
+    stats["closest"] = _closest([stats["closest"], v])
+
+
+def _note_cancellation(nrm: np.ndarray, sp: np.ndarray, sq: np.ndarray, stats: dict) -> None:
+    """stats["cancellation"]: the least |o| / (|s_p| + |s_q|) over the new rays
+    o = s_p x_q - s_q x_p (unit x, so 1 means no cancellation). A new ray's relative
+    rounding error is about eps over this ratio: below CANCELLATION_MIN it reaches the
+    zero tolerance."""
+    if nrm.size:
+        stats["cancellation"] = min(stats["cancellation"], float((nrm / (np.abs(sp) + np.abs(sq))).min()))
 
 
 CHUNK = 1 << 12                  # rows per block of new-ray arithmetic (stays in cache)

@@ -43,11 +43,18 @@ import numpy as np
 import scipy.linalg as sla
 
 from .conic import (ATTEMPTS, FEASIBLE, LEAST_NORM_ATTEMPT, INFEASIBLE, UNDECIDED, ConeRows, Rows, _count, _settings,
-                    _socp_data, _csc_dense, _csc_zero, decide, feasible, pattern_rows, violation)
-from .problem import Parametrization
+                    _socp_data, _csc_dense, _csc_zero, decide, feasible, pattern_rows, problem_dim, violation)
+from .problem import Parametrization, balanced_2d
 
 BRACKET_RTOL = 1e-7
 POLISH_TOL = 1e-9
+#: 2D with a scale: mu^c is recomputed in coordinates balanced at it when it lies below
+#: mu_hi / REBALANCE (the first coordinates were balanced at mu_hi)
+REBALANCE = 10.0
+#: ... starting from the bracket mu^c (1 -/+ this) around the first value
+REBALANCE_BRACKET = 1e-6
+#: slack thresholds of the active sets tried after those scaled to the bracket width
+POLISH_WIDE_TAUS = (1e-5, 1e-3, 1e-2)
 #: 3D: Dinkelbach stops when a step lowers mu by less than this (relative)
 DINKELBACH_RTOL = 1e-7
 DINKELBACH_MAX = 60
@@ -78,23 +85,45 @@ class MuC:
 
 def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
                 mu_hi: float | None = None, mu_max: float = 100.0,
-                method: str = "accurate", tol: float = 1e-6) -> MuC:
+                method: str = "accurate", tol: float = 1e-6, scale: float | None = None) -> MuC:
     """Least mu at which the pattern (zero_u, zero_r) admits a solution with r != 0.
 
     mu_hi: a mu known feasible (e.g. the run's mu for a cone found there); else
     mu_max is tested first. Returns MuC(None) when infeasible at mu_max.
+    scale (2D): the stiffness that weighs u_n against r (numerics.Numerics.scale). The
+    LPs then run in the balanced coordinates of problem.balanced_2d at mu_hi, and once
+    more at the mu^c found when it lies below mu_hi / REBALANCE (scripts/stress.py: plug2d
+    at 0.1 deg, mu^c to 3e-13 instead of 8e-9 relative).
     """
-    rows = pattern_rows(param, m, zero_u, zero_r)
-    out = MuC(None)
-    if isinstance(rows, ConeRows):
-        return _mu_critical_3d(param, m, zero_u, zero_r, mu_hi, mu_max, method, tol, out)
-    return mu_critical_rows(rows, mu_hi, mu_max, method, tol, out)
+    if problem_dim(param, m) == 3 or scale is None:
+        rows = pattern_rows(param, m, zero_u, zero_r)
+        if isinstance(rows, ConeRows):
+            return _mu_critical_3d(param, m, zero_u, zero_r, mu_hi, mu_max, method, tol, MuC(None))
+        return mu_critical_rows(rows, mu_hi, mu_max, method, tol)
+
+    def solve(ref: float, hi: float | None, lo: float | None = None) -> MuC:
+        return mu_critical_rows(pattern_rows(balanced_2d(param, ref, m, scale)[0], m, zero_u, zero_r),
+                                hi, mu_max, method, tol, mu_lo=lo)
+
+    ref = mu_max if mu_hi is None else mu_hi
+    out = solve(ref, mu_hi)
+    if out.mu_c is None or method != "accurate" or out.mu_c * REBALANCE > ref:
+        return out
+    again = solve(out.mu_c, out.mu_c * (1 + REBALANCE_BRACKET), out.mu_c * (1 - REBALANCE_BRACKET))
+    again.lps += out.lps
+    again.undecided += out.undecided
+    for k, v in out.statuses.items():
+        again.statuses[k] = again.statuses.get(k, 0) + v
+    return again if again.mu_c is not None and (again.polished or not out.polished) else out
 
 
 def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100.0,
-                     method: str = "accurate", tol: float = 1e-6, out: MuC | None = None) -> MuC:
+                     method: str = "accurate", tol: float = 1e-6, out: MuC | None = None,
+                     mu_lo: float | None = None) -> MuC:
     """mu^c of an LP pattern problem given by its rows (2D patterns; also any
-    polyhedral problem of the same form, e.g. a 3D pattern with pyramids)."""
+    polyhedral problem of the same form, e.g. a 3D pattern with pyramids).
+    mu_lo: a guess of an infeasible mu below mu^c; the bisection starts from it when an
+    LP confirms it (else from 0)."""
     out = MuC(None) if out is None else out
 
     def feasible_at(mu: float):
@@ -110,6 +139,8 @@ def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100
             return out
         mu_hi = mu_max
     lo, hi = 0.0, float(mu_hi)
+    if mu_lo is not None and not feasible_at(mu_lo)[0]:
+        lo = mu_lo
     rtol = BRACKET_RTOL if method == "accurate" else tol
     x_hi = None
     while hi - lo > rtol * hi and hi > 1e-12 * mu_hi:
@@ -138,13 +169,17 @@ def polish(rows: Rows, x: np.ndarray, lo: float, hi: float, seed: int = 0) -> fl
     width = max(hi - lo, 1e-300) / max(hi, 1e-300)
     rng = np.random.default_rng(seed)
     pad = 2 * (hi - lo) + 1e-5 * hi    # the LP feasibility tolerance can put the bracket ~1e-7 low
-    for tau in (10 * width, width, 1e-3 * width):
+    # active sets by slack; the wide ones catch an ill-conditioned vertex whose active
+    # rows at x_hi have slacks far above the bracket width (random free bodies: 3e-4 at
+    # width 1e-7); a wrong active set has no verified root
+    wide = tuple(t for t in POLISH_WIDE_TAUS if t > 10 * width)
+    for tau in (10 * width, width, 1e-3 * width) + wide:
         act = rows.eq | (np.abs(slack) <= tau)
         sc = np.linalg.norm(rows.a0[act], axis=1) + hi * np.linalg.norm(rows.a1[act], axis=1)
         sc[sc == 0] = 1.0
         M0, M1 = rows.a0[act] / sc[:, None], rows.a1[act] / sc[:, None]
-        if M0.shape[0] < M0.shape[1] - 1:
-            continue
+        if M0.shape[0] < M0.shape[1]:
+            continue             # fewer than d rows always have a null vector: no root to find
         G = rng.standard_normal((M0.shape[1], M0.shape[0]))
         try:
             lam = sla.eigvals(G @ M0, -(G @ M1))

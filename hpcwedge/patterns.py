@@ -17,13 +17,17 @@ from functools import partial
 
 import numpy as np
 
-from .conic import (INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, infeasible_core, node_rows, pattern_rows,
+from .conic import (INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, infeasible_core, lp_violation, node_rows, pattern_rows,
                     problem_dim, violation)
 from .mu_critical import mu_critical
 from .problem import Parametrization
 from .symmetry import Symmetry
 
 MEETS_TOL = 1e-12
+#: 2D: a full pattern whose LP point violates a unit row by more than this (HiGHS points of
+#: clearly feasible patterns: <= 3e-16; at mu = mu^c (1 - 1e-9): 3e-14) is feasible
+#: only to HiGHS's tolerance: counted as statuses["near_boundary"] (pipeline: suspect)
+NEAR_BOUNDARY_TOL = 1e-14
 #: 3D: a child's condition counts as nearly met by the parent's x below this
 #: (relative to max |u|, |r|); the projected point must then verify
 NEAR_TOL = 1e-6
@@ -177,6 +181,8 @@ class PatternTree:
                 found.append(node)
                 if doubt:
                     undecided.append(node)
+                elif self.dim == 2 and self.friction and self._near_boundary(node, x, mu):
+                    _bump(stats.statuses, "near_boundary")
                 if first_only:
                     stack.clear()
                     break
@@ -197,6 +203,11 @@ class PatternTree:
             stack.extend(reversed(kids))
         stats.lps = stats.statuses.get("lp_calls", 0)
         return Explored(found, [node for node, _ in reversed(stack)], stats, undecided)
+
+    def _near_boundary(self, node: Subtree, x: np.ndarray, mu: float) -> bool:
+        """2D: the full pattern's LP point x violates a row by more than NEAR_BOUNDARY_TOL."""
+        zu, zr = node.masks(self.m)
+        return lp_violation(pattern_rows(self.param, self.m, zu, zr), mu, x) > NEAR_BOUNDARY_TOL
 
     def _static_next(self, node: Subtree) -> int:
         """The first node of `order` not fixed in `node`."""
@@ -317,9 +328,11 @@ def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool,
 
 def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: str = "accurate",
                        tol: float = 1e-6, stats: BnBStats | None = None,
-                       symmetry: Symmetry | None = None) -> tuple[float | None, str]:
+                       symmetry: Symmetry | None = None,
+                       scale: float | None = None) -> tuple[float | None, str]:
     """Least mu with any solution, by branch and bound over patterns with an incumbent
-    (2D and 3D alike; with a symmetry, over orbit representatives).
+    (2D and 3D alike; with a symmetry, over orbit representatives). scale: passed to
+    mu_critical (2D balanced coordinates).
 
     Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
     r_t free has no solution) or "none_up_to_mu_max".
@@ -335,7 +348,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         if not leaf:
             break
         zu, zr = leaf[0]
-        r = mu_critical(param, m, zu, zr, mu_hi=bound, method=method, tol=tol)
+        r = mu_critical(param, m, zu, zr, mu_hi=bound, method=method, tol=tol, scale=scale)
         _absorb(stats, r)
         if r.mu_c is None or (best is not None and r.mu_c >= best):
             break
@@ -347,8 +360,26 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     # (one per orbit: mu^c is invariant under the symmetry)
     top = best * (1 + 1e-9)
     for zu, zr in search(top, representatives=True):
-        r = mu_critical(param, m, zu, zr, mu_hi=top, method=method, tol=tol)
+        r = mu_critical(param, m, zu, zr, mu_hi=top, method=method, tol=tol, scale=scale)
         _absorb(stats, r)
         if r.mu_c is not None:
             best = min(best, r.mu_c)
     return best, "found"
+
+
+def implied_patterns(ray_zero: np.ndarray, m: int) -> set[tuple[int, ...]]:
+    """The 2D sign patterns the wedged rays imply (SPEC §2): (C, G) is feasible iff some
+    wedged ray has supp(r_n) in C and supp(u_n) in G. ray_zero: (R, 3m) zero flags of the
+    wedged rays (pipeline Run.ray_zero). Returns the contact sets C as sorted tuples."""
+    out: set[int] = set()
+    zu = ray_zero[:, 0::3]
+    zr = ray_zero[:, 1::3] & ray_zero[:, 2::3]
+    weights = 1 << np.arange(m, dtype=np.int64)
+    for need, free in zip((~zr) @ weights, (zu & zr) @ weights):
+        sub = int(free)
+        while True:                      # every subset of the free nodes
+            out.add(int(need) | sub)
+            if sub == 0:
+                break
+            sub = (sub - 1) & int(free)
+    return {tuple(i for i in range(m) if c >> i & 1) for c in out}

@@ -3,7 +3,8 @@
 Runs only the stages the scene's plan asks for, times each, and returns a
 Result whose lists are in canonical order (SPEC §4).
 
-2D: rays (double description), cones, mu^c per cone and global.
+2D: rays (double description), cones, mu^c per cone and global; float decisions too
+close to call are detected and, on small problems, redone exactly (numerics.py).
 3D: feasible sign patterns per listed mu (branch and bound over SOCPs),
 mu^c per pattern and global (2D too with enumerate = "patterns"). The units
 of work the parallel layer distributes (parallel.run_patterns: budgeted
@@ -16,18 +17,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from functools import partial
+from functools import cache as once, partial
 
 import numpy as np
 
 from .build import build_model, contact_problem
 from .cones import maximal_cones
-from .dd import branching_nodes, canonical_order, complementary_rays
+from .dd import branching_nodes, canonical_order
 from .model import Model
 from .mu_critical import mu_critical
+from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, global_mu_critical
-from .problem import ContactProblem, parametrize, friction_rows_2d, ray_vectors
+from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from .progress import Progress
 from .scene import Scene
 from .symmetry import node_symmetries
@@ -116,19 +118,28 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         sym = node_symmetries(problem.K, scene.dim)
         stats["symmetry"] = {"order": sym.order}
         sym = sym if sym.order > 1 else None
+    numerics = Numerics.of(problem, scene.exact_fallback_max_m)
+    # the exact parametrisation, made once if a fallback needs it
+    exact_param = (lambda: param) if scene.exact else once(lambda: parametrize(problem, exact=True))
 
     if plan.rays:
         t = time.perf_counter()
         stages.append("enumerate")
         nodes = branching_nodes(m, scene.face_split)
         if nodes or engine.restored(RAYS_JOB):
-            # split over faces, one task per (mu, face) (SPEC §5); resumed: the saved split
-            rows = [friction_rows_2d(param, run.mu, m, exact=scene.exact) for run in result.runs]
+            # split over faces, one task per (mu, face) (SPEC §5); resumed: the saved split.
+            # Float: in each mu's balanced coordinates, the merged rays judged as a whole
+            # (numerics.judge_2d: redone exactly when suspect and small)
+            coords = [(param, None) if scene.exact else balanced_2d(param, run.mu, m, numerics.scale)
+                      for run in result.runs]
+            rows = [friction_rows_2d(p, run.mu, m, exact=scene.exact) for (p, _), run in zip(coords, result.runs)]
             dds = run_faces(rows, m, exact=scene.exact, engine=engine, nodes=nodes, name=RAYS_JOB)
+            done = [judge_2d(dd, p, cond_T, m, run.mu, numerics, exact_param, progress)
+                    for dd, (p, cond_T), run in zip(dds, coords, result.runs)]
         else:
-            dds = (_rays_serial(param, run.mu, m, scene.exact, progress) for run in result.runs)
-        for run, dd in zip(result.runs, dds):
-            _fill_rays(run, dd, param, m, plan.cones)
+            done = (_rays_whole(param, m, run.mu, numerics, exact_param, progress) for run in result.runs)
+        for run, (dd, p_run) in zip(result.runs, done):
+            _fill_rays(run, dd, p_run, m, plan.cones)
             stats["dd"].append({"mu": run.mu, **dd.stats})
         timings["enumerate"] = time.perf_counter() - t
         if plan.cones:
@@ -148,6 +159,14 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
             stats["symmetry"]["representatives"] = [len(f) for f in pats.found]
         c = pats.counters
         stats["patterns_undecided"] = sum(len(u) for u in pats.undecided)
+        if scene.dim == 2:
+            exact_sets = settle_patterns_2d(numerics, m, scene.mu, c, stats["patterns_undecided"],
+                                            exact_param, scene.exact)
+            if exact_sets is not None:
+                for run, sets in zip(result.runs, exact_sets):
+                    run.patterns = [{"contact": list(cs), "mu_c": None, "undecided": False}
+                                    for cs in sorted(sets, key=lambda cs: sum(1 << i for i in cs))]
+                stats["patterns_undecided"] = 0
         stats["bnb"] = {k: c.get(k, 0) for k in ("nodes", "solves", "skipped", "pruned", "undecided")}
         stats["bnb"]["partitions"] = 2 ** m * len(scene.mu)       # what brute force would solve
         if scene.dim == 3:
@@ -181,8 +200,9 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         for run in wanted:
             for key, zu, zr, _ in keyed(run):
                 items.setdefault(key, (zu, zr, run.mu))
+        scale = numerics.scale if scene.dim == 2 else None       # 2D: balanced coordinates
         solve = partial(mu_critical, strip_exact(param), m, mu_max=scene.mu_max,
-                        method=scene.mu_c_method, tol=scene.mu_c_tol)
+                        method=scene.mu_c_method, tol=scene.mu_c_tol, scale=scale)
         cache = dict(zip(items, run_mu_c(solve, list(items.values()), engine=engine)))
         for r in cache.values():
             stats["lp_solves"] += r.lps
@@ -202,13 +222,16 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
                 bnb = BnBStats()
                 result.mu_c, result.mu_c_status = global_mu_critical(
                     param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb,
-                    symmetry=sym)
+                    symmetry=sym, scale=scale)
                 stats["bnb"] = {"solves": bnb.solves, "skipped": bnb.skipped,
                                 "undecided": bnb.undecided, "nodes": bnb.nodes}
+                stats["mu_c_unpolished"] += bnb.extra.get("mu_c_unpolished", 0)
+                stats["mu_c_polished"] += bnb.extra.get("mu_c_polished", 0)
         timings["mu_c"] = time.perf_counter() - t
-    if stats["mu_c_unpolished"]:
-        progress.note(f"warning: {stats['mu_c_unpolished']} mu^c value(s) not polished "
-                      f"(accurate to the bracket, {1e-7:g} relative)")
+    note_mu_c(numerics, stats["mu_c_unpolished"], stats["lp_undecided"])
+    for line in numerics.warnings():
+        progress.note(line)
+    stats["numerics"] = numerics.as_dict()
     timings["total"] = time.perf_counter() - t0
     stats["parallel"] = engine.summary()
     result.stats = stats
@@ -219,13 +242,14 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
 RAYS_JOB = "rays"
 
 
-def _rays_serial(param, mu: float, m: int, exact: bool, progress: Progress):
-    """One double description on the master (no split: a serial run)."""
+def _rays_whole(param, m: int, mu: float, numerics: Numerics, exact_param, progress: Progress):
+    """One double description of P(mu) on the master, unsplit (numerics.enumerate_2d):
+    (rays, the parametrisation they are expressed in)."""
     progress.stage(f"rays mu={mu:g}")
-    dd = complementary_rays(friction_rows_2d(param, mu, m, exact=exact), m, exact=exact, progress=progress)
+    dd, p_run = enumerate_2d(param, m, mu, numerics, exact_param, progress)
     progress.close()
     dd.stats.update(faces=1, branching_nodes=[])
-    return dd
+    return dd, p_run
 
 
 def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:

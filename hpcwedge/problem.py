@@ -160,6 +160,29 @@ def _bordered(K: np.ndarray, N: np.ndarray) -> np.ndarray:
     return np.block([[K, N], [N.T, np.zeros((k, k))]])
 
 
+def balanced_2d(param: Parametrization, mu: float, m: int, s: float) -> tuple[Parametrization, float]:
+    """The same cone P(mu) in coordinates x' = T x chosen for the float DD at mu.
+
+    With M = [s U_n; R_n; R_t / mu] (3m x d) and M = Q T its QR factorisation, x' = T x
+    makes x' -> (s u_n, r_n, r_t / mu) an isometry: a unit ray is a unit state and the
+    constraint rows are rows of Q. s > 0 is a stiffness that weighs u_n against r
+    (pipeline: sqrt(lambda_min lambda_max) of K on range(K), so that the coordinates do
+    not depend on the units of K). Without it the DD's zero tests see the friction slack
+    mu r_n - r_t relative to |r_t| + |r_n|, which near mu^c on a small taper is ~ delta
+    tan(taper) (2e-12 at 0.1 deg and mu = mu^c (1 + 1e-9)); scaling r_t by 1/mu makes it
+    ~ delta (scripts/stress.py, family near_mu_c).
+    Returns (float Parametrization with U' = U T^-1, R' = R T^-1 — the rows the DD tests
+    taken from Q itself, not from a solve with T — and n_alpha = 0 since the rigid
+    amplitudes are mixed in; cond(T)).
+    """
+    U, R = param.U, param.R
+    Q, T = np.linalg.qr(np.vstack([s * U[:m], R[:m], R[m:2 * m] / mu]))
+    Up = sla.solve_triangular(T, U.T, trans="T").T
+    Rp = sla.solve_triangular(T, R.T, trans="T").T
+    Up[:m], Rp[:m], Rp[m:2 * m] = Q[:m] / s, Q[m:2 * m], mu * Q[2 * m:]
+    return Parametrization(U=Up, R=Rp, n_alpha=0), float(np.linalg.cond(T))
+
+
 def friction_rows_2d(param: Parametrization, mu: float, m: int, exact: bool = False):
     """Node-wise constraint rows of the 2D cone P(mu) = {x : A x >= 0}.
 

@@ -23,7 +23,8 @@ TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact", "ob
 MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs"}
 MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
-                    "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False}
+                    "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
+                    "exact_fallback_max_m": 10}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
                 "condense": "auto"}
 #: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
@@ -69,6 +70,9 @@ class Scene:
     condense: str = "auto"         # run.condense: auto | serial | distributed (under mpirun)
     obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
     obstacle_key: str = "obstacle"  # where they came from, for messages
+    #: compute.exact_fallback_max_m: a 2D float enumeration whose decisions were too close to
+    #: call is redone in exact arithmetic when m is at most this (0: never; pipeline.py)
+    exact_fallback_max_m: int = 10
 
     @property
     def hash(self) -> str:
@@ -144,6 +148,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
             raise SceneError(f"compute.{key}: must be a finite number > 0, got {v!r}")
     if not isinstance(compute["exact"], bool):
         raise SceneError(f"compute.exact: true or false, got {compute['exact']!r}")
+    v = compute["exact_fallback_max_m"]
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise SceneError(f"compute.exact_fallback_max_m: must be a whole number >= 0, got {v!r}")
     if compute["exact"] and dim == 3:
         raise SceneError("compute.exact: exact arithmetic is for 2D scenes (3D problems are conic)")
     run = dict(RUN_DEFAULTS)
@@ -190,7 +197,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
                  text=text, base_dir=base_dir, task_budget=run["task_budget"],
                  symmetry=run["symmetry"], face_split=run["face_split"], condense=run["condense"],
-                 obstacles=obstacles, obstacle_key=obstacle_key)
+                 obstacles=obstacles, obstacle_key=obstacle_key,
+                 exact_fallback_max_m=compute["exact_fallback_max_m"])
 
 
 def _unknown(table, allowed, prefix):

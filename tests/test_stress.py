@@ -1,0 +1,213 @@
+"""Numerical stress (issue 4, deliverable 3): the cases of scripts/stress.py that found
+something, kept as regressions. The reference is exact rational arithmetic (the DD on the
+same float stiffness), or the analytic mu^c = tan(taper) of a free plug.
+
+Each test failed before its fix: float rays near mu^c on small tapers (balanced
+coordinates), ill-conditioned stiffness and cancelling DD steps (run-time detection and
+the exact fallback), mu^c on small tapers (5e-5 off; balanced coordinates in the LPs),
+mu^c of an ill-conditioned vertex (1.3e-4 off; polish), 2D patterns at mu^c (1 - 1e-9)
+(LP tolerance), a mechanism taken as a supported body (mu^c = -8e-17).
+"""
+import importlib.util
+import io
+import math
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from hpcwedge.dd import complementary_rays
+from hpcwedge.patterns import implied_patterns
+from hpcwedge.pipeline import run_scene
+from hpcwedge.problem import balanced_2d, friction_rows_2d, parametrize, ray_vectors
+from hpcwedge.progress import Progress
+from hpcwedge.scene import SceneError
+from instances import random_problem
+
+_spec = importlib.util.spec_from_file_location(
+    "stress_grid", os.path.join(os.path.dirname(__file__), "..", "scripts", "stress.py"))
+grid = importlib.util.module_from_spec(_spec)
+sys.modules["stress_grid"] = grid              # (dataclasses look their module up)
+_spec.loader.exec_module(grid)
+
+
+def tan(deg):
+    return math.tan(math.radians(deg))
+
+
+def run(spec, mu, progress=None, **compute):
+    return run_scene(grid._scene(spec, mu, compute), progress=progress)
+
+
+def answer(res):
+    """Zero sets of the wedged rays and the cones' zero sets (canonical order)."""
+    r = res.runs[0]
+    return r.ray_zero.tolist(), [(c["zero_u"], c["zero_r"]) for c in r.cones]
+
+
+@pytest.mark.parametrize("taper,delta", [(1.0, 1e-7), (1.0, -1e-7), (1.0, 1e-9), (0.1, 1e-9)])
+def test_float_dd_near_mu_c_on_small_taper(taper, delta):
+    """mu = tan(taper) (1 + delta): the float DD alone (no fallback) finds the exact rays
+    (before the balanced coordinates: 1 ray instead of 8, or 1 instead of 0)."""
+    spec = grid.builtin("plug2d", rows=4, taper_deg=taper)
+    mu = tan(taper) * (1 + delta)
+    raw = run(spec, mu, exact_fallback_max_m=0, mu_c="none")
+    exact = run(spec, mu, exact=True, mu_c="none")
+    assert answer(raw) == answer(exact)
+    assert raw.runs[0].n_wedged_rays == (8 if delta > 0 else 0)
+
+
+@pytest.mark.parametrize("label,spec,mu", [
+    ("cancellation", grid.plug_truss(4, ea_diag=1e6), 0.65),       # float alone: 500 rays, exact 198
+    ("ill-conditioned K", grid.plug_truss(4, ea_diag=1e-6), 0.65),  # float alone: 192, exact 240
+    ("close calls", grid.builtin("plug2d", rows=4, taper_deg=0.1), 1.5 * tan(0.1)),   # 59 vs 56
+])
+def test_suspect_enumeration_is_detected_and_redone_exactly(label, spec, mu):
+    """A float enumeration whose decisions were too close to call is flagged; with
+    m <= compute.exact_fallback_max_m it is redone exactly (same answer as exact=true),
+    above it the result says so and a warning is printed."""
+    exact = run(spec, mu, exact=True, mu_c="none")
+    res = run(spec, mu, mu_c="none")
+    num = res.stats["numerics"]
+    assert num["exact_fallback"] == [mu] and num["runs"][0]["suspect"] and num["flagged"]
+    assert answer(res) == answer(exact)
+    np.testing.assert_allclose(res.runs[0].rays, exact.runs[0].rays, rtol=0, atol=1e-12)
+    log = io.StringIO()
+    raw = run(spec, mu, progress=Progress(stream=log), exact_fallback_max_m=0, mu_c="none")
+    assert raw.stats["numerics"]["unresolved"] == [mu] and raw.stats["numerics"]["flagged"]
+    assert "too close to call" in log.getvalue()
+
+
+def test_well_posed_runs_are_not_flagged():
+    """No false alarm (and no exact rerun) on the reference scene and a refined block."""
+    for spec in (grid.builtin("plug2d", rows=5), grid.builtin("block2d", rows=3, refine=8)):
+        res = run(spec, 0.65)
+        num = res.stats["numerics"]
+        assert not num["flagged"] and not num["exact_fallback"], num
+        assert abs(res.mu_c - tan(10.0)) <= 1e-9 * tan(10.0)
+
+
+@pytest.mark.parametrize("taper,mu", [(0.1, 1.5 * tan(0.1)), (0.1, 0.65), (0.3, 1.5 * tan(0.3))])
+def test_mu_c_on_small_taper(taper, mu):
+    """Global mu^c = tan(taper) to 1e-9 (before: 5e-5 off at 0.1 deg, unpolished)."""
+    res = run(grid.builtin("plug2d", rows=4, taper_deg=taper), mu)
+    assert abs(res.mu_c - tan(taper)) <= 1e-9 * tan(taper)
+    assert res.stats["mu_c_unpolished"] == 0
+
+
+def _wedged_exact(spec, mu):
+    return run(spec, mu, exact=True, mu_c="none").runs[0].n_wedged_rays
+
+
+def test_global_mu_c_at_an_ill_conditioned_vertex():
+    """A random free body whose critical LP vertex is ill-conditioned (active rows with
+    slack 3e-4 at a 1e-7 bracket; HiGHS's simplex undecided on 6 LPs): the global mu^c,
+    checked by exact arithmetic, to 1e-9 (before: 1.3e-4 low)."""
+    spec = grid.raw_stiffness(2, 5, True)
+    res = run(spec, 0.8)
+    mu_c = res.mu_c
+    assert res.runs[0].n_wedged_rays == 0 and res.mu_c_status == "found"
+    assert _wedged_exact(spec, mu_c * (1 - 1e-9)) == 0
+    assert _wedged_exact(spec, mu_c * (1 + 1e-9)) > 0
+
+
+@pytest.mark.parametrize("delta,count", [(-1e-9, 0), (1e-9, 1)])
+def test_2d_patterns_at_mu_c(delta, count):
+    """Sign patterns by the LP branch and bound at mu^c (1 -/+ 1e-9), taper 1 deg: HiGHS
+    finds the pattern feasible to its tolerance below mu^c; that is detected and the
+    patterns are taken from the exact rays."""
+    spec = grid.builtin("plug2d", rows=4, taper_deg=1.0)
+    res = run(spec, tan(1.0) * (1 + delta), enumerate="patterns", mu_c="none")
+    assert len(res.runs[0].patterns) == count
+    if delta < 0:
+        assert res.stats["numerics"]["patterns"]["exact"]
+
+
+def test_implied_patterns_match_an_independent_enumeration():
+    from test_dd import patterns_from_rays
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        prob = random_problem(rng, 4, free=bool(seed % 2))
+        p = parametrize(prob)
+        dd = complementary_rays(friction_rows_2d(p, 0.9, 4), 4)
+        zero = dd.zero[dd.wedged()]
+        assert implied_patterns(zero, 4) == patterns_from_rays(zero, 4)
+
+
+def test_balanced_coordinates_are_the_same_cone():
+    """balanced_2d: the float DD in the new coordinates has the exact zero sets, and its
+    rays map to the same (u, r) as the exact ones."""
+    for seed in range(8):
+        rng = np.random.default_rng(100 + seed)
+        m, free = 4, bool(seed % 2)
+        prob = random_problem(rng, m, free)
+        mu = float(rng.uniform(0.2, 1.5))
+        pb, _ = balanced_2d(parametrize(prob), mu, m, 1.0)
+        fl = complementary_rays(friction_rows_2d(pb, mu, m), m)
+        pe = parametrize(prob, exact=True)
+        ex = complementary_rays(friction_rows_2d(pe, mu, m, exact=True), m, exact=True)
+        of, oe = (np.lexsort(z.T[::-1]) for z in (fl.zero, ex.zero))
+        assert np.array_equal(fl.zero[of], ex.zero[oe])
+        w = fl.wedged()[of]
+        _, vf = ray_vectors(pb, fl.X[of], m, w)
+        _, ve = ray_vectors(pe, ex.X[oe], m, w)
+        np.testing.assert_allclose(vf, ve, rtol=0, atol=1e-9)
+
+
+def test_answer_does_not_depend_on_frame_or_units():
+    """Rotating the global frame or scaling every EA by 1e8 changes nothing."""
+    base = run(grid.plug_truss(4), 0.65)
+    for spec in (grid.plug_truss(4, angle_deg=137.3), grid.plug_truss(4, angle_deg=291.8),
+                 grid.plug_truss(4, ea=1e8)):
+        res = run(spec, 0.65)
+        assert answer(res) == answer(base)
+        assert abs(res.mu_c - base.mu_c) <= 1e-9 * base.mu_c
+
+
+def test_mechanism_is_an_input_error():
+    """Ground bars that leave a rotation free: the condensed K is singular although the
+    body has supports (before: taken as supported, global mu^c = -8e-17)."""
+    spec = grid.plug_truss(4, ground=1.0)
+    spec["model"]["nodes"][-2] = [0.0, 1.5]        # the top ground bar vertical, under the pin
+    with pytest.raises(SceneError, match="mechanism"):
+        run(spec, 0.65)
+
+
+def test_exact_fallback_key_is_validated():
+    with pytest.raises(SceneError, match="exact_fallback_max_m"):
+        grid._scene(grid.builtin("plug2d"), 0.65, {"exact_fallback_max_m": -1})
+
+
+def test_cancellation_alone_flags_a_run(monkeypatch):
+    """Stiff diagonals (EA 1e6 against 1): a DD step cancels to 4e-14 of its terms and
+    the float answer is wrong (500 rays, exact 198); the cancellation is detected even
+    with the conditioning test off."""
+    import hpcwedge.numerics as numerics
+    monkeypatch.setattr(numerics, "COND_SUSPECT", math.inf)
+    res = run(grid.plug_truss(4, ea_diag=1e6), 0.65, exact_fallback_max_m=0, mu_c="none")
+    rec = res.stats["numerics"]["runs"][0]
+    assert rec["suspect"] and rec["close_calls"] == 0
+    assert rec["cancellation"] < numerics.CANCELLATION_MIN
+    ok = run(grid.plug_truss(4), 0.65, mu_c="none").stats["numerics"]["runs"][0]
+    assert ok["cancellation"] > 1e-3 and not ok["suspect"]
+
+
+def test_undecided_simplex_is_retried_by_interior_point(monkeypatch):
+    """An LP the dual simplex leaves undecided is solved again by HiGHS's interior point
+    method (counted), not taken as feasible."""
+    import hpcwedge.conic as conic
+    rows = conic.pattern_rows(parametrize(random_problem(np.random.default_rng(3), 3, False)), 3,
+                              np.array([True, True, False]), np.array([False, False, True]))
+    plain = conic.lp_feasible(rows, 0.8)[0]
+    real = conic.lp_feasible
+    methods = []
+
+    def flaky(rows, mu, options=None, method="highs-ds"):
+        methods.append(method)
+        return (conic.UNDECIDED, None) if method == "highs-ds" else real(rows, mu, options, method)
+    monkeypatch.setattr(conic, "lp_feasible", flaky)
+    counts = {}
+    status, _ = conic.feasible(rows, 0.8, counts)
+    assert methods == ["highs-ds", "highs-ipm"] and status == plain != conic.UNDECIDED
+    assert counts == {"lp_undecided": 1, f"lp_retry_ipm_{plain}": 1}
