@@ -23,12 +23,14 @@ bench: setup-bench
 	$(PY) scripts/bench_parallel.py
 	PYTHONPATH=. $(PY) scripts/bench_convergence.py --refine 1 2 4 8 16 32 64
 	PYTHONPATH=. $(PY) scripts/bench_condense.py
+	PYTHONPATH=. $(PY) scripts/bench_growth.py
 	$(PY) scripts/stress.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick
 	$(PY) scripts/bench_mu_c.py --quick
 	$(PY) scripts/stress.py --quick
+	PYTHONPATH=. $(PY) scripts/bench_growth.py --quick
 
 check: setup
 	../shared/acceptance/check_public

@@ -236,7 +236,13 @@ def worker_main(kind: str, rows: int, mu: float) -> None:
 
 def run_worker(kind: str, rows: int, mu: float, limit: float) -> tuple[str, dict | None, float, str]:
     """(status, result, wall seconds, stderr tail) of one worker subprocess, killed at `limit`."""
-    cmd = [sys.executable, os.path.abspath(__file__), "--worker", kind, "--rows", str(rows), "--mu", repr(mu)]
+    return run_script(os.path.abspath(__file__), ["--worker", kind, "--rows", str(rows), "--mu", repr(mu)], limit)
+
+
+def run_script(script: str, argv: list[str], limit: float) -> tuple[str, dict | None, float, str]:
+    """(status, result, wall seconds, stderr tail) of `python script argv` in its own process
+    group, killed at `limit`; the result is the JSON on the last MARK line of its stdout."""
+    cmd = [sys.executable, script, *argv]
     env = dict(os.environ)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
     t0 = time.perf_counter()
