@@ -557,8 +557,7 @@ def infeasible_core(nr: NodeRows, rows: ConeRows, mu: float, zu: np.ndarray, zr:
     lam_c = np.maximum(lam, 0.0)
     zeta_c = _soc_project(zeta)
     cost = np.zeros(m)
-    cost[cu] = lam[cu] - lam_c[cu]
-    cost[cu] = np.abs(cost[cu])
+    cost[cu] = lam_c[cu] - lam[cu]                                  # >= 0: the clip
     cost[cr] = max(mu, 1.0) * np.linalg.norm(zeta[cr] - zeta_c[cr], axis=1)
     fixed = np.concatenate([cu, cr])
     kind = np.concatenate([np.zeros(len(cu), bool), np.ones(len(cr), bool)])

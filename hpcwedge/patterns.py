@@ -230,11 +230,8 @@ class PatternTree:
         return max(free, key=lambda i: v[i])          # first maximum in `order`
 
     def expand(self, found: list[Subtree]) -> list[Subtree]:
-        """All patterns of the orbits of `found` (itself without a symmetry), sorted
-        by (contact, gap) bits."""
-        if self.symmetry is None:
-            return list(found)
-        return [Subtree(self.m, c, g) for c, g in self.symmetry.expand([(s.contact, s.gap) for s in found])]
+        """expand_orbits with this tree's symmetry."""
+        return expand_orbits(found, self.symmetry, self.m)
 
     def _witness(self, kid: Subtree, x: np.ndarray, nodes: list[int], contact: bool,
                  mu: float) -> np.ndarray | None:
@@ -253,6 +250,14 @@ class PatternTree:
         if violation(rows, mu, y) > VERIFY_TOL:
             return None
         return y / (rows.norm @ y)
+
+
+def expand_orbits(found: list[Subtree], symmetry: Symmetry | None, m: int) -> list[Subtree]:
+    """All patterns of the orbits of the full patterns `found` under `symmetry`
+    (found itself without one), sorted by (contact, gap) bits."""
+    if symmetry is None or symmetry.order == 1:
+        return list(found)
+    return [Subtree(m, c, g) for c, g in symmetry.expand([(s.contact, s.gap) for s in found])]
 
 
 class Cores:

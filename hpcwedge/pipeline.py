@@ -28,7 +28,7 @@ from .model import Model
 from .mu_critical import mu_critical
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, run_faces, run_mu_c, run_patterns, strip_exact
-from .patterns import BnBStats, PatternTree, global_mu_critical
+from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
 from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from .progress import Progress
 from .scene import Scene
@@ -150,9 +150,8 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         stages.append("enumerate")
         make_tree = partial(PatternTree, strip_exact(param), m, symmetry=sym)
         pats = run_patterns(make_tree, scene.mu, engine=engine, budget=scene.task_budget)
-        tree = make_tree(scene.mu[0])
         for run, found, doubt in zip(result.runs, pats.found, pats.undecided):
-            found, doubt = tree.expand(found), set(tree.expand(doubt))
+            found, doubt = expand_orbits(found, sym, m), set(expand_orbits(doubt, sym, m))
             run.patterns = [{"contact": np.flatnonzero(s.masks(m)[0]).tolist(), "mu_c": None,
                              "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)]
         if sym is not None:

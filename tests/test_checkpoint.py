@@ -29,17 +29,23 @@ def reference(tmp_path_factory):
     return show(out)
 
 
-def _kill9_master(ranks):
+def _signal(ranks, sig, rank=0):
+    """how(proc) for interrupt_cycles: send `sig` to rank `rank` of an mpirun run with
+    `ranks` ranks (ranks None: to the serial process); the pids that must be gone."""
     def how(p):
         if ranks is None:
-            p.send_signal(signal.SIGKILL)
+            p.send_signal(sig)
             return [p.pid]
         pids = rank_pids(p.pid, ranks, proc=p)
-        if 0 not in pids:              # the run finished first
+        if rank not in pids:           # the run finished first
             return []
-        os.kill(pids[0], signal.SIGKILL)
+        os.kill(pids[rank], sig)
         return list(pids.values())
     return how
+
+
+def _kill9_master(ranks):
+    return _signal(ranks, signal.SIGKILL)
 
 
 def _finish(scene, out, ranks=None, rays=True):
@@ -79,13 +85,8 @@ def test_kill9_master_under_mpirun_then_resume(tmp_path, reference, ranks, seed)
 def test_killed_worker_then_resume(tmp_path, reference):
     """kill -9 of a worker: Open MPI aborts the job (the master writes its
     checkpoint in mpirun's grace period or not at all); resume gives the same answers."""
-    def how(p):
-        pids = rank_pids(p.pid, 3, proc=p)
-        if 1 not in pids:              # the run finished first
-            return []
-        os.kill(pids[1], signal.SIGKILL)
-        return list(pids.values())
-    scene, out, kills, codes = interrupt_cycles(tmp_path, 3, 1, how, random.Random(4))
+    scene, out, kills, codes = interrupt_cycles(tmp_path, 3, 1, _signal(3, signal.SIGKILL, rank=1),
+                                                random.Random(4))
     assert all(c != 0 for c in codes)
     assert answers(_finish(scene, out)) == reference          # resumed serially: any rank count
 
@@ -94,10 +95,7 @@ def test_killed_worker_then_resume(tmp_path, reference):
 
 
 def test_sigterm_writes_checkpoint_and_exits_75(tmp_path, reference):
-    def how(p):
-        p.send_signal(signal.SIGTERM)
-        return [p.pid]
-    scene, out, n, codes = interrupt_cycles(tmp_path, None, 4, how, random.Random(5))
+    scene, out, n, codes = interrupt_cycles(tmp_path, None, 4, _signal(None, signal.SIGTERM), random.Random(5))
     assert codes == [EXIT_INTERRUPTED] * 4
     assert answers(_finish(scene, out)) == reference
 
@@ -108,13 +106,7 @@ def test_sigterm_to_master_under_mpirun(tmp_path, reference):
     """SIGTERM to rank 0 (as SLURM sends it to every process of the job): the
     master writes its checkpoint, tells the workers to stop, and mpirun exits
     with the master's status 75, no rank left. Resume under mpirun: same answers."""
-    def how(p):
-        pids = rank_pids(p.pid, 3, proc=p)
-        if 0 not in pids:              # the run finished first
-            return []
-        os.kill(pids[0], signal.SIGTERM)
-        return list(pids.values())
-    scene, out, n, codes = interrupt_cycles(tmp_path, 3, 1, how, random.Random(6))
+    scene, out, n, codes = interrupt_cycles(tmp_path, 3, 1, _signal(3, signal.SIGTERM), random.Random(6))
     assert codes == [EXIT_INTERRUPTED]
     with h5py.File(checkpoint_path(out)) as f:
         assert f.attrs["reason"] == "SIGTERM" and f.attrs["ranks"] == 3
