@@ -282,6 +282,9 @@ def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float 
         if code == 0:                 # it had finished: a signal after the result changes nothing
             assert os.path.exists(out) and not os.path.exists(ckpt), err
             continue
+        if not os.path.exists(ckpt):  # killed after the result was written and the checkpoint
+            assert os.path.exists(out), err   # removed, before the process exited: finished
+            continue
         codes.append(code)
         done += 1
     return scene, out, done, codes
