@@ -27,7 +27,7 @@ import h5py
 import numpy as np
 
 from . import __version__
-from .results import write_atomic
+from .results import compression, write_atomic
 
 FORMAT = "hpcwedge-checkpoint"
 FORMAT_VERSION = 1
@@ -58,17 +58,9 @@ def write_checkpoint(path: str, header: dict, scene_text: str, jobs: list[tuple[
             jg.attrs.update(state["attrs"])
             for key, arr in state["data"].items():
                 arr = np.asarray(arr)
-                jg.create_dataset(key, data=arr, compression="gzip" if _compress(arr) else None)
+                jg.create_dataset(key, data=arr, compression=compression(arr))
 
     write_atomic(path, fill, tmp_path=path + ".tmp", verify=read_checkpoint)
-
-
-def _compress(arr: np.ndarray) -> bool:
-    """gzip large integer/bool/bytes arrays (bit words, flags); never floats (the 2D
-    face rays): gzip shrank them by ~8% at 10x the write time (plug2d m = 16:
-    76 MB in 2.9 s against 82 MB in 0.3 s), and checkpoints are written while the
-    workers wait."""
-    return arr.size > 65536 and arr.dtype.kind not in "fc"
 
 
 def read_checkpoint(path: str) -> dict:

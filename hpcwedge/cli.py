@@ -178,10 +178,12 @@ def _read(path: str, with_rays: bool = True) -> dict:
 
 
 def _show(args) -> int:
-    res = _read(args.result, with_rays=not args.no_rays)
     if args.json:
-        print(json.dumps(res))
+        from .results import dump_result_json
+        _read(args.result, with_rays=False)
+        dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)
         return 0
+    res = _read(args.result, with_rays=False)
     mu_c = "null" if res["mu_c"] is None else f"{res['mu_c']:.12g}"
     print(f"{res['name']}: dim {res['dim']}, m {res['m']}, mu_c = {mu_c}"
           + (f" ({res['mu_c_status']})" if res["mu_c_status"] else ""))

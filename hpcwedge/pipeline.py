@@ -253,10 +253,12 @@ def _rays_whole(param, m: int, mu: float, numerics: Numerics, exact_param, progr
 
 def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
     order = canonical_order(dd.zero)
-    X, zero = dd.X[order], dd.zero[order]
+    zero = dd.zero[order]
     wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
-    _, V = ray_vectors(param, X, m, wedged)
-    run.rays, run.trivial_rays, run.ray_zero = V[wedged], V[~wedged], zero[wedged]
+    for name, sel in (("rays", wedged), ("trivial_rays", ~wedged)):
+        _, V = ray_vectors(param, dd.X[order[sel]], m, np.full(int(sel.sum()), sel is wedged))
+        setattr(run, name, V)
+    run.ray_zero = zero[wedged]
     if not want_cones:
         return
     gap = ~zero[:, 0::3]

@@ -231,7 +231,9 @@ def ray_vectors(param: Parametrization, X: np.ndarray, m: int,
             col = [Uq[i, c] / s for i in range(n)] + [Rq[i, c] / s for i in range(n)]
             out[c] = [int(v.p) / int(v.q) for v in col]
         return wedged, out
-    u, r = X @ param.U.T, X @ param.R.T
-    r[~wedged] = 0.0
-    s = np.where(wedged, r[:, :m].sum(1), u[:, :m].sum(1))
-    return wedged, np.hstack([u, r]) / s[:, None]
+    V = np.empty((len(X), 2 * n))
+    np.matmul(X, param.U.T, out=V[:, :n])
+    np.matmul(X, param.R.T, out=V[:, n:])
+    V[~wedged, n:] = 0.0
+    V /= np.where(wedged, V[:, n:n + m].sum(1), V[:, :m].sum(1))[:, None]
+    return wedged, V

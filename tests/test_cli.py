@@ -154,3 +154,17 @@ def test_export_stiffness_scene_and_missing_file(tmp_path, capsys):
     assert main(["export", str(tmp_path / "none.h5"), "--ray", "0", "-o", str(tmp_path / "x.vtu")]) == 2
     assert "no such file" in capsys.readouterr().err
     assert not (tmp_path / "x.vtu").exists()
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 16384])
+def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monkeypatch, chunk):
+    """`show --json` streams the rays in chunks; the object equals read_result's (ray
+    vectors to the last bit: repr round-trips floats) whatever the chunk size."""
+    from hpcwedge import results
+    monkeypatch.setattr(results, "RAY_CHUNK", chunk)
+    out, got = run_show_json(tmp_path, capsys, 'name = "p"\ndim = 2\n[model]\nkind = "plug2d"\n'
+                             'rows = 3\n[friction]\nmu = [0.65, 2.0]\n[compute]\nmu_c = "cones"\n')
+    want = results.read_result(out)
+    assert got == want and len(got["runs"][0]["rays"]) == got["runs"][0]["n_wedged_rays"] > 7
+    assert main(["show", out, "--json", "--no-rays"]) == 0
+    assert json.loads(capsys.readouterr().out) == results.read_result(out, with_rays=False)
