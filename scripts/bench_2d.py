@@ -10,6 +10,10 @@ Engines, run in the same invocation on the same condensed stiffness:
                   + complementary_rays (complementarity-pruned DD) + maximal_cones
   ours_run_scene  the whole pipeline, run_scene() with mu_c = "global" (model, PETSc
                   condensation, enumeration, cones, every cone's mu^c, global mu^c)
+  ours_mpirun     the whole run through the command line on both cores: `mpirun -n 3 hpcwedge
+                  run` (master + 2 workers sharing the DD faces, SPEC §5, and the mu^c tasks);
+                  seconds = the program's timings.total (scene to result, as ours_run_scene),
+                  the wall time with MPI start-up and the result file write beside it
   ours_exact      our engine in exact rational arithmetic (exact=True), enumerate stage,
                   for the sizes it finishes within --exact-limit (default 60 s)
   cdd_exact       the peer: a full double description with cddlib in exact arithmetic
@@ -53,7 +57,7 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MARK = "BENCH_RESULT "
 COLS, TAPER = 3, 10.0
-ENGINES = ("ours_enumerate", "ours_run_scene", "ours_exact", "cdd_exact")
+ENGINES = ("ours_enumerate", "ours_run_scene", "ours_mpirun", "ours_exact", "cdd_exact")
 CDD_HELP = ("pycddlib is not installed (needed for the cdd_exact peer). Install it with\n"
             "    apt-get install -y libcdd-dev libgmp-dev\n"
             f"    {sys.executable} -m pip install \"pycddlib<3\"\n"
@@ -132,6 +136,38 @@ def worker_scene(rows: int, mu: float) -> dict:
             "mu_c_rel_err": (abs(res.mu_c - math.tan(math.radians(TAPER))) / math.tan(math.radians(TAPER))
                              if res.mu_c is not None else None),
             "lp_solves": res.stats.get("lp_solves")}
+
+
+def worker_mpirun(rows: int, mu: float, workers: int = 2) -> dict:
+    import shutil
+    import tempfile
+    import h5py
+    from hpcwedge.results import read_result
+    mpirun = shutil.which("mpirun")
+    if mpirun is None:
+        raise SystemExit(3)
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = os.path.join(tmp, "scene.toml")
+        with open(scene, "w") as f:
+            f.write(f'name = "plug2d-r{rows}"\ndim = 2\n[model]\nkind = "plug2d"\nrows = {rows}\n'
+                    f'cols = {COLS}\ntaper_deg = {TAPER}\n[friction]\nmu = [{mu!r}]\n'
+                    '[compute]\nenumerate = true\nmu_c = "global"\n')
+        out = os.path.join(tmp, "r.h5")
+        extra = ["--allow-run-as-root"] if os.geteuid() == 0 else []
+        t0 = time.perf_counter()
+        subprocess.run([mpirun, *extra, "--oversubscribe", "-n", str(workers + 1), "-x", "PYTHONPATH",
+                        sys.executable, "-m", "hpcwedge", "run", scene, "-o", out, "-q"], check=True)
+        wall = time.perf_counter() - t0
+        res = read_result(out, with_rays=False)
+        with h5py.File(out, "r") as f:
+            zero = f["runs/000/ray_zero"][()]
+    run = res["runs"][0]
+    keys = [(c["zero_u"], c["zero_r"]) for c in run["cones"]]
+    return {"seconds": res["timings"]["total"], "wall_with_startup_and_write": wall,
+            "n_wedged_rays": run["n_wedged_rays"], "n_cones": run["n_cones"],
+            "n_trivial_rays": run["n_trivial_rays"], "fingerprint": _fingerprint(zero, keys),
+            "breakdown": {k: float(v) for k, v in res["timings"].items()},
+            "workers": workers, "mu_c": res["mu_c"]}
 
 
 def _cdd_generators(H):
@@ -227,6 +263,8 @@ def worker_main(kind: str, rows: int, mu: float) -> None:
         out = worker_scene(rows, mu)
     elif kind == "peer":
         out = worker_peer(rows, mu)
+    elif kind == "mpirun":
+        out = worker_mpirun(rows, mu)
     else:
         raise SystemExit(f"unknown worker {kind}")
     print(MARK + json.dumps(out), flush=True)
@@ -285,6 +323,7 @@ def main(argv=None) -> int:
                     help="seconds per size for ours_enumerate and ours_run_scene (default 1800)")
     ap.add_argument("--exact-limit", type=float, default=60.0, help="seconds per size for ours_exact")
     ap.add_argument("--no-peer", action="store_true", help="skip the cddlib peer")
+    ap.add_argument("--no-mpirun", action="store_true", help="skip ours_mpirun (mpirun -n 3)")
     ap.add_argument("--out", default=os.path.join(ROOT, "results"), help="output directory")
     ap.add_argument("--profile-m", type=int, default=None,
                     help="also profile ours_enumerate at this m with pyinstrument "
@@ -318,10 +357,11 @@ def main(argv=None) -> int:
     stopped = {e: False for e in ENGINES}
     peer_used = 0.0
     limits = {"ours_enumerate": ("ours", args.ours_limit), "ours_run_scene": ("scene", args.ours_limit),
-              "ours_exact": ("exact", args.exact_limit)}
+              "ours_mpirun": ("mpirun", args.ours_limit), "ours_exact": ("exact", args.exact_limit)}
     for rows in sizes:
         m = 2 * rows
-        plan = [(e, *limits[e]) for e in ("ours_enumerate", "ours_run_scene", "ours_exact")]
+        plan = [(e, *limits[e]) for e in ("ours_enumerate", "ours_run_scene", "ours_mpirun", "ours_exact")
+                if e != "ours_mpirun" or not args.no_mpirun]
         if not args.no_peer:
             plan.append(("cdd_exact", "peer", budget - peer_used))
         for engine, kind, limit in plan:
@@ -394,7 +434,7 @@ def main(argv=None) -> int:
     # ----------------------------------------------------------------- summary
     print()
     hdr = (f"{'m':>3} {'wedged':>8} {'cones':>5} | {'ours enum s':>11} {'rays/s':>9} | "
-           f"{'run_scene s':>11} | {'ours exact s':>12} | {'cdd exact s':>11} | {'peer/ours':>9}")
+           f"{'run_scene s':>11} | {'mpirun 2w s':>11} | {'ours exact s':>12} | {'cdd exact s':>11} | {'peer/ours':>9}")
     print(hdr)
     print("-" * len(hdr))
     for rows in sizes:
@@ -415,7 +455,7 @@ def main(argv=None) -> int:
         print(f"{m:>3} {nw if nw is not None else '-':>8} {nc if nc is not None else '-':>5} | "
               f"{cell('ours_enumerate', 11)} "
               f"{(format(o['rays_per_second'], '.3g') if o.get('rays_per_second') else '-'):>9} | "
-              f"{cell('ours_run_scene', 11)} | {cell('ours_exact', 12)} | {cell('cdd_exact', 11)} | "
+              f"{cell('ours_run_scene', 11)} | {cell('ours_mpirun', 11)} | {cell('ours_exact', 12)} | {cell('cdd_exact', 11)} | "
               f"{ratio or '-':>9}")
     print()
     ok_m = [2 * rows for rows in sizes if records.get(("ours_enumerate", 2 * rows), {}).get("status") == "ok"]
@@ -450,10 +490,12 @@ def main(argv=None) -> int:
               + (" (lower bound: the peer timed out)" if s8.startswith(">") else ""))
     r20 = records.get(("ours_enumerate", 20), {})
     s20 = records.get(("ours_run_scene", 20), {})
+    p20 = records.get(("ours_mpirun", 20), {})
     if not r20:
         print("  m = 20 within 60 s: not measured (run without --quick)")
     else:
-        for name, x in (("enumerate", r20), ("run_scene", s20)):
+        for name, x in (("enumerate, 1 core", r20), ("run_scene, 1 core", s20),
+                        ("mpirun -n 3, 2 workers on the 2 cores", p20)):
             if x.get("status") == "ok":
                 print(f"  m = 20 within 60 s ({name}): {fmt_s(x['seconds'])} s -> "
                       f"{'MET' if x['seconds'] <= 60 else 'NOT MET'}")
@@ -495,6 +537,7 @@ def plot(records, sizes, budget, path, mu) -> None:
     fig, ax = plt.subplots(figsize=(10, 4.8))
     style = {"ours_enumerate": ("o-", "ours, enumerate (float)"),
              "ours_run_scene": ("s-", "ours, run_scene (mu_c global)"),
+             "ours_mpirun": ("v-", "ours, mpirun -n 3 (2 workers), timings.total"),
              "ours_exact": ("^-", "ours, exact arithmetic"),
              "cdd_exact": ("D-", "cddlib exact DD + filter + cliques")}
     for e in ENGINES:
