@@ -20,7 +20,8 @@ KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 
 TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact", "obstacle"}
 #: keys of a kind = "mesh" scene (values are checked when the mesh is read: models/mesh.py)
-MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs"}
+MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs",
+                   "contact_patch"}
 MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
@@ -220,6 +221,17 @@ def _check_builtin(kind: str, params: dict) -> None:
         if isinstance(default, int) and not isinstance(default, bool):
             if not isinstance(v, int) or v < 1:
                 raise SceneError(f"model.{k}: must be a whole number >= 1, got {v!r}")
+    _check_patch(params)
+
+
+def _check_patch(params: dict) -> None:
+    """model.contact_patch, if given: a length >= 0 (models/patch.py)."""
+    if "contact_patch" in params:
+        from .models.patch import check_patch_size
+        try:
+            check_patch_size(params["contact_patch"])
+        except ValueError as e:
+            raise SceneError(str(e)) from None
 
 
 def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> None:
@@ -231,6 +243,7 @@ def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> No
         raise SceneError("model.file: required for a mesh, a file name (relative to the scene file)")
     if dim == 3 and "thickness" in params:
         raise SceneError("model.thickness: only for 2D (plane stress) meshes")
+    _check_patch(params)
     for k in ("E", "nu", "thickness"):
         v = params.get(k, 1.0)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
