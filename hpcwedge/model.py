@@ -36,7 +36,8 @@ class Model:
     normals:       (m, dim) unit normals of the obstacle pointing into the body.
     tangents:      (m, dim-1, dim) unit tangents: 2D t = (n_y, -n_x); 3D t1, t2 = n x t1.
     rigid_modes:   (n_nodes*dim, k) rigid-body motions the supports leave free
-                   (k = 0 for a supported body), from the geometry.
+                   (k = 0 for a supported body), from the geometry; with a tie, in the
+                   DOFs the tie keeps (models/patch.py: "hat" patches change the contact rows).
     cells:         plotting/export connectivity, e.g. {"line": (nb, 2), "quad": (ne, 4)}.
     material:      per-element constants for stress recovery, element order = the blocks of
                    `cells` in order: {"EA": (nb,)} for bars ("line" cells); {"E": (ne,),

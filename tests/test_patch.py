@@ -203,3 +203,67 @@ def test_patch_on_supported_node_rejected():
     with pytest.raises(ValueError, match="model.contact_patch: the node at .* is supported"):
         mesh_model(mesh, contact_nodes=[nid(0, 1, 1)], normals=[[1, 0, 0]], contact_patch=1.0,
                    supports=[[nid(0, 1, 2), 0]])
+
+
+def _hat_dense_condensed(mdl, patches, a):
+    """K_local of hat patches by an independent route: minimise 1/2 u^T K u over all nodal
+    displacements subject to A u = u_c, A's row (contact node i, component k) holding the
+    normalised weights max(0, 1 - d/a) of the patch nodes (dense KKT)."""
+    X, d = mdl.coords, mdl.dim
+    n, m = len(X), mdl.m
+    A = np.zeros((d * m, n * d))
+    for i, (c, s) in enumerate(zip(mdl.contact_nodes, patches)):
+        nodes = np.array([c] + list(s))
+        w = 1 - np.linalg.norm(X[nodes] - X[c], axis=1) / a
+        w /= w.sum()
+        for k in range(d):
+            A[d * i + k, d * nodes + k] = w
+    p = A.shape[0]
+    KKT = np.block([[mdl.K.toarray(), A.T], [A, np.zeros((p, p))]])
+    S = -np.linalg.inv(KKT)[-p:, -p:]
+    T = mdl.local_map()
+    return T @ S @ T.T
+
+
+@pytest.mark.parametrize("a", [0.09, 0.15])
+def test_hat_patch_matches_dense_route_and_keeps_rigid_modes(a):
+    rows, refine = 3, 4
+    mdl = block2d(rows=rows, refine=refine, contact_patch=a, contact_patch_kind="hat")
+    patches = _patches_brute(mdl.coords, _block2d_boundary(rows, 2, refine), mdl.contact_nodes, a)
+    K, N = condense(mdl)
+    assert N.shape[1] == 3
+    assert np.abs(K @ N).max() <= 1e-10 * np.abs(K).max()
+    assert _rel(K, _hat_dense_condensed(mdl, patches, a)) < 1e-10
+    assert _rel(K, condense(block2d(rows=rows, refine=refine, contact_patch=a))[0]) > 1e-3  # not the foot
+
+
+def test_hat_patch_3d_and_whole_body():
+    X, H, nid = _hex_block(4, 4, 4)
+    contact = np.array([nid(0, 1, 1), nid(0, 3, 3), nid(4, 2, 2), nid(2, 0, 2), nid(2, 4, 2), nid(2, 2, 0)])
+    normals = [[1, 0, 0], [1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]]
+    mesh = MeshData(name="block", points=X, cells={"hexahedron": H}, groups={})
+    mdl = mesh_model(mesh, contact_nodes=contact, normals=normals, contact_patch=1.05, contact_patch_kind="hat")
+    ids = np.arange(len(X))
+    i, j, k = ids % 5, ids // 5 % 5, ids // 25
+    bnd = np.flatnonzero(np.isin(i, [0, 4]) | np.isin(j, [0, 4]) | np.isin(k, [0, 4]))
+    patches = _patches_brute(X, bnd, contact, 1.05)
+    K, N = condense(mdl)
+    assert N.shape[1] == 6 and np.abs(K @ N).max() <= 1e-10 * np.abs(K).max()
+    assert _rel(K, _hat_dense_condensed(mdl, patches, 1.05)) < 1e-10
+    # whole body: the contact DOFs are the weighted means of the patch displacements
+    u = np.random.default_rng(1).standard_normal(K.shape[0])
+    cfg = whole_body(mdl, u, K @ u)
+    uc = (mdl.local_map().T @ u).reshape(-1, 3)
+    for c, s, want in zip(contact, patches, uc):
+        nodes = np.array([c] + s)
+        w = 1 - np.linalg.norm(X[nodes] - X[c], axis=1) / 1.05
+        np.testing.assert_allclose(w @ cfg.displacement[nodes] / w.sum(), want, atol=1e-10)
+
+
+def test_patch_kind_checked_by_the_scene():
+    scene = {"name": "p", "dim": 2, "friction": {"mu": [0.65]},
+             "model": {"kind": "block2d", "contact_patch": 0.05, "contact_patch_kind": "soft"}}
+    with pytest.raises(SceneError, match=r"model.contact_patch_kind: one of 'rigid', 'hat', got 'soft'"):
+        parse_scene(scene)
+    scene["model"]["contact_patch_kind"] = "hat"
+    assert parse_scene(scene).model["contact_patch_kind"] == "hat"

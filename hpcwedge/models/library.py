@@ -135,7 +135,8 @@ def plug3d(levels: int = 2, ring: int = 5, taper_deg: float = 10.0) -> Model:
 
 
 def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10.0,
-            E: float = 1.0, nu: float = 0.3, thickness: float = 1.0, contact_patch: float = 0.0) -> Model:
+            E: float = 1.0, nu: float = 0.3, thickness: float = 1.0, contact_patch: float = 0.0,
+            contact_patch_kind: str = "rigid") -> Model:
     """Plane-stress Q4 plug: trapezoid of height 1, width 1 at the bottom, sides at τ from vertical.
 
     Coarse grid rows x cols elements, each split refine x refine (uniform bilinear subdivision,
@@ -146,6 +147,7 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     side (I = C); m = 2(rows+1); normals as plug2d. Free body (3 rigid modes).
     contact_patch = a > 0: a rigid foot of half-width a under every contact node (the boundary
     nodes within a of it move with it rigidly: models/patch.py); 0 = point contacts.
+    contact_patch_kind = "hat": the contact DOFs are hat-weighted means over the patches instead.
     """
     rows, cols, refine = _int(rows, "rows", 1), _int(cols, "cols", 1), _int(refine, "refine", 1)
     tau = math.radians(_real(taper_deg, "taper_deg", 0.0, 90.0))
@@ -171,7 +173,7 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     mdl = Model(dim=2, coords=X, K=K, fixed_dofs=np.zeros(0, dtype=np.int64), contact_nodes=contact,
                 normals=nrm, tangents=tan, rigid_modes=rigid_modes(X, 2), cells={"quad": quads},
                 material=continuum_material(len(quads), E, nu, thickness, "model"))
-    return with_contact_patch(mdl, a)
+    return with_contact_patch(mdl, a, contact_patch_kind)
 
 
 #: built-in generators by scene `model.kind`, and their dimension

@@ -183,7 +183,7 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
                obstacles: list[Plane | Cone] | None = None, obstacle_key: str = "obstacle",
                tolerance: float = DEFAULT_TOLERANCE,
                supports=None, support_group: str | list[str] | None = None, support_dofs=None,
-               contact_patch=0.0) -> Model:
+               contact_patch=0.0, contact_patch_kind: str = "rigid") -> Model:
     """The Model of a meshed body (SPEC §3, kind = "mesh").
 
     Contact nodes: `contact_nodes` (m,) file ids, or `contact_group` (name or names).
@@ -195,7 +195,8 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
     `support_dofs` (default all) of the nodes of `support_group`.
     Material: E, nu, thickness (2D plane stress; ignored in 3D), errors named model.E, ...
     contact_patch = a > 0: a rigid foot of half-width a under every contact node (the boundary
-    nodes within a of it move with it rigidly: models/patch.py); 0 = point contacts.
+    nodes within a of it move with it rigidly: models/patch.py); 0 = point contacts;
+    contact_patch_kind = "hat": hat-weighted means over the patches instead.
     Every error is ValueError("<key>: <reason>") naming the scene key, with file node ids.
     """
     a = check_patch_size(contact_patch)
@@ -250,4 +251,4 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
     material = continuum_material(sum(len(q) for q in cells.values()), E, nu, t, "model")
     mdl = Model(dim=dim, coords=Xb, K=K, fixed_dofs=fixed_b, contact_nodes=new[c], normals=nrm,
                 tangents=tan, rigid_modes=rigid_modes(Xb, dim, fixed_b), cells=cells, material=material)
-    return with_contact_patch(mdl, a)
+    return with_contact_patch(mdl, a, contact_patch_kind)

@@ -17,6 +17,17 @@ its foot's rotations. A rigid motion of the body is T of a reduced vector (the s
 and rotation at the masters, the body's rotation as the feet's), so free bodies keep their
 rigid modes exactly. Reduced numbering: the full DOF ids (slave DOFs unused), then the foot
 rotations at n_dofs, n_dofs + 1, ...
+
+model.contact_patch_kind = "hat" is the other patch model: the contact node's DOFs stand for
+the hat-weighted mean displacement u_c = sum_i w_i u_i of its patch (the contact node and
+its slaves, w_i proportional to max(0, 1 - d_i/a), summing to 1), so the contact force acts
+on the body as nodal forces w_i F, a triangular pressure of half-width a; the patch itself
+stays elastic. Elimination u = T u_red again: T keeps every DOF but the contact node's own,
+u_c(node) = (u_c - sum_s w_s u_s) / w_c. A rigid motion's u_c is the motion of the weighted
+contact point sum_i w_i x_i (the contact node itself on a straight, evenly meshed side; inside
+the corner at a corner), which is what the model's rigid modes hold at the contact DOFs. The
+hat's weights vary continuously with the node positions, so the patch's effective width does
+not jump as nodes enter it under refinement (the rigid foot's does, by up to one element).
 """
 from __future__ import annotations
 
@@ -28,6 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..model import Model, Tie
+from .rigid import orthonormalise
 
 #: a boundary node at distance d <= a (1 + DIST_RTOL) of a contact node is in its patch
 #: (mirror-image nodes land on the same side of the cut despite rounding in their coordinates)
@@ -136,14 +148,62 @@ def tie_map(coords: np.ndarray, contact_nodes: np.ndarray, slaves: list[np.ndarr
     return Tie(T=T, slave_dofs=np.flatnonzero(is_slave), n_rotations=q)
 
 
-def with_contact_patch(model: Model, a) -> Model:
-    """`model` with a rigid foot of half-width a under every contact node (module doc).
+def hat_weights(coords: np.ndarray, contact_nodes: np.ndarray, slaves: list[np.ndarray],
+                a: float) -> list[np.ndarray]:
+    """Per patch: weights of (contact node, *slaves) proportional to max(0, 1 - d/a), d the
+    distance to the contact node, summing to 1."""
+    X = np.asarray(coords, dtype=float)
+    out = []
+    for ci, s in zip(contact_nodes, slaves):
+        h = np.maximum(0.0, 1.0 - np.linalg.norm(X[s] - X[ci], axis=1) / a)
+        w = np.concatenate([[1.0], h])
+        out.append(w / w.sum())
+    return out
 
+
+def hat_map(coords: np.ndarray, contact_nodes: np.ndarray, slaves: list[np.ndarray], a: float) -> Tie:
+    """The hat-weighted patch map (module doc, kind "hat"). The contact DOFs become
+    u_c = sum_i w_i u_i over the patch; the contact node's own displacement is
+    (u_c - sum_s w_s u_s) / w_c, every other DOF is kept."""
+    X = np.asarray(coords, dtype=float)
+    n, d = X.shape
+    nd = n * d
+    W = hat_weights(X, contact_nodes, slaves, a)
+    is_master = np.zeros(nd, dtype=bool)
+    is_master[(d * np.asarray(contact_nodes, dtype=np.int64)[:, None] + np.arange(d)).ravel()] = True
+    keep = np.flatnonzero(~is_master)
+    rows, cols, vals = [keep], [keep], [np.ones(keep.size)]
+    for ci, s, w in zip(contact_nodes, slaves, W):
+        nodes = np.concatenate([[ci], s]).astype(np.int64)
+        coef = np.concatenate([[1.0], -w[1:]]) / w[0]        # u_ci = coef @ (u_c, u_s...)
+        for k in range(d):
+            rows.append(np.full(nodes.size, d * ci + k))
+            cols.append(d * nodes + k)
+            vals.append(coef)
+    T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(nd, nd))
+    T.sum_duplicates()
+    T.sort_indices()
+    return Tie(T=T, slave_dofs=np.zeros(0, dtype=np.int64), n_rotations=0)
+
+
+#: patch kinds (scene key model.contact_patch_kind)
+KINDS = ("rigid", "hat")
+
+
+def with_contact_patch(model: Model, a, kind: str = "rigid") -> Model:
+    """`model` with a contact patch of half-width a under every contact node (module doc).
+
+    kind "rigid": a rigid foot (the patch's boundary nodes move with the contact node
+    rigidly); "hat": the contact DOFs are the hat-weighted means of the patch's displacements
+    (weights max(0, 1 - d/a), normalised), the contact force spread as a hat pressure; the
+    rigid modes then take the contact DOFs at the weighted contact points.
     a = 0, or patches that hold no node besides their contact node: `model` itself, unchanged.
     ValueError("model.contact_patch: ...") if a < 0, the patches overlap, a patch holds a
     supported node, or the model has no continuum cells.
     """
     a = check_patch_size(a)
+    if kind not in KINDS:
+        raise ValueError(f"model.contact_patch_kind: one of {', '.join(KINDS)}, got {kind!r}")
     if a == 0:
         return model
     n, d = model.coords.shape
@@ -157,4 +217,16 @@ def with_contact_patch(model: Model, a) -> Model:
             raise ValueError(f"{KEY}: the node at {_at(model.coords[int(hit[0])])} in the patch of contact "
                              f"node {i} (contact position) is supported "
                              "(a patch node moves with its contact node): take a smaller a")
-    return dataclasses.replace(model, tie=tie_map(model.coords, model.contact_nodes, slaves))
+    if kind == "rigid":
+        return dataclasses.replace(model, tie=tie_map(model.coords, model.contact_nodes, slaves))
+    tie = hat_map(model.coords, model.contact_nodes, slaves, a)
+    R = model.rigid_modes
+    if R.shape[1]:
+        R = R.copy()       # reduced DOFs: a contact DOF is the weighted mean over its patch
+        for ci, s, w in zip(model.contact_nodes, slaves, hat_weights(model.coords, model.contact_nodes,
+                                                                       slaves, a)):
+            nodes = np.concatenate([[ci], s]).astype(np.int64)
+            for k in range(d):
+                R[d * ci + k] = w @ model.rigid_modes[d * nodes + k]
+        R = orthonormalise(R, expect_rank=R.shape[1], what="contact patch rigid modes")
+    return dataclasses.replace(model, tie=tie, rigid_modes=R)
