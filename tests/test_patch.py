@@ -267,3 +267,22 @@ def test_patch_kind_checked_by_the_scene():
         parse_scene(scene)
     scene["model"]["contact_patch_kind"] = "hat"
     assert parse_scene(scene).model["contact_patch_kind"] == "hat"
+
+
+def test_run_and_export_with_rigid_patches(tmp_path, capsys):
+    """The command line end to end: run a patched block2d, export a ray; every foot moves rigidly."""
+    import meshio
+    path = tmp_path / "s.toml"
+    path.write_text(_scene_text(0.09, refine=4).replace("rows = 5", "rows = 3"))
+    out, vtu = str(tmp_path / "r.h5"), str(tmp_path / "c.vtu")
+    assert main(["run", str(path), "-o", out, "--quiet"]) == 0
+    assert main(["export", out, "--ray", "0", "-o", vtu]) == 0
+    U = meshio.read(vtu).point_data["displacement"][:, :2]
+    mdl = block2d(rows=3, refine=4, contact_patch=0.09)
+    assert np.abs(U).max() > 0
+    for c, s in zip(mdl.contact_nodes, _patches_brute(mdl.coords, _block2d_boundary(3, 2, 4),
+                                                      mdl.contact_nodes, 0.09)):
+        nodes = [c] + s
+        R = rigid_motions(mdl.coords[nodes], 2)
+        v = U[nodes].ravel()
+        assert np.abs(v - R @ np.linalg.lstsq(R, v, rcond=None)[0]).max() < 1e-9 * np.abs(U).max()
