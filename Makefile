@@ -22,6 +22,8 @@ bench: setup-bench
 	PYTHONPATH=. $(PY) scripts/bench_socp_count.py --brute-max 14
 	$(PY) scripts/bench_parallel.py
 	PYTHONPATH=. $(PY) scripts/bench_convergence.py --refine 1 2 4 8 16 32 64
+	PYTHONPATH=. $(PY) scripts/bench_convergence.py --patch 0.05 --refine 1 2 4 8 16 32 64 128 256
+	PYTHONPATH=. $(PY) scripts/bench_convergence.py --patch 0.05 --patch-kind hat --refine 1 2 4 8 16 32 64 128 256
 	PYTHONPATH=. $(PY) scripts/bench_condense.py
 	PYTHONPATH=. $(PY) scripts/bench_growth.py
 	$(PY) scripts/stress.py

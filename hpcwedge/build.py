@@ -64,7 +64,8 @@ def _mesh_model(scene: Scene) -> Model:
                            obstacles=obstacles, obstacle_key=scene.obstacle_key,
                            tolerance=c.get("tolerance", mesh.DEFAULT_TOLERANCE),
                            supports=m.get("supports"), support_group=m.get("support_group"),
-                           support_dofs=m.get("support_dofs"))
+                           support_dofs=m.get("support_dofs"), contact_patch=m.get("contact_patch", 0.0),
+                           contact_patch_kind=m.get("contact_patch_kind", "rigid"))
 
 
 def contact_problem(scene: Scene, model: Model | None = None, comm=None) -> ContactProblem:

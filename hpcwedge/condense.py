@@ -8,7 +8,9 @@ The only module that imports petsc4py. `condense` is serial (PETSc.COMM_SELF);
     N_local = orth(T R_c)                           (dim*m, k), R_c = rigid modes on contact DOFs
 
 with supports applied (fixed DOFs dropped), c = contact DOFs (node-major), i = the other free
-DOFs, T = model.local_map(). `interior_response` reads the condensation backwards
+DOFs, T = model.local_map(). A model with contact patches (model.tie, models/patch.py) is
+condensed in its reduced DOFs: K = Q^T K Q with Q = model.tie.T, the slave DOFs dropped and
+the feet's rotation DOFs (ids n_dofs, n_dofs + 1, ...) added to i. `interior_response` reads the condensation backwards
 (u_i = -K_ii^-1 K_ic u_c) with the same factorisation routine (`_factored`).
 """
 from __future__ import annotations
@@ -35,7 +37,8 @@ class DofSplit:
     """Which DOFs are condensed out and how the contact DOFs are rotated.
 
     contact:  (dim*m,) global contact DOFs, node-major (model.contact_dofs()).
-    interior: (n_i,) free (unsupported) non-contact global DOFs, ascending.
+    interior: (n_i,) free (unsupported) non-contact global DOFs, ascending (with contact
+              patches: no slave DOF, then the rotation DOFs n_dofs, n_dofs + 1, ...).
     T:        (dim*m, dim*m) global node-major contact DOFs -> local block ordering.
     Rc:       (dim*m, k) the model's rigid modes restricted to the contact DOFs.
     """
@@ -53,13 +56,31 @@ def split_dofs(model: Model) -> DofSplit:
     keep = np.ones(model.n_dofs, dtype=bool)
     keep[np.asarray(model.fixed_dofs, dtype=np.int64)] = False
     keep[c] = False
-    return DofSplit(contact=c, interior=np.flatnonzero(keep), T=model.local_map(), Rc=model.rigid_modes[c])
+    interior = np.flatnonzero(keep)
+    if model.tie is not None:
+        keep[model.tie.slave_dofs] = False
+        interior = np.concatenate([np.flatnonzero(keep),
+                                   model.n_dofs + np.arange(model.tie.n_rotations, dtype=np.int64)])
+    return DofSplit(contact=c, interior=interior, T=model.local_map(), Rc=model.rigid_modes[c])
+
+
+def reduced_stiffness(model: Model) -> sp.csr_matrix:
+    """model.K, or Q^T K Q (Q = model.tie.T) for a model with contact patches: the stiffness
+    in the DOFs that split_dofs numbers."""
+    K = sp.csr_matrix(model.K)
+    if model.tie is None:
+        return K
+    Q = model.tie.T
+    Kr = (Q.T @ K @ Q).tocsr()
+    Kr = (0.5 * (Kr + Kr.T)).tocsr()          # exactly symmetric (MUMPS LDL^T needs it)
+    Kr.sort_indices()
+    return Kr
 
 
 def _blocks(model: Model, sp_: DofSplit, lo: int = 0, hi: int | None = None):
     """Kcc (p, p) dense, Kic (hi-lo, p) CSR, Kii (hi-lo, n_i) CSR, p = dim*m (node-major contact
     DOFs): the interior rows [lo, hi) (default all) of K_ic and K_ii."""
-    K = sp.csr_matrix(model.K)
+    K = reduced_stiffness(model)
     Kcc = K[sp_.contact][:, sp_.contact].toarray()
     Ki = K[sp_.interior[lo:hi]]
     return Kcc, Ki[:, sp_.contact].tocsr(), Ki[:, sp_.interior].tocsr()
@@ -186,7 +207,8 @@ def interior_response(model: Model, uc: np.ndarray, solver: str | None = None) -
 
     uc: (dim*m,) or (dim*m, q) global contact DOFs, node-major (model.contact_dofs()).
     Returns (n_i,) or (n_i, q) on split_dofs(model).interior (supported DOFs are zero and not
-    included). This is the static condensation read backwards: with these u_i, K u = f has
+    included; with contact patches, reduced DOFs: expand with model.tie.T). This is the
+    static condensation read backwards: with these u_i, K u = f has
     f = 0 at every free non-contact DOF. K_ii is factored exactly as by `condense` (same
     solver choice and null-pivot checks; ValueError if singular).
     """

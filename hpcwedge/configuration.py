@@ -20,7 +20,10 @@ and extended to the body by the static condensation read backwards (`whole_body`
     u = 0 at supported DOFs
     f   = T^T r_local at the contact DOFs, 0 elsewhere: the obstacle's force on the body
 
-so that K u = f at every free DOF (the supports take K u at theirs). The amplitude is that
+so that K u = f at every free DOF (the supports take K u at theirs). With contact patches
+(model.tie, models/patch.py) the reduced u_i includes the feet's rotations, u = Q u_red
+(Q = model.tie.T), and the equilibrium is Q^T (K u - f) = 0: the feet press on their slave
+nodes (K u is their pressure there). The amplitude is that
 of the normalised item (sum r_n = 1, in force units; displacements in length units); any
 positive multiple is the same wedged configuration.
 
@@ -90,9 +93,12 @@ def whole_body(model: Model, u_local: np.ndarray, r_local: np.ndarray, label: st
     from .condense import interior_response, split_dofs
     n, dim = model.coords.shape
     uc = to_global(model, u_local).ravel()
-    u = np.zeros(n * dim)
+    q = model.tie.n_rotations if model.tie is not None else 0
+    u = np.zeros(n * dim + q)
     u[model.contact_dofs()] = uc
     u[split_dofs(model).interior] = interior_response(model, uc, solver=solver)
+    if model.tie is not None:
+        u = model.tie.T @ u                  # slaves of the contact patches from their feet
     f = np.zeros((n, dim))
     f[model.contact_nodes] = to_global(model, r_local)
     U = u.reshape(n, dim)

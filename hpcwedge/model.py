@@ -8,6 +8,22 @@ import scipy.sparse as sp
 
 
 @dataclass(frozen=True)
+class Tie:
+    """Master-slave elimination of some DOFs (contact patches, models/patch.py): u = T u_red.
+
+    T:           (n_dofs, n_dofs + n_rotations) sparse; identity on every non-slave DOF,
+                 zero columns at the slave DOFs; columns n_dofs.. are extra DOFs (the feet's
+                 rotations), condensed out with the interior.
+    slave_dofs:  (sorted) full DOFs that T expresses through the others.
+    n_rotations: number of extra DOFs.
+    """
+
+    T: sp.csr_matrix
+    slave_dofs: np.ndarray
+    n_rotations: int
+
+
+@dataclass(frozen=True)
 class Model:
     """A linear-elastic body touching a rigid obstacle at m contact nodes.
 
@@ -20,12 +36,15 @@ class Model:
     normals:       (m, dim) unit normals of the obstacle pointing into the body.
     tangents:      (m, dim-1, dim) unit tangents: 2D t = (n_y, -n_x); 3D t1, t2 = n x t1.
     rigid_modes:   (n_nodes*dim, k) rigid-body motions the supports leave free
-                   (k = 0 for a supported body), from the geometry.
+                   (k = 0 for a supported body), from the geometry; with a tie, in the
+                   DOFs the tie keeps (models/patch.py: "hat" patches change the contact rows).
     cells:         plotting/export connectivity, e.g. {"line": (nb, 2), "quad": (ne, 4)}.
     material:      per-element constants for stress recovery, element order = the blocks of
                    `cells` in order: {"EA": (nb,)} for bars ("line" cells); {"E": (ne,),
                    "nu": (ne,), "thickness": (ne,)} for continuum cells (thickness 1 in 3D).
                    (Springs added to K by hand, e.g. vgroove_bar's eps, are not elements.)
+    tie:           None, or the master-slave map of contact patches (Tie): condensation then
+                   works on T^T K T (condense.py), the whole body's displacement is T u_red.
     """
 
     dim: int
@@ -38,6 +57,7 @@ class Model:
     rigid_modes: np.ndarray
     cells: dict = field(default_factory=dict)
     material: dict = field(default_factory=dict)
+    tie: Tie | None = None
 
     @property
     def m(self) -> int:

@@ -20,7 +20,8 @@ KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 
 TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact", "obstacle"}
 #: keys of a kind = "mesh" scene (values are checked when the mesh is read: models/mesh.py)
-MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs"}
+MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs",
+                   "contact_patch", "contact_patch_kind"}
 MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
@@ -215,11 +216,28 @@ def _check_builtin(kind: str, params: dict) -> None:
         if k not in sig.parameters:
             raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(sig.parameters)})")
         default = sig.parameters[k].default
+        if isinstance(default, str):
+            continue                  # a choice (contact_patch_kind): checked in _check_patch
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise SceneError(f"model.{k}: must be a finite number, got {v!r}")
         if isinstance(default, int) and not isinstance(default, bool):
             if not isinstance(v, int) or v < 1:
                 raise SceneError(f"model.{k}: must be a whole number >= 1, got {v!r}")
+    _check_patch(params)
+
+
+def _check_patch(params: dict) -> None:
+    """model.contact_patch, if given: a length >= 0; model.contact_patch_kind: one of
+    models.patch.KINDS (models/patch.py)."""
+    from .models.patch import KINDS, check_patch_size
+    if "contact_patch" in params:
+        try:
+            check_patch_size(params["contact_patch"])
+        except ValueError as e:
+            raise SceneError(str(e)) from None
+    if "contact_patch_kind" in params and params["contact_patch_kind"] not in KINDS:
+        raise SceneError(f"model.contact_patch_kind: one of {', '.join(repr(k) for k in KINDS)}, "
+                         f"got {params['contact_patch_kind']!r}")
 
 
 def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> None:
@@ -231,6 +249,7 @@ def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> No
         raise SceneError("model.file: required for a mesh, a file name (relative to the scene file)")
     if dim == 3 and "thickness" in params:
         raise SceneError("model.thickness: only for 2D (plane stress) meshes")
+    _check_patch(params)
     for k in ("E", "nu", "thickness"):
         v = params.get(k, 1.0)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):

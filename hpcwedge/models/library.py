@@ -16,6 +16,7 @@ import scipy.sparse as sp
 
 from ..model import Model, contact_frames
 from .continuum import continuum_material, q4_stiffness
+from .patch import check_patch_size, with_contact_patch
 from .rigid import rigid_modes
 from .truss import truss_model
 
@@ -134,7 +135,8 @@ def plug3d(levels: int = 2, ring: int = 5, taper_deg: float = 10.0) -> Model:
 
 
 def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10.0,
-            E: float = 1.0, nu: float = 0.3, thickness: float = 1.0) -> Model:
+            E: float = 1.0, nu: float = 0.3, thickness: float = 1.0, contact_patch: float = 0.0,
+            contact_patch_kind: str = "rigid") -> Model:
     """Plane-stress Q4 plug: trapezoid of height 1, width 1 at the bottom, sides at τ from vertical.
 
     Coarse grid rows x cols elements, each split refine x refine (uniform bilinear subdivision,
@@ -143,6 +145,9 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     x = (2I/C - 1)(0.5 + y tan τ); element (J, I) = J*C + I with corners counter-clockwise.
     Contact nodes: coarse side nodes, left side bottom to top (J = j*refine, I = 0), then right
     side (I = C); m = 2(rows+1); normals as plug2d. Free body (3 rigid modes).
+    contact_patch = a > 0: a rigid foot of half-width a under every contact node (the boundary
+    nodes within a of it move with it rigidly: models/patch.py); 0 = point contacts.
+    contact_patch_kind = "hat": the contact DOFs are hat-weighted means over the patches instead.
     """
     rows, cols, refine = _int(rows, "rows", 1), _int(cols, "cols", 1), _int(refine, "refine", 1)
     tau = math.radians(_real(taper_deg, "taper_deg", 0.0, 90.0))
@@ -163,10 +168,12 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     contact = np.concatenate([left, left + C])
     side = np.repeat([-1.0, 1.0], rows + 1)
     nrm, tan = contact_frames(_wall_normals_2d(side, tau), 2, len(contact))
+    a = check_patch_size(contact_patch)
     K = q4_stiffness(X, quads, E, nu, thickness)
-    return Model(dim=2, coords=X, K=K, fixed_dofs=np.zeros(0, dtype=np.int64), contact_nodes=contact,
-                 normals=nrm, tangents=tan, rigid_modes=rigid_modes(X, 2), cells={"quad": quads},
-                 material=continuum_material(len(quads), E, nu, thickness, "model"))
+    mdl = Model(dim=2, coords=X, K=K, fixed_dofs=np.zeros(0, dtype=np.int64), contact_nodes=contact,
+                normals=nrm, tangents=tan, rigid_modes=rigid_modes(X, 2), cells={"quad": quads},
+                material=continuum_material(len(quads), E, nu, thickness, "model"))
+    return with_contact_patch(mdl, a, contact_patch_kind)
 
 
 #: built-in generators by scene `model.kind`, and their dimension

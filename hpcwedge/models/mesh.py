@@ -25,6 +25,7 @@ from ..model import (Model, as_index_array, check_contact_free, check_contact_no
 from .continuum import continuum_material, continuum_stiffness
 from .elements import CELL_TYPES
 from .obstacle import Cone, Plane, obstacle_frames, orient_into_body
+from .patch import check_patch_size, with_contact_patch
 from .rigid import rigid_modes
 
 #: default obstacle tolerance: contact nodes within DEFAULT_TOLERANCE x the median element
@@ -181,7 +182,8 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
                normals=None, tangents=None,
                obstacles: list[Plane | Cone] | None = None, obstacle_key: str = "obstacle",
                tolerance: float = DEFAULT_TOLERANCE,
-               supports=None, support_group: str | list[str] | None = None, support_dofs=None) -> Model:
+               supports=None, support_group: str | list[str] | None = None, support_dofs=None,
+               contact_patch=0.0, contact_patch_kind: str = "rigid") -> Model:
     """The Model of a meshed body (SPEC §3, kind = "mesh").
 
     Contact nodes: `contact_nodes` (m,) file ids, or `contact_group` (name or names).
@@ -192,8 +194,12 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
     Supports (optional, else a free body): `supports` [[node, dof], ...] and/or every DOF in
     `support_dofs` (default all) of the nodes of `support_group`.
     Material: E, nu, thickness (2D plane stress; ignored in 3D), errors named model.E, ...
+    contact_patch = a > 0: a rigid foot of half-width a under every contact node (the boundary
+    nodes within a of it move with it rigidly: models/patch.py); 0 = point contacts;
+    contact_patch_kind = "hat": hat-weighted means over the patches instead.
     Every error is ValueError("<key>: <reason>") naming the scene key, with file node ids.
     """
+    a = check_patch_size(contact_patch)
     X, dim, n = mesh.points, mesh.points.shape[1], mesh.points.shape[0]
     used = np.zeros(n, dtype=bool)
     for conn in mesh.cells.values():
@@ -243,5 +249,6 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
     t = thickness if dim == 2 else 1.0
     K = continuum_stiffness(Xb, cells, E, nu, t, key="model.file", material_key="model")
     material = continuum_material(sum(len(q) for q in cells.values()), E, nu, t, "model")
-    return Model(dim=dim, coords=Xb, K=K, fixed_dofs=fixed_b, contact_nodes=new[c], normals=nrm,
-                 tangents=tan, rigid_modes=rigid_modes(Xb, dim, fixed_b), cells=cells, material=material)
+    mdl = Model(dim=dim, coords=Xb, K=K, fixed_dofs=fixed_b, contact_nodes=new[c], normals=nrm,
+                tangents=tan, rigid_modes=rigid_modes(Xb, dim, fixed_b), cells=cells, material=material)
+    return with_contact_patch(mdl, a, contact_patch_kind)
