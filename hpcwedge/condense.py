@@ -2,7 +2,8 @@
 
 The only module that imports petsc4py. `condense` is serial (PETSc.COMM_SELF);
 `condense_distributed` is the same condensation collective over an MPI communicator
-(K_ii an MPIAIJ matrix, rows split between the ranks, factored by parallel MUMPS).
+(K_ii an MPIAIJ matrix, rows split between the ranks, each rank assembling only its own rows
+of a continuum model, factored by parallel MUMPS).
 
     K_local = T (K_cc - K_ci K_ii^-1 K_ic) T^T      (dim*m, dim*m), block ordering (SPEC §1)
     N_local = orth(T R_c)                           (dim*m, k), R_c = rigid modes on contact DOFs
@@ -86,6 +87,39 @@ def _blocks(model: Model, sp_: DofSplit, lo: int = 0, hi: int | None = None):
     return Kcc, Ki[:, sp_.contact].tocsr(), Ki[:, sp_.interior].tocsr()
 
 
+def _distributed_blocks(model: Model, sp_: DofSplit, lo: int, hi: int):
+    """`_blocks(model, sp_, lo, hi)` for one rank of condense_distributed, plus a flag: whether
+    K_ii still needs symmetrising (0.5 (K_ii + K_ii^T), done on the assembled parallel matrix).
+
+    A model with element data (model.assembly) never assembles the whole K here: the contact
+    rows and this rank's interior rows come from the elements incident to their nodes
+    (assembly.rows: bit for bit the rows of the whole K, so K_ii is exactly symmetric across
+    the ranks). With contact patches (Q = model.tie.T), rows D of Q^T K Q are
+    Q[R, D]^T K[R] Q, R the full DOFs of Q's columns D (the DOFs themselves, their patches'
+    slaves, or a hat's master): only K[R] is assembled. Those rows are symmetric up to
+    rounding only, so K_cc and K_ic are symmetrised here from the contact rows (every rank
+    has them) and K_ii by the caller. Models without element data (trusses, hand-made K):
+    `_blocks`, from the whole K.
+    """
+    if model.assembly is None:
+        return (*_blocks(model, sp_, lo, hi), False)
+    c, mine = sp_.contact, sp_.interior[lo:hi]
+    p = c.size
+    D = np.concatenate([c, mine])
+    if model.tie is None:
+        B = model.assembly.rows(D)
+        Bi = B[p:]
+        return B[:p][:, c].toarray(), Bi[:, c].tocsr(), Bi[:, sp_.interior].tocsr(), False
+    Q = model.tie.T
+    QD = Q.T.tocsr()[D]                                     # (|D|, n_dofs): columns D of Q
+    R = np.unique(QD.indices)
+    B = ((QD[:, R] @ model.assembly.rows(R)) @ Q).tocsr()    # rows D of Q^T K Q
+    Bc, Bi = B[:p], B[p:]
+    Kcc = Bc[:, c].toarray()
+    Kic = (0.5 * (Bi[:, c] + Bc[:, mine].T)).tocsr()
+    return 0.5 * (Kcc + Kcc.T), Kic, Bi[:, sp_.interior].tocsr(), True
+
+
 def to_local(model: Model, sp_: DofSplit, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotate the condensed (global, node-major) S into K_local, symmetrise, and build N_local."""
     T = sp_.T
@@ -162,8 +196,12 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
 
     Every rank of `comm` calls it with the same `model`. Rank r assembles the rows
     [r n_i / P, (r+1) n_i / P) of K_ii (and of K_ic) into a parallel PETSc MPIAIJ matrix on
-    `comm`; K_ii is factored once by parallel MUMPS ("petsc" native LU is serial only:
-    ValueError with more than one rank); each rank multiplies its rows of X = K_ii^-1 K_ic by
+    `comm`: with a comm, a model with element data (model.assembly: continuum meshes, with or
+    without contact patches) assembles only these rows and the contact rows, from the elements
+    incident to their nodes, never the whole K (`_distributed_blocks`); other models (trusses,
+    hand-made K) and comm None slice them from the whole model.K (comm None: exactly as
+    before, bit for bit). K_ii is factored once by parallel MUMPS ("petsc" native LU is serial
+    only: ValueError with more than one rank); each rank multiplies its rows of X = K_ii^-1 K_ic by
     its rows of K_ic, and the (dim*m)^2 partial sums are allreduced. Every rank returns the
     same (K_local, N_local), equal to `condense`'s up to rounding. Errors (singular K_ii, rigid
     modes) are raised on every rank alike.
@@ -173,10 +211,14 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
     size, rank = (1, 0) if comm is None else (comm.size, comm.rank)
     if size > 1 and solver == "petsc":
         raise ValueError("condense: the native PETSc LU is serial; use MUMPS with more than one rank")
-    Kcc, Kic, Kii = _blocks(model, sp_, n * rank // size, n * (rank + 1) // size)
+    lo, hi = n * rank // size, n * (rank + 1) // size
+    if comm is None:
+        (Kcc, Kic, Kii), symmetrise = _blocks(model, sp_, lo, hi), False
+    else:
+        Kcc, Kic, Kii, symmetrise = _distributed_blocks(model, sp_, lo, hi)
     if n == 0:
         return to_local(model, sp_, Kcc)
-    return to_local(model, sp_, Kcc - _kci_kii_inv_kic(Kic, Kii, model, solver, comm))
+    return to_local(model, sp_, Kcc - _kci_kii_inv_kic(Kic, Kii, model, solver, comm, symmetrise))
 
 
 #: contact columns per MatMatSolve (bounds the two dense n_i x COLUMN_BLOCK work arrays)
@@ -186,12 +228,13 @@ _ZERO_PIVOT_ERRORS = {71, 73, 81}   # MAT_LU_ZRPVT, ARG_WRONGSTATE (missing diag
 
 
 def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solver: str | None,
-                     comm=None) -> np.ndarray:
+                     comm=None, symmetrise: bool = False) -> np.ndarray:
     """K_ci K_ii^-1 K_ic (p, p), global node-major contact DOFs, on every rank of `comm`.
-    Kic (n_loc, p), Kii (n_loc, n_i): this rank's rows (all rows serially)."""
+    Kic (n_loc, p), Kii (n_loc, n_i): this rank's rows (all rows serially); symmetrise: factor
+    0.5 (K_ii + K_ii^T) (see `_factored`)."""
     p = Kic.shape[1]
     probe = Kic[:, 0].toarray().ravel()
-    with _factored(Kii, model, solver, probe=probe, comm=comm) as solve:
+    with _factored(Kii, model, solver, probe=probe, comm=comm, symmetrise=symmetrise) as solve:
         P = np.zeros((p, p))
         KicT = Kic.T.tocsr()
         for lo in range(0, p, COLUMN_BLOCK):
@@ -225,12 +268,15 @@ def interior_response(model: Model, uc: np.ndarray, solver: str | None = None) -
 
 
 @contextmanager
-def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.ndarray, comm=None):
+def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.ndarray, comm=None,
+              symmetrise: bool = False):
     """Factor K_ii once with PETSc (MUMPS or native LU, see `condense`) and yield
     solve(B (n_loc, q) dense) -> the same rows of K_ii^-1 B. Collective over the mpi4py
     communicator `comm` (None: PETSc.COMM_SELF): Kii (n_loc, n) is this rank's block of
     consecutive rows (all n rows serially; ranks in order), B and the result likewise.
     `probe` (n_loc,): a right-hand side solved once to detect a failed factorisation.
+    symmetrise: factor 0.5 (K_ii + K_ii^T) (PETSc transpose and add: exactly symmetric, for
+    rows that are symmetric up to rounding only, e.g. `_distributed_blocks` with patches).
     Every PETSc object is destroyed on exit."""
     if solver not in (None, "mumps", "petsc"):
         raise ValueError(f"condense: unknown solver {solver!r} (mumps, petsc)")
@@ -242,6 +288,12 @@ def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.nd
     A = PETSc.Mat().createAIJ(size=((nloc, n), (nloc, n)), csr=(Kii.indptr.astype(PETSc.IntType),
                                                 Kii.indices.astype(PETSc.IntType), Kii.data), comm=comm)
     A.assemble()
+    if symmetrise:
+        At = PETSc.Mat()
+        A.transpose(At)                      # into a new matrix (A.transpose() is in place)
+        A.axpy(1.0, At, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+        At.destroy()
+        A.scale(0.5)
     ksp = PETSc.KSP().create(comm=comm)
     objs = [A, ksp]
     try:

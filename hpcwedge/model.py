@@ -1,7 +1,9 @@
 """The Model record: a discretised body before condensation (one per model family)."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -23,6 +25,41 @@ class Tie:
     n_rotations: int
 
 
+class StiffnessRows(Protocol):
+    """The element data of a body that can assemble its stiffness whole or by rows.
+
+    full():      the whole K (n_dofs, n_dofs) CSR, exactly symmetric, node-major DOFs.
+    rows(dofs):  K[dofs] (len(dofs), n_dofs) CSR for global DOFs `dofs` (sorted, unique),
+                 assembled from the elements incident to their nodes only, equal entry by
+                 entry to the same rows of full().
+    full_assemblies, row_assemblies: how many times each was called (for tests and benchmarks).
+    """
+
+    full_assemblies: int
+    row_assemblies: int
+
+    def full(self) -> sp.csr_matrix: ...
+
+    def rows(self, dofs: np.ndarray) -> sp.csr_matrix: ...
+
+
+class _LazyK:
+    """Model.K as a data descriptor: the stored matrix; a stored None with `model.assembly`
+    set is replaced, on first access, by assembly.full() (cached on the instance)."""
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            raise AttributeError("K")           # no class-level default: K stays a required field
+        K = obj.__dict__["_K"]
+        if K is None and obj.assembly is not None:
+            K = obj.assembly.full()
+            obj.__dict__["_K"] = K
+        return K
+
+    def __set__(self, obj, value) -> None:
+        obj.__dict__["_K"] = value
+
+
 @dataclass(frozen=True)
 class Model:
     """A linear-elastic body touching a rigid obstacle at m contact nodes.
@@ -30,7 +67,9 @@ class Model:
     dim:           2 or 3.
     coords:        (n_nodes, dim) node coordinates.
     K:             (n_nodes*dim, n_nodes*dim) sparse symmetric stiffness, node-major
-                   DOFs (dof = dim*node + component), supports *not* applied.
+                   DOFs (dof = dim*node + component), supports *not* applied. May be given as
+                   None together with `assembly`: then assembled (assembly.full()) on first
+                   access and kept.
     fixed_dofs:    global DOFs held at zero by supports (sorted, unique).
     contact_nodes: (m,) node ids, in contact-list order.
     normals:       (m, dim) unit normals of the obstacle pointing into the body.
@@ -45,11 +84,15 @@ class Model:
                    (Springs added to K by hand, e.g. vgroove_bar's eps, are not elements.)
     tie:           None, or the master-slave map of contact patches (Tie): condensation then
                    works on T^T K T (condense.py), the whole body's displacement is T u_red.
+    assembly:      None, or the element data (StiffnessRows) K comes from: continuum models
+                   keep it so that condense_distributed can assemble each rank's rows alone
+                   (models/continuum.py ContinuumAssembly) instead of the whole K.
+    Use model.replace(...) rather than dataclasses.replace: it keeps K unassembled.
     """
 
     dim: int
     coords: np.ndarray
-    K: sp.csr_matrix
+    K: sp.csr_matrix | None = _LazyK()
     fixed_dofs: np.ndarray
     contact_nodes: np.ndarray
     normals: np.ndarray
@@ -58,6 +101,12 @@ class Model:
     cells: dict = field(default_factory=dict)
     material: dict = field(default_factory=dict)
     tie: Tie | None = None
+    assembly: StiffnessRows | None = None
+
+    def replace(self, **changes) -> Model:
+        """dataclasses.replace(self, **changes), without assembling a K not yet assembled."""
+        changes.setdefault("K", self.__dict__["_K"])
+        return dataclasses.replace(self, **changes)
 
     @property
     def m(self) -> int:

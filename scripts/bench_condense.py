@@ -4,12 +4,15 @@
 block2d(rows=5, cols=2, refine=f): m = 12 contact nodes; the body has
 2 (5f+1)(2f+1) DOFs (f = 224: 1.0e6; --quick f = 71: 1.0e5). For each rank
 count the script starts itself under mpirun (`--worker`): every rank builds the
-model (the whole K: rows of K_ii are taken from it), then `condense_distributed`
-runs collectively over MPI.COMM_WORLD (K_ii rows split between the ranks, an
-MPIAIJ matrix, parallel MUMPS, LDL^T). Per rank: the model build time, the
-condensation time (after a barrier, up to the allreduced result) and the peak
-resident memory (getrusage ru_maxrss, after the build and at the end), gathered
-to rank 0. Checks that the K_local of every rank count agree (relative
+model (mesh and element data; K is not assembled), then `condense_distributed`
+runs collectively over MPI.COMM_WORLD: each rank assembles its share of the K_ii
+rows (and the contact rows) from the elements incident to their nodes, into an
+MPIAIJ matrix factored by parallel MUMPS (LDL^T). Per rank: the model build time,
+the condensation time (after a barrier, up to the allreduced result; includes the
+rank's assembly), the peak resident memory (getrusage ru_maxrss, after the build
+and at the end) and how the stiffness was assembled (full_assemblies: times the
+whole K was built, 0 expected; row_elements: elements assembled for the rank's
+rows), gathered to rank 0. Checks that the K_local of every rank count agree (relative
 max-difference), and writes results/bench_condense{,_quick}.{json,csv}.
 
     .venv/bin/python scripts/bench_condense.py [--quick] [--refine F] [--ranks 1 2]
@@ -57,8 +60,11 @@ def worker(refine: int, out: str) -> None:
     K, _ = condense_distributed(model, comm)
     condense_s = time.perf_counter() - t
     rss_end = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    asm = model.assembly
     rows = comm.gather({"rank": comm.rank, "build_s": build_s, "condense_s": condense_s,
-                        "maxrss_after_build_mb": rss_build, "maxrss_mb": rss_end}, root=0)
+                        "maxrss_after_build_mb": rss_build, "maxrss_mb": rss_end,
+                        "full_assemblies": asm.full_assemblies, "row_elements": asm.row_elements,
+                        "n_elements": len(model.cells["quad"])}, root=0)
     if comm.rank == 0:
         np.save(out, K)
         with open(out + ".json", "w") as f:
@@ -107,7 +113,10 @@ def main() -> None:
                    "per_rank": pr}
             rows.append(row)
             print(f"{ranks} rank(s), {d['n_dofs']} DOFs: condense {row['condense_s']:.2f} s, build "
-                  f"{row['build_s']:.2f} s, peak RSS per rank {[round(x) for x in row['maxrss_mb_per_rank']]} MB")
+                  f"{row['build_s']:.2f} s, peak RSS per rank {[round(x) for x in row['maxrss_mb_per_rank']]} MB"
+                  f" (after build {[round(x) for x in row['maxrss_after_build_mb_per_rank']]}), elements "
+                  f"assembled per rank {[r['row_elements'] for r in pr]} of {pr[0]['n_elements']}, whole K "
+                  f"assembled {[r['full_assemblies'] for r in pr]} times")
     K1 = Ks[a.ranks[0]]
     for row in rows:
         row["rel_diff_vs_first"] = float(np.abs(Ks[row["ranks"]] - K1).max() / np.abs(K1).max())

@@ -9,10 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from hpcwedge import models
 from hpcwedge.condense import condense, condense_distributed, schur_dense, split_dofs
 from hpcwedge.models import block2d, plug2d, plug3d, truss_model, vgroove_bar
 
+from model_cases import make_model
 from mpi_helpers import MPIRUN, ROOT, env, needs_mpirun
 
 
@@ -160,7 +160,38 @@ def test_wrong_rigid_modes_detected():
 
 
 DISTRIBUTED = {"block2d-r2c2f4": ("block2d", {"rows": 2, "cols": 2, "refine": 4}),
-               "plug3d-l3r4": ("plug3d", {"levels": 3, "ring": 4, "taper_deg": 5.0})}
+               "plug3d-l3r4": ("plug3d", {"levels": 3, "ring": 4, "taper_deg": 5.0}),
+               "hexblock": ("hexblock", {})}
+#: contact patches: rows of T^T K T from the incident elements (compared on 2 and 3 ranks)
+DISTRIBUTED_PATCHED = {"block2d-foot": ("block2d", {"rows": 3, "refine": 4, "contact_patch": 0.15}),
+                       "block2d-hat": ("block2d", {"rows": 3, "refine": 4, "contact_patch": 0.15,
+                                                   "contact_patch_kind": "hat"}),
+                       "hexblock-foot": ("hexblock", {"contact_patch": 1.05}),
+                       "hexblock-hat": ("hexblock", {"contact_patch": 1.05, "contact_patch_kind": "hat"})}
+
+
+def _condense_under_mpirun(tmp_path, kind, kw, ranks):
+    """condense_driver.py under the real mpirun -n ranks: its npz (K, N, per-rank assembly counts)."""
+    out = tmp_path / "k.npz"
+    cmd = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), "-x", "PYTHONPATH",
+           sys.executable, os.path.join(ROOT, "tests", "condense_driver.py"), str(out), kind, json.dumps(kw)]
+    p = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = np.load(out)
+    assert int(got["ranks"]) == ranks and float(got["spread"]) == 0.0
+    return got
+
+
+def _assert_rows_only(got, model, ranks):
+    """No rank assembled the whole K; with several ranks each assembled a share of the elements."""
+    if model.assembly is None:                     # trusses: rows sliced from the whole K
+        assert list(got["full"]) == [-1] * ranks
+        return
+    assert list(got["full"]) == [0] * ranks
+    share = got["row_elements"]
+    assert np.all(share > 0)
+    if ranks > 1:
+        assert share.max() < int(got["n_elements"])
 
 
 @pytest.mark.mpi
@@ -169,18 +200,32 @@ DISTRIBUTED = {"block2d-r2c2f4": ("block2d", {"rows": 2, "cols": 2, "refine": 4}
 @pytest.mark.parametrize("name", sorted(DISTRIBUTED))
 def test_distributed_matches_dense_under_mpirun(tmp_path, name, ranks):
     # condense_distributed collective over the real mpirun's world (K_ii rows split between the
-    # ranks, parallel MUMPS): every rank gets the same K_local, equal to a dense Schur complement
+    # ranks, each assembled from its own elements, parallel MUMPS): every rank gets the same
+    # K_local, equal to a dense Schur complement
     kind, kw = DISTRIBUTED[name]
-    out = tmp_path / "k.npz"
-    cmd = [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), "-x", "PYTHONPATH",
-           sys.executable, os.path.join(ROOT, "tests", "condense_driver.py"), str(out), kind, json.dumps(kw)]
-    p = subprocess.run(cmd, env=env(), capture_output=True, text=True, timeout=120)
-    assert p.returncode == 0, p.stderr
-    got = np.load(out)
-    assert int(got["ranks"]) == ranks and float(got["spread"]) == 0.0
-    Kd, Nd = schur_dense(getattr(models, kind)(**kw))
+    got = _condense_under_mpirun(tmp_path, kind, kw, ranks)
+    model = make_model(kind, kw)
+    Kd, Nd = schur_dense(model)
     assert np.abs(got["K"] - Kd).max() <= 1e-10 * np.abs(Kd).max()
     np.testing.assert_allclose(got["N"] @ got["N"].T, Nd @ Nd.T, atol=1e-12)
+    _assert_rows_only(got, model, ranks)
+
+
+@pytest.mark.mpi
+@needs_mpirun
+@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("name", sorted(DISTRIBUTED_PATCHED))
+def test_distributed_patched_matches_serial_under_mpirun(tmp_path, name, ranks):
+    kind, kw = DISTRIBUTED_PATCHED[name]
+    got = _condense_under_mpirun(tmp_path, kind, kw, ranks)
+    model = make_model(kind, kw)
+    assert model.tie is not None
+    K, N = condense(model)
+    assert np.abs(got["K"] - K).max() <= 1e-10 * np.abs(K).max()
+    np.testing.assert_allclose(got["N"] @ got["N"].T, N @ N.T, atol=1e-12)
+    Kd, _ = schur_dense(model)
+    assert np.abs(got["K"] - Kd).max() <= 1e-10 * np.abs(Kd).max()
+    _assert_rows_only(got, model, ranks)
 
 
 def test_distributed_without_comm_is_condense():

@@ -14,6 +14,8 @@ from hpcwedge.models.rigid import rigid_motions
 from hpcwedge.pipeline import run_scene
 from hpcwedge.scene import SceneError, parse_scene
 
+from model_cases import hex_block as _hex_block
+
 
 def _patches_brute(X, boundary, contact, a):
     """Slave nodes per contact node by brute-force distances (no KD-tree, no face tables)."""
@@ -114,18 +116,6 @@ def test_tie_maps_rigid_motions_to_rigid_motions():
     R = rigid_motions(mdl.coords, 2)
     z = np.linalg.lstsq(Q, R, rcond=None)[0]
     assert np.abs(Q @ z - R).max() < 1e-12
-
-
-def _hex_block(nx, ny, nz):
-    """Unit-spaced hexahedral block, nodes (i, j, k) -> i + (nx+1)(j + (ny+1) k)."""
-    g = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij"), -1)
-    X = g.transpose(2, 1, 0, 3).reshape(-1, 3).astype(float)
-    X[:, 0] *= 1.0 + 0.1 * X[:, 2]                       # a slight taper: not a plain grid
-    nid = lambda i, j, k: i + (nx + 1) * (j + (ny + 1) * k)  # noqa: E731
-    H = [[nid(i, j, k), nid(i + 1, j, k), nid(i + 1, j + 1, k), nid(i, j + 1, k),
-          nid(i, j, k + 1), nid(i + 1, j, k + 1), nid(i + 1, j + 1, k + 1), nid(i, j + 1, k + 1)]
-         for k in range(nz) for j in range(ny) for i in range(nx)]
-    return X, np.array(H), nid
 
 
 def test_3d_hexahedral_patch_matches_dense_route():

@@ -24,26 +24,40 @@ def _node_pattern(conn: np.ndarray, n_nodes: int):
 
 
 def assemble_blocks(conn: np.ndarray, n_nodes: int, dim: int, element_matrices,
-                    chunk: int | None = None) -> sp.csr_matrix:
+                    chunk: int | None = None, elements: np.ndarray | None = None) -> sp.csr_matrix:
     """Assemble (n_nodes*dim)^2 CSR from element matrices without a global COO array.
 
-    conn: (ne, nen) node ids; element_matrices(lo, hi) -> (hi-lo, nen*dim, nen*dim) exactly
-    symmetric matrices with node-major local DOFs. The node-level pattern is built once; each
-    chunk's blocks are added into it with bincount, in element order, so the result is exactly
-    symmetric. Memory ~ nnz of K plus one chunk of temporaries (chunk elements; default
-    CHUNK_ENTRIES / (nen*dim)^2).
+    conn: (ne, nen) node ids; element_matrices(sel) -> (k, nen*dim, nen*dim) exactly
+    symmetric matrices with node-major local DOFs of the elements `sel` (a slice(lo, hi), or
+    an ascending index array when `elements` is given). The node-level pattern is built once;
+    each chunk's blocks are added into it with bincount, in element order, so the result is
+    exactly symmetric. Memory ~ nnz of K plus one chunk of temporaries (chunk elements;
+    default CHUNK_ENTRIES / (nen*dim)^2).
+    elements: None (all), or ascending ids of the only elements to assemble. Chunks are the
+    same ranges of element ids either way, so an entry (i, j) that gets every element holding
+    both i and j is bit for bit the entry of the whole assembly (a chunk without such an
+    element adds exactly 0): the rows of the nodes whose incident elements are all selected
+    are exactly those of the whole K.
     """
     ne, nen = conn.shape
     if chunk is None:
         chunk = max(1, CHUNK_ENTRIES // (nen * dim) ** 2)
-    indptr, indices, keys = _node_pattern(conn, n_nodes)
+    sel_all = None if elements is None else np.asarray(elements, dtype=np.int64)
+    indptr, indices, keys = _node_pattern(conn if sel_all is None else conn[sel_all], n_nodes)
     nnzb = keys.size
     data = np.zeros((dim, dim, nnzb))
     for lo in range(0, ne, chunk):
         hi = min(ne, lo + chunk)
-        c = conn[lo:hi].astype(np.int64)
+        if sel_all is None:
+            sel = slice(lo, hi)
+        else:
+            sel = sel_all[np.searchsorted(sel_all, lo):np.searchsorted(sel_all, hi)]
+            if sel.size == 0:
+                continue
+        c = conn[sel].astype(np.int64)
+        k = len(c)
         pos = np.searchsorted(keys, (c[:, :, None] * n_nodes + c[:, None, :]).ravel())
-        ke = element_matrices(lo, hi).reshape(hi - lo, nen, dim, nen, dim)
+        ke = element_matrices(sel).reshape(k, nen, dim, nen, dim)
         for p in range(dim):
             for q in range(dim):
                 data[p, q] += np.bincount(pos, weights=ke[:, :, p, :, q].ravel(), minlength=nnzb)

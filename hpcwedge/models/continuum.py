@@ -7,8 +7,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..model import as_float_array
-from .assembly import assemble_blocks
-from .elements import CELL_TYPES, REFERENCE, centroid_stress, element_stiffness, von_mises
+from .assembly import CHUNK_ENTRIES, assemble_blocks
+from .elements import CELL_TYPES, REFERENCE, centroid_stress, check_jacobians, element_stiffness, von_mises
 
 
 def _per_element(v, ne: int, key: str) -> np.ndarray:
@@ -75,6 +75,91 @@ def continuum_von_mises(coords: np.ndarray, cells: Mapping[str, np.ndarray], u: 
     return out
 
 
+class ContinuumAssembly:
+    """The elements of a continuum body, assembling its stiffness whole or by rows
+    (model.StiffnessRows; continuum_stiffness is `full()`).
+
+    Arguments as continuum_stiffness, validated here alike (ValueError naming `key` /
+    `material_key`); check: also check every element's Jacobian now (chunked, the
+    error of element_stiffness), so that a later rows() on a subset cannot be the first to
+    meet a bad element. Holds coords, conns {cell type: (ne, nen) int64}, material
+    (continuum_material), and counters full_assemblies, row_assemblies, elements_assembled
+    (elements in the last rows() call) and row_elements (summed over rows() calls).
+    """
+
+    def __init__(self, coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1.0, nu=0.3,
+                 thickness=1.0, key: str = "model.cells", material_key: str = "material",
+                 check: bool = True):
+        X = as_float_array(coords, "model.nodes", ndim=2)
+        n, dim = X.shape
+        if dim not in CELL_TYPES:
+            raise ValueError(f"model.nodes: expected (n_nodes, 2) or (n_nodes, 3) coordinates, got {X.shape}")
+        for cell in cells:
+            if cell not in CELL_TYPES[dim]:
+                raise ValueError(f"{key}: unsupported cell type {cell!r} for a {dim}D body "
+                                 f"(supported: {', '.join(CELL_TYPES[dim])})")
+        self.coords, self.dim, self.key = X, dim, key
+        self.conns = {c: _connectivity(q, c, REFERENCE[c].nen, n, key) for c, q in cells.items()}
+        self.material = continuum_material(sum(len(q) for q in self.conns.values()), E, nu, thickness,
+                                           material_key)
+        self.full_assemblies = self.row_assemblies = self.elements_assembled = self.row_elements = 0
+        if check:
+            for cell, Q in self.conns.items():
+                step = max(1, CHUNK_ENTRIES // (REFERENCE[cell].nen * dim) ** 2)
+                for lo in range(0, len(Q), step):
+                    check_jacobians(cell, X[Q[lo:lo + step]], lo, key)
+
+    @property
+    def n_dofs(self) -> int:
+        return self.coords.shape[0] * self.dim
+
+    def _assemble(self, nodes: np.ndarray | None = None) -> sp.csr_matrix:
+        """The whole K (nodes None), or the sum of the elements incident to `nodes` only."""
+        X, dim, key = self.coords, self.dim, self.key
+        n = X.shape[0]
+        Ev, nuv, tv = self.material["E"], self.material["nu"], self.material["thickness"]
+        mark = None
+        if nodes is not None:
+            mark = np.zeros(n, dtype=bool)
+            mark[nodes] = True
+        K = sp.csr_matrix((n * dim, n * dim))
+        offset, count = 0, 0
+        for cell, Q in self.conns.items():
+            o = offset
+
+            def element_matrices(sel, cell=cell, Q=Q, o=o) -> np.ndarray:
+                first = sel.start if isinstance(sel, slice) else 0
+                idx = np.arange(sel.start, sel.stop) if isinstance(sel, slice) else sel
+                return element_stiffness(cell, X[Q[sel]], Ev[o + idx], nuv[o + idx], tv[o + idx],
+                                         first=first, key=key)
+
+            elements = None if mark is None else np.flatnonzero(mark[Q].any(axis=1))
+            if len(Q) and (elements is None or elements.size):
+                Kc = assemble_blocks(Q, n, dim, element_matrices, elements=elements)
+                K = Kc if K.nnz == 0 else (K + Kc).tocsr()
+            count += len(Q) if elements is None else elements.size
+            offset += len(Q)
+        K.sort_indices()
+        self.elements_assembled = count
+        return K
+
+    def full(self) -> sp.csr_matrix:
+        """The whole stiffness (n_nodes*dim, n_nodes*dim) CSR (continuum_stiffness)."""
+        self.full_assemblies += 1
+        return self._assemble()
+
+    def rows(self, dofs: np.ndarray) -> sp.csr_matrix:
+        """K[dofs] (len(dofs), n_dofs) CSR, dofs global DOF ids (any order), assembled from the
+        elements incident to their nodes only: bit for bit the rows of full() (assemble_blocks)."""
+        dofs = np.asarray(dofs, dtype=np.int64)
+        self.row_assemblies += 1
+        K = self._assemble(np.unique(dofs // self.dim))
+        self.row_elements += self.elements_assembled
+        out = K[dofs]
+        out.sort_indices()
+        return out
+
+
 def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1.0, nu=0.3,
                         thickness=1.0, key: str = "model.cells",
                         material_key: str = "material") -> sp.csr_matrix:
@@ -89,33 +174,7 @@ def continuum_stiffness(coords: np.ndarray, cells: Mapping[str, np.ndarray], E=1
     a non-positive Jacobian (naming the cell type and its element index within the block);
     material errors name <material_key>.E / .nu / .thickness.
     """
-    X = as_float_array(coords, "model.nodes", ndim=2)
-    n, dim = X.shape
-    if dim not in CELL_TYPES:
-        raise ValueError(f"model.nodes: expected (n_nodes, 2) or (n_nodes, 3) coordinates, got {X.shape}")
-    for cell in cells:
-        if cell not in CELL_TYPES[dim]:
-            raise ValueError(f"{key}: unsupported cell type {cell!r} for a {dim}D body "
-                             f"(supported: {', '.join(CELL_TYPES[dim])})")
-    conns = {c: _connectivity(q, c, REFERENCE[c].nen, n, key) for c, q in cells.items()}
-    total = sum(len(q) for q in conns.values())
-    mat = continuum_material(total, E, nu, thickness, material_key)
-    Ev, nuv, tv = mat["E"], mat["nu"], mat["thickness"]
-    K = sp.csr_matrix((n * dim, n * dim))
-    offset = 0
-    for cell, Q in conns.items():
-        o = offset
-
-        def element_matrices(lo: int, hi: int, cell=cell, Q=Q, o=o) -> np.ndarray:
-            return element_stiffness(cell, X[Q[lo:hi]], Ev[o + lo:o + hi], nuv[o + lo:o + hi],
-                                     tv[o + lo:o + hi], first=lo, key=key)
-
-        if len(Q):
-            Kc = assemble_blocks(Q, n, dim, element_matrices)
-            K = Kc if K.nnz == 0 else (K + Kc).tocsr()
-        offset += len(Q)
-    K.sort_indices()
-    return K
+    return ContinuumAssembly(coords, cells, E, nu, thickness, key, material_key, check=False).full()
 
 
 def q4_stiffness(coords: np.ndarray, quads: np.ndarray, E=1.0, nu=0.3, t=1.0,

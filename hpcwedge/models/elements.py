@@ -139,6 +139,11 @@ def _checked_jacobian(ref: ReferenceCell, Xe: np.ndarray, first: int, key: str):
     return det, inv
 
 
+def check_jacobians(cell: str, Xe: np.ndarray, first: int = 0, key: str = "model.cells") -> None:
+    """The Jacobian check of element_stiffness alone (same ValueError), Xe (ne, nen, dim)."""
+    _checked_jacobian(REFERENCE[cell], Xe, first, key)
+
+
 def element_stiffness(cell: str, Xe: np.ndarray, E: np.ndarray, nu: np.ndarray,
                       t: np.ndarray | None = None, first: int = 0, key: str = "model.cells") -> np.ndarray:
     """Element stiffness matrices (ne, nen*dim, nen*dim), exactly symmetric.

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..model import Model, contact_frames
-from .continuum import continuum_material, q4_stiffness
+from .continuum import ContinuumAssembly, continuum_material
 from .patch import check_patch_size, with_contact_patch
 from .rigid import rigid_modes
 from .truss import truss_model
@@ -148,6 +148,7 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     contact_patch = a > 0: a rigid foot of half-width a under every contact node (the boundary
     nodes within a of it move with it rigidly: models/patch.py); 0 = point contacts.
     contact_patch_kind = "hat": the contact DOFs are hat-weighted means over the patches instead.
+    K is assembled on first access (model.assembly: condense_distributed assembles rows only).
     """
     rows, cols, refine = _int(rows, "rows", 1), _int(cols, "cols", 1), _int(refine, "refine", 1)
     tau = math.radians(_real(taper_deg, "taper_deg", 0.0, 90.0))
@@ -169,8 +170,8 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     side = np.repeat([-1.0, 1.0], rows + 1)
     nrm, tan = contact_frames(_wall_normals_2d(side, tau), 2, len(contact))
     a = check_patch_size(contact_patch)
-    K = q4_stiffness(X, quads, E, nu, thickness)
-    mdl = Model(dim=2, coords=X, K=K, fixed_dofs=np.zeros(0, dtype=np.int64), contact_nodes=contact,
+    asm = ContinuumAssembly(X, {"quad": quads}, E, nu, thickness, key="model.quads")
+    mdl = Model(dim=2, coords=X, K=None, assembly=asm, fixed_dofs=np.zeros(0, dtype=np.int64), contact_nodes=contact,
                 normals=nrm, tangents=tan, rigid_modes=rigid_modes(X, 2), cells={"quad": quads},
                 material=continuum_material(len(quads), E, nu, thickness, "model"))
     return with_contact_patch(mdl, a, contact_patch_kind)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..model import (Model, as_index_array, check_contact_free, check_contact_nodes, check_supports,
                      contact_frames)
-from .continuum import continuum_material, continuum_stiffness
+from .continuum import ContinuumAssembly
 from .elements import CELL_TYPES
 from .obstacle import Cone, Plane, obstacle_frames, orient_into_body
 from .patch import check_patch_size, with_contact_patch
@@ -198,6 +198,7 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
     nodes within a of it move with it rigidly: models/patch.py); 0 = point contacts;
     contact_patch_kind = "hat": hat-weighted means over the patches instead.
     Every error is ValueError("<key>: <reason>") naming the scene key, with file node ids.
+    K is assembled on first access (model.assembly: condense_distributed assembles rows only).
     """
     a = check_patch_size(contact_patch)
     X, dim, n = mesh.points, mesh.points.shape[1], mesh.points.shape[0]
@@ -247,8 +248,7 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
     cells = {t: new[conn] for t, conn in mesh.cells.items()}
     fixed_b = np.sort(dim * new[fixed // dim] + fixed % dim)
     t = thickness if dim == 2 else 1.0
-    K = continuum_stiffness(Xb, cells, E, nu, t, key="model.file", material_key="model")
-    material = continuum_material(sum(len(q) for q in cells.values()), E, nu, t, "model")
-    mdl = Model(dim=dim, coords=Xb, K=K, fixed_dofs=fixed_b, contact_nodes=new[c], normals=nrm,
-                tangents=tan, rigid_modes=rigid_modes(Xb, dim, fixed_b), cells=cells, material=material)
+    asm = ContinuumAssembly(Xb, cells, E, nu, t, key="model.file", material_key="model")
+    mdl = Model(dim=dim, coords=Xb, K=None, assembly=asm, fixed_dofs=fixed_b, contact_nodes=new[c], normals=nrm,
+                tangents=tan, rigid_modes=rigid_modes(Xb, dim, fixed_b), cells=cells, material=asm.material)
     return with_contact_patch(mdl, a, contact_patch_kind)

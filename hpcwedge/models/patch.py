@@ -31,7 +31,6 @@ not jump as nodes enter it under refinement (the rigid foot's does, by up to one
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import numbers
 
@@ -218,7 +217,7 @@ def with_contact_patch(model: Model, a, kind: str = "rigid") -> Model:
                              f"node {i} (contact position) is supported "
                              "(a patch node moves with its contact node): take a smaller a")
     if kind == "rigid":
-        return dataclasses.replace(model, tie=tie_map(model.coords, model.contact_nodes, slaves))
+        return model.replace(tie=tie_map(model.coords, model.contact_nodes, slaves))
     tie = hat_map(model.coords, model.contact_nodes, slaves, a)
     R = model.rigid_modes
     if R.shape[1]:
@@ -229,4 +228,4 @@ def with_contact_patch(model: Model, a, kind: str = "rigid") -> Model:
             for k in range(d):
                 R[d * ci + k] = w @ model.rigid_modes[d * nodes + k]
         R = orthonormalise(R, expect_rank=R.shape[1], what="contact patch rigid modes")
-    return dataclasses.replace(model, tie=tie, rigid_modes=R)
+    return model.replace(tie=tie, rigid_modes=R)
