@@ -33,6 +33,9 @@ Writes results/bench_2d.csv, results/bench_2d.png and results/bench_2d.json (per
 breakdown); prints a summary. Exit status 1 (and MISMATCH on stderr) if two engines that
 both finished disagree on the wedged-ray or cone counts, or on the zero sets.
 
+peer_cdd (also with cddlib's float arithmetic) and enumerate_ours take any 2D ContactProblem:
+scripts/bench_peers.py runs them on other scenes.
+
 The peer needs pycddlib (GPL, benchmark only):
     apt-get install -y libcdd-dev libgmp-dev
     .venv/bin/pip install "pycddlib<3"          # or: scripts/setup.sh bench
