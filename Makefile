@@ -27,12 +27,14 @@ bench: setup-bench
 	PYTHONPATH=. $(PY) scripts/bench_condense.py
 	PYTHONPATH=. $(PY) scripts/bench_growth.py
 	$(PY) scripts/stress.py
+	PYTHONPATH=. $(PY) scripts/bench_peers.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick
 	$(PY) scripts/bench_mu_c.py --quick
 	$(PY) scripts/stress.py --quick
 	PYTHONPATH=. $(PY) scripts/bench_growth.py --quick
+	PYTHONPATH=. $(PY) scripts/bench_peers.py --quick
 
 check: setup
 	../shared/acceptance/check_public

@@ -37,6 +37,9 @@ Writes results/bench_2d.csv, results/bench_2d.png and results/bench_2d.json (per
 breakdown); prints a summary. Exit status 1 (and MISMATCH on stderr) if two engines that
 both finished disagree on the wedged-ray or cone counts, or on the zero sets.
 
+peer_cdd (also with cddlib's float arithmetic) and enumerate_ours take any 2D ContactProblem:
+scripts/bench_peers.py runs them on other scenes.
+
 The peer needs pycddlib (GPL, benchmark only):
     apt-get install -y libcdd-dev libgmp-dev
     .venv/bin/pip install "pycddlib<3"          # or: scripts/setup.sh bench
@@ -95,9 +98,16 @@ def _cones_of(zero, wedged):
 
 
 def worker_ours(rows: int, mu: float, exact: bool) -> dict:
+    out = enumerate_ours(_problem(rows), mu, exact)
+    del out["ray_zero"]
+    return out
+
+
+def enumerate_ours(problem, mu: float, exact: bool) -> dict:
+    """Our enumerate stage on a 2D ContactProblem: parametrize + friction rows + complementary
+    DD + maximal cones, timed; counts, fingerprint and a per-stage breakdown."""
     from hpcwedge.dd import complementary_rays
     from hpcwedge.problem import friction_rows_2d, parametrize
-    problem = _problem(rows)
     m = problem.m
     t0 = time.perf_counter()
     param = parametrize(problem, exact=exact)
@@ -112,7 +122,8 @@ def worker_ours(rows: int, mu: float, exact: bool) -> dict:
             "n_trivial_rays": int((~wedged).sum()),
             "fingerprint": _fingerprint(dd.zero[wedged], [c.key() for c in cones]),
             "breakdown": {"parametrize": t1 - t0, "dd": t2 - t1, "cones": t3 - t2},
-            "dd_stats": {k: v for k, v in dd.stats.items()}, "d": int(A.shape[1])}
+            "dd_stats": {k: v for k, v in dd.stats.items()}, "d": int(A.shape[1]),
+            "ray_zero": dd.zero[wedged]}
 
 
 def worker_scene(rows: int, mu: float) -> dict:
@@ -170,19 +181,24 @@ def worker_mpirun(rows: int, mu: float, workers: int = 2) -> dict:
             "workers": workers, "mu_c": res["mu_c"]}
 
 
-def _cdd_generators(H):
-    """Generators (rows [t, x...], Fractions or ints) and lin_set of the H-representation
-    rows H ([b, a...]: b + a.x >= 0) in exact arithmetic, pycddlib 2.x or 3.x."""
+def _cdd_generators(H, number_type: str = "fraction"):
+    """Generators (rows [t, x...]) and lin_set of the H-representation rows H ([b, a...]:
+    b + a.x >= 0), pycddlib 2.x or 3.x: number_type "fraction" (exact, GMP rationals: Fractions
+    or ints) or "float" (cddlib's floating-point arithmetic)."""
     try:
         import cdd
     except ImportError:
         print(CDD_HELP, file=sys.stderr)
         raise SystemExit(3)
     if hasattr(cdd, "Matrix"):                      # pycddlib 2.x
-        mat = cdd.Matrix(H, number_type="fraction")
+        mat = cdd.Matrix(H, number_type=number_type)
         mat.rep_type = cdd.RepType.INEQUALITY
         gen = cdd.Polyhedron(mat).get_generators()
         return [gen[i] for i in range(gen.row_size)], set(gen.lin_set), "pycddlib " + _cdd_version()
+    if number_type == "float":                       # pycddlib 3.x, float
+        mat = cdd.matrix_from_array(H, rep_type=cdd.RepType.INEQUALITY)
+        gen = cdd.copy_generators(cdd.polyhedron_from_matrix(mat))
+        return list(gen.array), set(gen.lin_set), "pycddlib " + _cdd_version()
     import cdd.gmp                                   # pycddlib 3.x (needs a GMP build)
     mat = cdd.gmp.matrix_from_array(H, rep_type=cdd.RepType.INEQUALITY)
     gen = cdd.gmp.copy_generators(cdd.gmp.polyhedron_from_matrix(mat))
@@ -198,28 +214,25 @@ def _cdd_version() -> str:
 
 
 def worker_peer(rows: int, mu: float) -> dict:
+    return peer_cdd(_problem(rows), mu)
+
+
+def complementary_filter(zero):
+    """The peer's post-processing of P's extreme rays: (zero flags of the complementary
+    ones, their wedged mask, how many there are). zero: (R, 3m) boolean zero flags."""
+    zu, zr = zero[:, 0::3], zero[:, 1::3] & zero[:, 2::3]
+    comp = (zu | zr).all(axis=1)
+    zero = zero[comp]
+    wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
+    return zero, wedged, int(comp.sum())
+
+
+def _exact_zero(Aint, gens):
+    """Zero flags (R, 3m) of cddlib's exact generators on the integer rows (exact signs)."""
     import flint
     import numpy as np
     from fractions import Fraction
     from math import lcm
-    from hpcwedge.problem import friction_rows_2d, parametrize
-    problem = _problem(rows)
-    m = problem.m
-    t0 = time.perf_counter()
-    param = parametrize(problem, exact=True)
-    A = friction_rows_2d(param, mu, m, exact=True)            # (3m, d) primitive integer rows
-    Aint = [[int(v) for v in row] for row in A]
-    t_setup = time.perf_counter() - t0
-    try:
-        import cdd  # noqa: F401  (imported before the clock starts)
-    except ImportError:
-        print(CDD_HELP, file=sys.stderr)
-        raise SystemExit(3)
-    t0 = time.perf_counter()
-    gens, lin, version = _cdd_generators([[0] + row for row in Aint])
-    t1 = time.perf_counter()
-    if lin:
-        raise RuntimeError(f"cddlib found {len(lin)} lines: the cone is not pointed")
     rays = []
     for g in gens:
         if g[0] != 0:          # the apex (origin) vertex
@@ -227,31 +240,72 @@ def worker_peer(rows: int, mu: float) -> dict:
         x = [Fraction(v) for v in g[1:]]
         den = lcm(*(v.denominator for v in x))
         rays.append([int(v * den) for v in x])
-    d = len(Aint[0])
-    R = len(rays)
-    if R:
-        S = flint.fmpz_mat(Aint) * flint.fmpz_mat(d, R, [v for j in range(d) for v in (r[j] for r in rays)])
-        sign = np.array([int(s > 0) - int(s < 0) for s in S.entries()], dtype=np.int8).reshape(3 * m, R).T
-    else:
-        sign = np.zeros((0, 3 * m), dtype=np.int8)
+    d, R = len(Aint[0]), len(rays)
+    if not R:
+        return np.zeros((0, len(Aint)), dtype=bool)
+    S = flint.fmpz_mat(Aint) * flint.fmpz_mat(d, R, [v for j in range(d) for v in (r[j] for r in rays)])
+    sign = np.array([int(s > 0) - int(s < 0) for s in S.entries()], dtype=np.int8).reshape(len(Aint), R).T
     if (sign < 0).any():
         raise RuntimeError("a cddlib generator violates A x >= 0")
-    zero = sign == 0
-    zu, zr = zero[:, 0::3], zero[:, 1::3] & zero[:, 2::3]
-    comp = (zu | zr).all(axis=1)                               # complementarity filter
-    zero = zero[comp]
-    wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
+    return sign == 0
+
+
+def _float_zero(A, gens):
+    """Zero flags (R, 3m) of cddlib's float generators: |a.x| <= dd.FLOAT_ZERO_TOL on unit rows
+    and unit rays (the tolerance our float engine uses); a ray violating a row by more than
+    that is an error of cddlib's float arithmetic."""
+    import numpy as np
+    from hpcwedge.dd import FLOAT_ZERO_TOL
+    X = np.array([[float(v) for v in g[1:]] for g in gens if float(g[0]) == 0.0], dtype=float)
+    if not len(X):
+        return np.zeros((0, A.shape[0]), dtype=bool)
+    X /= np.linalg.norm(X, axis=1, keepdims=True)
+    S = X @ (A / np.linalg.norm(A, axis=1, keepdims=True)).T
+    if (S < -FLOAT_ZERO_TOL).any():
+        raise RuntimeError(f"a cddlib float generator violates A x >= 0 by {-S.min():.1e}")
+    return np.abs(S) <= FLOAT_ZERO_TOL
+
+
+def peer_cdd(problem, mu: float, number_type: str = "fraction") -> dict:
+    """The peer on a 2D ContactProblem: cddlib's full double description of P = {x : A x >= 0},
+    A = friction_rows_2d of our parametrisation, then the complementarity filter and the clique
+    search. number_type "fraction": the exact integer rows, exact arithmetic; "float": the float
+    rows (what a float user hands cddlib), cddlib's float arithmetic, zero test as _float_zero.
+    Raises RuntimeError when cddlib returns lines (a cone it takes for not pointed) or a
+    generator outside P."""
+    from hpcwedge.problem import friction_rows_2d, parametrize
+    m = problem.m
+    exact = number_type == "fraction"
+    t0 = time.perf_counter()
+    param = parametrize(problem, exact=exact)
+    A = friction_rows_2d(param, mu, m, exact=exact)           # exact: (3m, d) primitive integer rows
+    rows = [[int(v) for v in row] for row in A] if exact else A.tolist()
+    t_setup = time.perf_counter() - t0
+    try:
+        import cdd  # noqa: F401  (imported before the clock starts)
+    except ImportError:
+        print(CDD_HELP, file=sys.stderr)
+        raise SystemExit(3)
+    t0 = time.perf_counter()
+    gens, lin, version = _cdd_generators([[0] + row for row in rows], number_type)
+    t1 = time.perf_counter()
+    if lin:
+        raise RuntimeError(f"cddlib found {len(lin)} lines: the cone is not pointed")
+    zero = _exact_zero(rows, gens) if exact else _float_zero(A, gens)
+    R = len(zero)
+    zero, wedged, n_comp = complementary_filter(zero)
     t2 = time.perf_counter()
     cones = _cones_of(zero, wedged)
     t3 = time.perf_counter()
-    bits = max(abs(v).bit_length() for row in Aint for v in row)
-    return {"seconds": t3 - t0, "n_wedged_rays": int(wedged.sum()), "n_cones": len(cones),
-            "n_trivial_rays": int((~wedged).sum()),
-            "fingerprint": _fingerprint(zero[wedged], [c.key() for c in cones]),
-            "breakdown": {"setup_exact_rows": t_setup, "cdd_dd": t1 - t0, "filter": t2 - t1,
-                          "cliques": t3 - t2},
-            "n_extreme_rays_P": R, "n_complementary": int(comp.sum()), "max_row_bits": bits,
-            "cdd": version}
+    out = {"seconds": t3 - t0, "n_wedged_rays": int(wedged.sum()), "n_cones": len(cones),
+           "n_trivial_rays": int((~wedged).sum()),
+           "fingerprint": _fingerprint(zero[wedged], [c.key() for c in cones]),
+           "breakdown": {"setup_exact_rows" if exact else "setup_rows": t_setup, "cdd_dd": t1 - t0,
+                         "filter": t2 - t1, "cliques": t3 - t2},
+           "n_extreme_rays_P": R, "n_complementary": n_comp, "cdd": version}
+    if exact:
+        out["max_row_bits"] = max(abs(v).bit_length() for row in rows for v in row)
+    return out
 
 
 def worker_main(kind: str, rows: int, mu: float) -> None:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 import math
 import os
@@ -79,21 +80,24 @@ def worker_3d(engine: str, ring: int) -> dict:
     _timed(patterns, "infeasible_core", acc, "cores")
     t0 = time.perf_counter()
     if engine == "brute":
-        n = len(brute(p, m, MU_3D))
+        found = brute(p, m, MU_3D)
         t1 = t2 = time.perf_counter()
         solves = 2 ** m
     else:
         tree = PatternTree(p, m, MU_3D, symmetry=group if engine == "bnb_sym" else None)
         out = tree.explore(tree.root())
         t1 = time.perf_counter()
-        n = len(tree.expand(out.found))
+        found = [s.contact for s in tree.expand(out.found)]
         t2 = time.perf_counter()
         solves = out.stats.solves
+    n = len(found)
     search = t1 - t0
     stages = {"setup": setup, **{k: acc.get(k, 0.0) for k in ("socp", "lp", "cores")}}
     stages["other"] = search - stages["socp"] - stages["lp"] - stages["cores"]
     stages["expand"] = t2 - t1
-    return {"m": m, "seconds": t2 - t0, "patterns": n, "socps": solves, "stages": stages}
+    digest = hashlib.sha1(repr(sorted(found)).encode()).hexdigest()[:16]     # the pattern set
+    return {"m": m, "seconds": t2 - t0, "patterns": n, "patterns_digest": digest, "socps": solves,
+            "stages": stages}
 
 
 def worker_2d(engine: str, rows: int) -> dict:
