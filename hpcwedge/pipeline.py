@@ -22,7 +22,6 @@ from functools import cache as once, partial
 import numpy as np
 
 from .build import build_model, contact_problem
-from .cones import maximal_cones
 from .dd import branching_nodes, canonical_order
 from .model import Model
 from .mu_critical import mu_critical
@@ -265,6 +264,7 @@ def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
     run.rays, run.trivial_rays, run.ray_zero = V[wedged], V[~wedged], zero[wedged]
     if not want_cones:
         return
+    from .cones import maximal_cones     # networkx: imported only by the 2D cone stage (~0.15 s)
     gap = ~zero[:, 0::3]
     load = ~(zero[:, 1::3] & zero[:, 2::3])
     widx = np.cumsum(wedged) - 1

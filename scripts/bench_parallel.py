@@ -56,7 +56,8 @@ def answers(path: str) -> dict:
                                    check=True, capture_output=True, text=True, env=env).stdout)
     return {"mu_c": js["mu_c"], "patterns": [[p["contact"], p["mu_c"]] for r in js["runs"]
                                              for p in r["patterns"]],
-            "stats": dict(js["stats"], timings_total=js["timings"]["total"])}
+            "stats": dict(js["stats"], timings_total=js["timings"]["total"]),
+            "stages": {k: js["timings"].get(k) for k in ("condense", "enumerate", "mu_c")}}
 
 
 def main() -> None:
@@ -73,15 +74,20 @@ def main() -> None:
     configs = [("serial", None, 0), ("1 worker", 2, 1), ("2 workers", 3, 2), ("3 workers (oversubscribed)", 4, 3)]
     walls = {label: [] for label, _, _ in configs}
     inside = {label: [] for label, _, _ in configs}
+    stages = {label: [] for label, _, _ in configs}
+    loads = {label: [] for label, _, _ in configs}       # 1-min load average before each run (noise)
     got = {}
     for rep in range(args.repeat):
         for label, ranks, workers in configs[rep % len(configs):] + configs[:rep % len(configs)]:
             out = os.path.join(tmp, f"r{ranks}.h5")
+            loads[label].append(os.getloadavg()[0])
             walls[label].append(run(ranks, scene, out))
             got[label] = answers(out)
             inside[label].append(got[label]["stats"].get("timings_total", float("nan")))
-            print(f"  {label:<28} {walls[label][-1]:7.2f} s wall, {inside[label][-1]:7.2f} s in the program",
-                  flush=True)
+            stages[label].append(got[label]["stages"])
+            st = ", ".join(f"{k} {v:.2f}" for k, v in stages[label][-1].items() if v is not None)
+            print(f"  {label:<28} {walls[label][-1]:7.2f} s wall, {inside[label][-1]:7.2f} s in the program "
+                  f"({st} s; load before {loads[label][-1]:.1f})", flush=True)
     rows, ref = [], got[configs[0][0]]
     for label, ranks, workers in configs:
         g = got[label]
@@ -89,7 +95,9 @@ def main() -> None:
             and all(abs(a[1] - b[1]) <= 1e-12 * abs(b[1]) for a, b in zip(g["patterns"], ref["patterns"]))
         rows.append({"config": label, "ranks": ranks or 1, "workers": workers, "seconds": min(walls[label]),
                      "all_seconds": walls[label], "program_seconds": min(inside[label]),
-                     "all_program_seconds": inside[label], "patterns": len(g["patterns"]), "same_answers": same,
+                     "all_program_seconds": inside[label], "all_stage_seconds": stages[label],
+                     "all_load_before": loads[label],
+                     "patterns": len(g["patterns"]), "same_answers": same,
                      "tasks_per_rank": g["stats"].get("parallel", {}).get("tasks_per_rank")})
     one = next(r for r in rows if r["workers"] == 1)
     for r in rows:
