@@ -10,7 +10,9 @@ in each repeat (noise on a shared machine hits them alike); the best of the
 repeats counts. Checks that every run gives the same answers, and writes
 results/bench_parallel.{json,csv} with wall times (mpirun start-up included),
 the program's own run time (timings.total: scene to result) and speedups
-relative to 1 worker for both. The SOCP count against 2^m for m = 8..14 is
+relative to 1 worker for both; every run's stage times (timings: condense,
+enumerate, mu_c) and the 1-minute load average before it (a shared machine's
+noise) are in the JSON. The SOCP count against 2^m for m = 8..14 is
 scripts/bench_socp_count.py (results/bench_socp_count.json); its table is
 copied into the JSON here when present.
 
