@@ -22,7 +22,6 @@ from functools import cache as once, partial
 import numpy as np
 
 from .build import build_model, contact_problem
-from .cones import maximal_cones
 from .dd import branching_nodes, canonical_order
 from .model import Model
 from .mu_critical import mu_critical
@@ -180,25 +179,30 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
         stages.append("mu_c")
 
         def mask(nodes):
-            return np.isin(np.arange(m), nodes)
+            z = np.zeros(m, dtype=bool)
+            z[list(nodes)] = True
+            return z
 
         def orbit_key(zu, zr):    # the same for every pattern of an orbit: one mu^c task each
             bits = (sum(1 << i for i in zu), sum(1 << i for i in zr))
             return bits if sym is None else sym.canonical(*bits)
 
-        def keyed(run):       # (key, zero_u, zero_r) of the run's cones and patterns
+        def keyed(run):       # (key, zero_u nodes, zero_r nodes, item) of the run's cones and patterns
             for c in run.cones or []:
-                yield orbit_key(c["zero_u"], c["zero_r"]), mask(c["zero_u"]), mask(c["zero_r"]), c
+                yield orbit_key(c["zero_u"], c["zero_r"]), c["zero_u"], c["zero_r"], c
             for p in run.patterns or []:
-                gap = [i for i in range(m) if i not in p["contact"]]
-                yield orbit_key(p["contact"], gap), mask(p["contact"]), mask(gap), p
+                gap = sorted(set(range(m)).difference(p["contact"]))
+                yield orbit_key(p["contact"], gap), p["contact"], gap, p
 
         listed = [r for r in result.runs if r.cones or r.patterns]
         wanted = result.runs if plan.mu_c_cones else listed[:1]
+        # the keys once per run (the master works alone here: workers wait for the tasks)
+        entries = [list(keyed(run)) for run in wanted]
         items: dict = {}      # one task per zero-set pair, at the least mu that lists it
-        for run in wanted:
-            for key, zu, zr, _ in keyed(run):
-                items.setdefault(key, (zu, zr, run.mu))
+        for run, entry in zip(wanted, entries):
+            for key, zu, zr, _ in entry:
+                if key not in items:
+                    items[key] = (mask(zu), mask(zr), run.mu)
         scale = numerics.scale if scene.dim == 2 else None       # 2D: balanced coordinates
         solve = partial(mu_critical, strip_exact(param), m, mu_max=scene.mu_max,
                         method=scene.mu_c_method, tol=scene.mu_c_tol, scale=scale)
@@ -207,14 +211,15 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
             stats["lp_solves"] += r.lps
             stats["lp_undecided"] += r.undecided
             stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
-        for run in wanted:
-            for key, _, _, item in keyed(run):
+        for entry in entries:
+            for key, _, _, item in entry:
                 if plan.mu_c_cones:
                     item["mu_c"] = cache[key].mu_c
         if plan.mu_c_global:
             if listed:
                 # any pattern feasible below the smallest such mu lies in one of its cones/patterns
-                values = [cache[key].mu_c for key, *_ in keyed(listed[0])]
+                first = next(e for r, e in zip(wanted, entries) if r is listed[0])
+                values = [cache[key].mu_c for key, *_ in first]
                 values = [v for v in values if v is not None]
                 result.mu_c, result.mu_c_status = (min(values), "found") if values else (None, None)
             if result.mu_c is None:
@@ -261,6 +266,7 @@ def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
     run.ray_zero = zero[wedged]
     if not want_cones:
         return
+    from .cones import maximal_cones     # networkx: imported only by the 2D cone stage (~0.15 s)
     gap = ~zero[:, 0::3]
     load = ~(zero[:, 1::3] & zero[:, 2::3])
     widx = np.cumsum(wedged) - 1

@@ -10,7 +10,9 @@ in each repeat (noise on a shared machine hits them alike); the best of the
 repeats counts. Checks that every run gives the same answers, and writes
 results/bench_parallel.{json,csv} with wall times (mpirun start-up included),
 the program's own run time (timings.total: scene to result) and speedups
-relative to 1 worker for both. The SOCP count against 2^m for m = 8..14 is
+relative to 1 worker for both; every run's stage times (timings: condense,
+enumerate, mu_c) and the 1-minute load average before it (a shared machine's
+noise) are in the JSON. The SOCP count against 2^m for m = 8..14 is
 scripts/bench_socp_count.py (results/bench_socp_count.json); its table is
 copied into the JSON here when present.
 
@@ -56,7 +58,8 @@ def answers(path: str) -> dict:
                                    check=True, capture_output=True, text=True, env=env).stdout)
     return {"mu_c": js["mu_c"], "patterns": [[p["contact"], p["mu_c"]] for r in js["runs"]
                                              for p in r["patterns"]],
-            "stats": dict(js["stats"], timings_total=js["timings"]["total"])}
+            "stats": dict(js["stats"], timings_total=js["timings"]["total"]),
+            "stages": {k: js["timings"].get(k) for k in ("condense", "enumerate", "mu_c")}}
 
 
 def main() -> None:
@@ -73,15 +76,20 @@ def main() -> None:
     configs = [("serial", None, 0), ("1 worker", 2, 1), ("2 workers", 3, 2), ("3 workers (oversubscribed)", 4, 3)]
     walls = {label: [] for label, _, _ in configs}
     inside = {label: [] for label, _, _ in configs}
+    stages = {label: [] for label, _, _ in configs}
+    loads = {label: [] for label, _, _ in configs}       # 1-min load average before each run (noise)
     got = {}
     for rep in range(args.repeat):
         for label, ranks, workers in configs[rep % len(configs):] + configs[:rep % len(configs)]:
             out = os.path.join(tmp, f"r{ranks}.h5")
+            loads[label].append(os.getloadavg()[0])
             walls[label].append(run(ranks, scene, out))
             got[label] = answers(out)
             inside[label].append(got[label]["stats"].get("timings_total", float("nan")))
-            print(f"  {label:<28} {walls[label][-1]:7.2f} s wall, {inside[label][-1]:7.2f} s in the program",
-                  flush=True)
+            stages[label].append(got[label]["stages"])
+            st = ", ".join(f"{k} {v:.2f}" for k, v in stages[label][-1].items() if v is not None)
+            print(f"  {label:<28} {walls[label][-1]:7.2f} s wall, {inside[label][-1]:7.2f} s in the program "
+                  f"({st} s; load before {loads[label][-1]:.1f})", flush=True)
     rows, ref = [], got[configs[0][0]]
     for label, ranks, workers in configs:
         g = got[label]
@@ -89,7 +97,9 @@ def main() -> None:
             and all(abs(a[1] - b[1]) <= 1e-12 * abs(b[1]) for a, b in zip(g["patterns"], ref["patterns"]))
         rows.append({"config": label, "ranks": ranks or 1, "workers": workers, "seconds": min(walls[label]),
                      "all_seconds": walls[label], "program_seconds": min(inside[label]),
-                     "all_program_seconds": inside[label], "patterns": len(g["patterns"]), "same_answers": same,
+                     "all_program_seconds": inside[label], "all_stage_seconds": stages[label],
+                     "all_load_before": loads[label],
+                     "patterns": len(g["patterns"]), "same_answers": same,
                      "tasks_per_rank": g["stats"].get("parallel", {}).get("tasks_per_rank")})
     one = next(r for r in rows if r["workers"] == 1)
     for r in rows:

@@ -6,8 +6,9 @@ policy's answers are verified; the 2D dispatch is the LP."""
 import numpy as np
 import pytest
 
-from hpcwedge.conic import (FEASIBLE, INFEASIBLE, UNDECIDED, VERIFY_TOL, ConeRows, Rows, decide, feasible,
-                            lp_feasible, pattern_rows, pyramid_rows, violation)
+from hpcwedge.conic import (FEASIBLE, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, VERIFY_TOL, ConeRows, Rows, decide,
+                            feasible, lp_feasible, pattern_rows, pyramid_rows, pyramid_sides_for, violation)
+from hpcwedge.mu_critical import mu_critical, mu_critical_rows
 from hpcwedge.patterns import PatternTree
 from hpcwedge.problem import parametrize
 from instances import random_problem, random_problem_3d, ur_sandwich
@@ -69,6 +70,56 @@ def test_pyramids_sandwich_the_cone():
                 assert so == FEASIBLE
             n_checked += 1
     assert n_checked == 80
+
+
+def test_pyramid_critical_mu_within_its_gap_of_mu_c():
+    """What pyramid_sides_for relies on: the critical mu of the inscribed k-pyramids
+    (an LP mu^c, mu_critical_rows) lies in [mu^c, mu^c / cos(pi/k)], that of the
+    circumscribed ones in [mu^c cos(pi/k), mu^c] (the polished SOCP mu^c): so a
+    level decides nothing at a mu whose relative distance from mu^c is well below
+    its gap 1 - cos(pi/k), unless its facets touch the optimum."""
+    rng = np.random.default_rng(11)
+    n_checked = 0
+    for _ in range(12):
+        m = 3
+        p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
+        zu = np.zeros(m, bool)
+        zu[rng.integers(m)] = True
+        r = mu_critical(p, m, zu, ~zu, mu_max=50.0)
+        if r.mu_c is None or not r.polished:
+            continue
+        rows = pattern_rows(p, m, zu, ~zu)
+        for k in (8, 16):
+            c = np.cos(np.pi / k)
+            mu_in = mu_critical_rows(pyramid_rows(rows, k, inner=True), mu_max=100.0).mu_c
+            mu_out = mu_critical_rows(pyramid_rows(rows, k, inner=False), mu_max=100.0).mu_c
+            assert r.mu_c * (1 - 1e-6) <= mu_in <= r.mu_c / c * (1 + 1e-6)
+            assert r.mu_c * c * (1 - 1e-6) <= mu_out <= r.mu_c * (1 + 1e-6)
+            n_checked += 1
+    assert n_checked >= 12
+
+
+def test_pyramid_sides_for_keeps_the_levels_finer_than_the_spread():
+    assert pyramid_sides_for(1.0) == PYRAMID_SIDES
+    assert pyramid_sides_for(1e-7) == ()
+    for spread in (1e-5, 1e-4, 1e-3, 1e-2, 0.1):
+        kept = pyramid_sides_for(spread)
+        assert kept == tuple(k for k in PYRAMID_SIDES if 2 * np.sin(np.pi / (2 * k)) ** 2 <= spread)
+
+
+def test_decide_without_pyramids_decides_what_clarabel_decides():
+    """pyramid_sides=() only drops the LP fallback: the decisions Clarabel makes
+    are the same (random partial patterns)."""
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        m = 3
+        p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
+        zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
+        zr[~zu] = rng.random((~zu).sum()) < 0.4
+        rows = pattern_rows(p, m, zu, zr)
+        for mu in (0.5, 1.5):
+            full, bare = decide(rows, mu), decide(rows, mu, pyramid_sides=())
+            assert bare.status == full.status or bare.status == UNDECIDED
 
 
 def test_decide_objective_proves_the_contact_child():
