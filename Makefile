@@ -30,11 +30,11 @@ bench: setup-bench
 	PYTHONPATH=. $(PY) scripts/bench_peers.py
 
 bench-quick: setup-bench
-	$(PY) scripts/bench_2d.py --quick
-	$(PY) scripts/bench_mu_c.py --quick
-	$(PY) scripts/stress.py --quick
-	PYTHONPATH=. $(PY) scripts/bench_growth.py --quick
-	PYTHONPATH=. $(PY) scripts/bench_peers.py --quick
+	$(PY) scripts/bench_2d.py --quick --out results/quick
+	$(PY) scripts/bench_mu_c.py --quick --out results/quick
+	$(PY) scripts/stress.py --quick --out results/quick
+	PYTHONPATH=. $(PY) scripts/bench_growth.py --quick --out results/quick/bench_growth
+	PYTHONPATH=. $(PY) scripts/bench_peers.py --quick --out results/quick/bench_peers
 
 check: setup
 	../shared/acceptance/check_public

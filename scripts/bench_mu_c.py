@@ -98,6 +98,7 @@ def timed(fn, repeat: int) -> tuple[float, object]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default=OUT, help="output folder (default results/)")
     args = ap.parse_args()
     repeat = 3 if args.quick else 7
     methods = [(f"bisection tol={t:.0e}", "bisection", t, "default") for t in TOLS] + \
@@ -114,15 +115,15 @@ def main() -> None:
             rows.append({"scene": label, "dim": dim, "m": m, "method": name, "tol": tol, "seconds": sec,
                          "lps": r.lps, "mu_c": r.mu_c, "analytic": want, "rel_error": err,
                          "polished": r.polished})
-    os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "bench_mu_c.csv"), "w", newline="") as f:
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, "bench_mu_c.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     summary = {f"{d}d": summarise([r for r in rows if r["dim"] == d]) for d in (2, 3)}
-    with open(os.path.join(OUT, "bench_mu_c.json"), "w") as f:
+    with open(os.path.join(args.out, "bench_mu_c.json"), "w") as f:
         json.dump({"summary": summary, "rows": rows}, f, indent=1)
-    plot(summary)
+    plot(summary, args.out)
     for key, sm in summary.items():
         print(f"{key}: {'method':<22}{'worst rel. error':>18}{'mean time [ms]':>16}{'mean solves':>12}")
         for name, s in sm["methods"].items():
@@ -147,7 +148,7 @@ def summarise(rows: list[dict]) -> dict:
             "worst_ratio": max(ratios)}
 
 
-def plot(summary: dict) -> None:
+def plot(summary: dict, out: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -169,7 +170,7 @@ def plot(summary: dict) -> None:
     ax.set_title("mu^c: run time against error (analytic scenes)")
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     fig.tight_layout()
-    fig.savefig(os.path.join(OUT, "bench_mu_c.png"), dpi=120)
+    fig.savefig(os.path.join(out, "bench_mu_c.png"), dpi=120)
 
 
 if __name__ == "__main__":
