@@ -47,7 +47,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import linprog
 
 from .problem import Parametrization
 
@@ -244,6 +243,7 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None,
     A_eq = np.vstack([A[E], rows.norm[None, :]])
     b_eq = np.zeros(A_eq.shape[0])
     b_eq[-1] = 1.0
+    from scipy.optimize import linprog     # here, not at the top: 0.16 s of every rank's start-up
     res = linprog(np.zeros(d), A_ub=-A[~E] if (~E).any() else None,
                   b_ub=np.zeros((~E).sum()) if (~E).any() else None,
                   A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * d, method=method,
