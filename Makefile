@@ -20,7 +20,7 @@ bench: setup-bench
 	$(PY) scripts/bench_2d.py
 	$(PY) scripts/bench_mu_c.py
 	PYTHONPATH=. $(PY) scripts/bench_socp_count.py --brute-max 14
-	$(PY) scripts/bench_parallel.py
+	$(PY) scripts/bench_parallel.py --repeat 3
 	PYTHONPATH=. $(PY) scripts/bench_convergence.py --refine 1 2 4 8 16 32 64
 	PYTHONPATH=. $(PY) scripts/bench_convergence.py --patch 0.05 --refine 1 2 4 8 16 32 64 128 256
 	PYTHONPATH=. $(PY) scripts/bench_convergence.py --patch 0.05 --patch-kind hat --refine 1 2 4 8 16 32 64 128 256
