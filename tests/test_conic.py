@@ -50,16 +50,21 @@ def test_3d_patterns_bnb_equals_brute_force_and_independent_route(seed, m, free)
     assert all(s.depth == m and s.contact | s.gap == (1 << m) - 1 for s in out.found)
 
 
+def _random_partial_rows(rng, m: int = 3):
+    """Rows of a random partial pattern (about 40 % of the nodes fixed in contact, 40 % of
+    the rest fixed open) of a random free or supported 3D body with m contact nodes."""
+    p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
+    zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
+    zr[~zu] = rng.random((~zu).sum()) < 0.4
+    return pattern_rows(p, m, zu, zr)
+
+
 def test_pyramids_sandwich_the_cone():
     """inner feasible => SOCP feasible => outer feasible, on random partial patterns."""
     rng = np.random.default_rng(7)
     n_checked = 0
     for _ in range(40):
-        m = 3
-        p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
-        zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
-        zr[~zu] = rng.random((~zu).sum()) < 0.4
-        rows = pattern_rows(p, m, zu, zr)
+        rows = _random_partial_rows(rng)
         for mu in (0.5, 1.5):
             s = feasible(rows, mu)[0]
             si = lp_feasible(pyramid_rows(rows, 8, inner=True), mu)[0]
@@ -112,11 +117,7 @@ def test_decide_without_pyramids_decides_what_clarabel_decides():
     are the same (random partial patterns)."""
     rng = np.random.default_rng(5)
     for _ in range(20):
-        m = 3
-        p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
-        zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
-        zr[~zu] = rng.random((~zu).sum()) < 0.4
-        rows = pattern_rows(p, m, zu, zr)
+        rows = _random_partial_rows(rng)
         for mu in (0.5, 1.5):
             full, bare = decide(rows, mu), decide(rows, mu, pyramid_sides=())
             assert bare.status == full.status or bare.status == UNDECIDED
