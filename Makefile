@@ -17,7 +17,7 @@ test: setup
 	$(PY) -m pytest -q
 
 bench: setup-bench
-	$(PY) scripts/bench_2d.py
+	$(PY) scripts/bench_2d.py --budget 300
 	$(PY) scripts/bench_mu_c.py
 	PYTHONPATH=. $(PY) scripts/bench_socp_count.py --brute-max 14
 	$(PY) scripts/bench_parallel.py --repeat 3
