@@ -278,14 +278,20 @@ def test_plan_patterns_2d():
 # ---------------------------------------------------------------- the real mpirun
 
 
+def _serial_reference(tmp_path_factory, name: str, write, read):
+    """(scene, read(result)) of the uninterrupted serial run of the scene write(folder) writes."""
+    tmp = tmp_path_factory.mktemp(name)
+    scene = write(tmp)
+    out = str(tmp / "ref.h5")
+    run(None, "run", scene, "-o", out, "-q")
+    return scene, read(out)
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     """The uninterrupted serial run of the pattern scene: (scene path, show JSON)."""
-    tmp = tmp_path_factory.mktemp("ref")
-    scene = write_scene(tmp, raw=False)          # plug2d: condensation (PETSc) under mpirun too
-    out = str(tmp / "ref.h5")
-    run(None, "run", scene, "-o", out, "-q")
-    return scene, show(out)
+    # plug2d: condensation (PETSc) under mpirun too
+    return _serial_reference(tmp_path_factory, "ref", lambda tmp: write_scene(tmp, raw=False), show)
 
 
 @pytest.mark.mpi
@@ -314,11 +320,8 @@ def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
 def rays_reference(tmp_path_factory):
     """The serial run of a 2D rays scene (plug2d m = 12, two mu, split on 3 nodes):
     (scene, show JSON)."""
-    tmp = tmp_path_factory.mktemp("rays")
-    scene = write_rays_scene(tmp, 6, mus=(0.65, 1.0), split=3)
-    out = str(tmp / "ref.h5")
-    run(None, "run", scene, "-o", out, "-q")
-    return scene, show_json(out)
+    return _serial_reference(tmp_path_factory, "rays",
+                             lambda tmp: write_rays_scene(tmp, 6, mus=(0.65, 1.0), split=3), show_json)
 
 
 @pytest.mark.mpi
