@@ -54,6 +54,8 @@ from .problem import F_MINUS, F_PLUS, U_N
 
 NODES_PER_WORD = 21
 FLOAT_ZERO_TOL = 1e-10   # on unit-norm rows and unit-norm rays
+BASIS_DEPENDENT = 1e-9   # a unit row this close to the span of others is dependent
+BASIS_WELL_POSED = 1e-3  # initial basis rows are taken this far from the span first
 #: a float sign decision |a.x| within this factor of FLOAT_ZERO_TOL (either side) is a
 #: close call: rounding may have decided it (stats["close_calls"]; numerics.py falls back
 #: to exact arithmetic or reports it). Measured (scripts/stress.py): every float result
@@ -368,7 +370,11 @@ def canonical_order(zero: np.ndarray, return_words: bool = False):
 def _initial_basis(A, m, order, exact, eq=()) -> tuple[list[int], list[int]]:
     """d independent rows: equality rows first, then friction rows, then u_n rows,
     nodes in `order`. Returns (basis, implied): implied are the rows outside the basis
-    that lie in the span of the chosen equality rows (they vanish on the whole face)."""
+    that lie in the span of the chosen equality rows (they vanish on the whole face).
+    Float: a row whose distance to the span of those chosen before it is below
+    BASIS_WELL_POSED is passed over at first (a nearly dependent basis row makes the
+    initial rays, and every ray built from them, inaccurate); if fewer than d rows
+    are taken, the rest are taken largest distance first, down to BASIS_DEPENDENT."""
     eq = list(eq)
     rest = [c for c in ([3 * i + k for i in order for k in (F_PLUS, F_MINUS)]
                         + [3 * i + U_N for i in order]) if c not in eq]
@@ -378,16 +384,16 @@ def _initial_basis(A, m, order, exact, eq=()) -> tuple[list[int], list[int]]:
         def rows(idx):
             return xq.to_q(np.array([[int(v) for v in A[r]] for r in idx], dtype=object))
 
-        def independent(c):
-            return rows(chosen + [c]).rank() > len(chosen)
+        def distance(c):
+            return 1.0 if rows(chosen + [c]).rank() > len(chosen) else 0.0
 
         def take(c):
             chosen.append(c)
     else:
         Q = np.zeros((0, d))
 
-        def independent(c):
-            return np.linalg.norm(A[c] - Q.T @ (Q @ A[c])) > 1e-9
+        def distance(c):
+            return float(np.linalg.norm(A[c] - Q.T @ (Q @ A[c])))
 
         def take(c):
             nonlocal Q
@@ -395,14 +401,21 @@ def _initial_basis(A, m, order, exact, eq=()) -> tuple[list[int], list[int]]:
             Q = np.vstack([Q, v / np.linalg.norm(v)])
             chosen.append(c)
     for c in eq:
-        if len(chosen) < d and independent(c):
+        if len(chosen) < d and distance(c) > BASIS_DEPENDENT:
             take(c)
-    implied = [c for c in range(A.shape[0]) if c not in chosen and not independent(c)] if eq else []
+    implied = [c for c in range(A.shape[0]) if c not in chosen and distance(c) <= BASIS_DEPENDENT] if eq else []
+    rest = [c for c in rest if c not in implied]
     for c in rest:
         if len(chosen) == d:
             break
-        if c not in implied and independent(c):
+        if distance(c) > BASIS_WELL_POSED:
             take(c)
+    while len(chosen) < d:
+        left = [c for c in rest if c not in chosen]
+        far = [distance(c) for c in left]
+        if not far or max(far) <= BASIS_DEPENDENT:
+            break
+        take(left[int(np.argmax(far))])
     if len(chosen) < d:
         raise ValueError(f"the cone is not pointed: constraint rank {len(chosen)} < {d}")
     return chosen, implied

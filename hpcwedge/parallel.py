@@ -394,8 +394,9 @@ def face_task(ctx: FaceContext, payload: tuple) -> dict:
     ((m,) bool masks of the face); X (R, d) float64 rays, or exact integers as
     decimal strings (bytes); zero (R, ceil(3m / 8)) uint8, the zero flags packed
     along rows (np.packbits); the counters initial_rays, pairs_tested,
-    pairs_adjacent, max_rays and seconds. face_result() turns it back into a
-    dd.DDResult."""
+    pairs_adjacent, max_rays and seconds; a float DD's numerics close_calls,
+    cancellation and closest (NaN: no close call). face_result() turns it back into
+    a dd.DDResult."""
     from .dd import complementary_rays
     i, (contact, gap) = payload
     dd = complementary_rays(ctx.rows[i], ctx.m, exact=ctx.exact, face=(contact, gap),
@@ -406,6 +407,11 @@ def face_task(ctx: FaceContext, payload: tuple) -> dict:
     for key in ("initial_rays", "pairs_tested", "pairs_adjacent", "max_rays"):
         out[key] = int(dd.stats[key])
     out["seconds"] = float(dd.stats["seconds"])
+    if not ctx.exact:
+        out["close_calls"] = int(dd.stats["close_calls"])
+        out["cancellation"] = float(dd.stats["cancellation"])
+        closest = dd.stats["closest"]
+        out["closest"] = float("nan") if closest is None else float(closest)
     return out
 
 
@@ -418,6 +424,10 @@ def face_result(res: dict) -> "DDResult":
     zero = np.unpackbits(np.asarray(res["zero"], dtype=np.uint8).reshape(-1, -(-3 * m // 8)),
                          axis=1, count=3 * m).astype(bool)
     stats = {k: res[k] for k in ("initial_rays", "pairs_tested", "pairs_adjacent", "max_rays", "seconds")}
+    if "close_calls" in res:
+        closest = float(res["closest"])
+        stats.update(close_calls=int(res["close_calls"]), cancellation=float(res["cancellation"]),
+                     closest=None if np.isnan(closest) else closest)
     stats["face"] = (tuple(np.flatnonzero(contact).tolist()), tuple(np.flatnonzero(gap).tolist()))
     return DDResult(X=_decode_rays(res["X"]), zero=zero, stats=stats)
 

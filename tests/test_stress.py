@@ -6,7 +6,9 @@ Each test failed before its fix: float rays near mu^c on small tapers (balanced
 coordinates), ill-conditioned stiffness and cancelling DD steps (run-time detection and
 the exact fallback), mu^c on small tapers (5e-5 off; balanced coordinates in the LPs),
 mu^c of an ill-conditioned vertex (1.3e-4 off; polish), 2D patterns at mu^c (1 - 1e-9)
-(LP tolerance), a mechanism taken as a supported body (mu^c = -8e-17).
+(LP tolerance), a mechanism taken as a supported body (mu^c = -8e-17), a face DD
+started from a nearly singular basis (cond 1e11; dd.BASIS_WELL_POSED), the close calls
+of a split DD lost between its face tasks and the judgement.
 """
 import importlib.util
 import io
@@ -180,15 +182,24 @@ def test_exact_fallback_key_is_validated():
 
 
 def test_cancellation_alone_flags_a_run(monkeypatch):
-    """Stiff diagonals (EA 1e6 against 1): a DD step cancels to 4e-14 of its terms and
-    the float answer is wrong (500 rays, exact 198); the cancellation is detected even
-    with the conditioning test off."""
+    """Stiff diagonals (EA 1e6 against 1) with the initial basis taken in order, as
+    before dd.BASIS_WELL_POSED (a row 1e-8 from the span of the others): a DD step
+    cancels to 4e-14 of its terms and the float answer is wrong (500 rays, exact 198);
+    the cancellation is detected even with the conditioning test off. With the
+    well-posed basis the float DD alone gives the exact answer, unflagged."""
+    import hpcwedge.dd as dd
     import hpcwedge.numerics as numerics
     monkeypatch.setattr(numerics, "COND_SUSPECT", math.inf)
-    res = run(grid.plug_truss(4, ea_diag=1e6), 0.65, exact_fallback_max_m=0, mu_c="none")
+    spec = grid.plug_truss(4, ea_diag=1e6)
+    exact = run(spec, 0.65, exact=True, mu_c="none")
+    good = run(spec, 0.65, exact_fallback_max_m=0, mu_c="none")
+    assert answer(good) == answer(exact) and not good.stats["numerics"]["runs"][0]["suspect"]
+    monkeypatch.setattr(dd, "BASIS_WELL_POSED", dd.BASIS_DEPENDENT)
+    res = run(spec, 0.65, exact_fallback_max_m=0, mu_c="none")
     rec = res.stats["numerics"]["runs"][0]
     assert rec["suspect"] and rec["close_calls"] == 0
     assert rec["cancellation"] < numerics.CANCELLATION_MIN
+    assert answer(res) != answer(exact)
     ok = run(grid.plug_truss(4), 0.65, mu_c="none").stats["numerics"]["runs"][0]
     assert ok["cancellation"] > 1e-3 and not ok["suspect"]
 
@@ -211,3 +222,45 @@ def test_undecided_simplex_is_retried_by_interior_point(monkeypatch):
     status, _ = conic.feasible(rows, 0.8, counts)
     assert methods == ["highs-ds", "highs-ipm"] and status == plain != conic.UNDECIDED
     assert counts == {"lp_undecided": 1, f"lp_retry_ipm_{plain}": 1}
+
+
+SMALL_TAPER = grid.builtin("plug2d", rows=4, taper_deg=0.1)     # m = 8, close calls at 1.5 tan
+
+
+def test_face_split_is_judged_like_one_dd():
+    """A float DD split over faces (run.face_split) carries the close calls of every
+    face into the judgement: redone exactly within the fallback limit, reported above
+    it (before: the face tasks dropped them, and the split run passed as exact)."""
+    mu = 1.5 * tan(0.1)
+    split = {**SMALL_TAPER, "run": {"face_split": 3}}
+    exact = run(SMALL_TAPER, mu, exact=True, mu_c="none")
+    res = run(split, mu, mu_c="none")
+    assert res.stats["numerics"]["exact_fallback"] == [mu] and answer(res) == answer(exact)
+    log = io.StringIO()
+    raw = run(split, mu, progress=Progress(stream=log), exact_fallback_max_m=0, mu_c="none")
+    assert raw.stats["dd"][0]["faces"] == 8 and raw.stats["dd"][0]["close_calls"] > 0
+    assert raw.stats["numerics"]["unresolved"] == [mu] and "too close to call" in log.getvalue()
+
+
+def test_face_dd_starts_from_a_well_conditioned_basis():
+    """On the face where the 3 branching nodes are in contact, the first 13 rows in
+    order left a row 1e-10 from the span of the others: the initial rays had cond 1e11,
+    their combinations zero flags off by up to 0.75, so nearly every ray looked
+    degenerate (at m = 16 the face ran > 16 min instead of 0.2 s). Now the basis is
+    well conditioned and every ray's zero flags agree with its values."""
+    from hpcwedge.build import build_model, contact_problem
+    from hpcwedge.dd import _face_rows, _initial_basis, split_faces
+    from hpcwedge.numerics import Numerics
+
+    mu = 1.5 * tan(0.1)
+    scene = grid._scene(SMALL_TAPER, mu, {})
+    problem = contact_problem(scene, build_model(scene))
+    m = problem.m
+    p_mu, _ = balanced_2d(parametrize(problem), mu, m, Numerics.of(problem, 10).scale)
+    A = friction_rows_2d(p_mu, mu, m)
+    for face in split_faces(m, [5, 6, 7]):
+        basis, _ = _initial_basis(A, m, list(range(m)), False, _face_rows(face, m))
+        assert np.linalg.cond(A[basis]) < 1e3, face
+        dd = complementary_rays(A, m, face=face)
+        S = dd.X @ A.T
+        assert np.abs(S[dd.zero]).max(initial=0.0) < 1e-8 and S[~dd.zero].min(initial=1.0) > 0, face
