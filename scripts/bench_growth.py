@@ -68,6 +68,7 @@ def _timed(module, name: str, acc: dict, key: str) -> None:
 
 
 def worker_3d(engine: str, ring: int) -> dict:
+    import scipy.optimize
     from hpcwedge import conic, patterns
     from hpcwedge.patterns import PatternTree
     from bench_socp_count import brute, plug
@@ -76,7 +77,7 @@ def worker_3d(engine: str, ring: int) -> dict:
     setup = time.perf_counter() - t0
     acc: dict = {}
     _timed(conic, "_clarabel", acc, "socp")
-    _timed(conic, "linprog", acc, "lp")
+    _timed(scipy.optimize, "linprog", acc, "lp")     # (conic imports it when it solves)
     _timed(patterns, "infeasible_core", acc, "cores")
     t0 = time.perf_counter()
     if engine == "brute":
@@ -270,7 +271,10 @@ def main(argv=None) -> int:
         plot(records, f, dim, f"{out}_{dim}d.png")
     print_summary(f)
     print(f"\nwrote {out}.csv, {out}.json, {out}_2d.png, {out}_3d.png ({time.perf_counter() - t0:.0f} s)")
-    return 0
+    failed = [r for r in records if r["status"] == "error"]
+    for r in failed:
+        print(f"error: {r['dim']}D {r['engine']} m = {r['m']}: {r.get('error', '')}", file=sys.stderr)
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":
