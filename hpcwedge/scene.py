@@ -79,6 +79,13 @@ class Scene:
     def hash(self) -> str:
         return hashlib.sha256(self.text.encode()).hexdigest()
 
+    @property
+    def input_files(self) -> tuple[str, ...]:
+        """Absolute paths of the data files the scene names (model.file of a stiffness or mesh
+        model), in a fixed order; the scene file itself is not among them."""
+        f = self.model.get("file") if self.kind in ("stiffness", "mesh") else None
+        return (os.path.abspath(os.path.join(self.base_dir, f)),) if isinstance(f, str) and f else ()
+
     def plan(self) -> Plan:
         enum = self.enumerate is not False
         patterns = enum and (self.dim == 3 or self.enumerate == "patterns")
