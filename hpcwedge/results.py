@@ -1,10 +1,18 @@
-"""Result files (SPEC §4): HDF5 layout, atomic writes, and the JSON of `show`.
+"""Result files (SPEC §4): HDF5 layout, atomic checksummed writes, and the JSON of `show`.
+
+Every file write_atomic writes (results and checkpoints) starts with a 512-byte HDF5 user
+block: CHECKSUM_MAGIC, the SHA-256 (hex) of all the bytes after the block, a newline, zeros.
+verify_checksum checks it before h5py opens the file, so any damage (a flipped byte
+anywhere, a truncation) is found, also in bytes h5py would never read. Result files
+written before checksums (no user block: they start with the HDF5 signature) are still
+read, with a note on stderr.
 
 Layout of RESULT.h5
     /                attrs: name, dim, m, complete, mu_c (NaN = null), mu_c_status,
-                     version, scene_hash, stages (JSON), timings (JSON), stats (JSON),
-                     scene_dir (absolute folder of the scene file: its file paths are
-                     relative to it)
+                     version, scene_hash, inputs (JSON {"model.file k.npz": SHA-256 of
+                     its bytes}: Scene.input_digests), stages (JSON), timings (JSON),
+                     stats (JSON), scene_dir (absolute folder of the scene file: its file
+                     paths are relative to it)
     /scene_text      the scene file, verbatim
     /model/          coords, contact_nodes, normals, cells_<kind> (when a model was built)
     /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
@@ -14,10 +22,13 @@ Layout of RESULT.h5
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
+import sys
 import tempfile
+from contextlib import contextmanager
 
 import h5py
 import numpy as np
@@ -25,12 +36,67 @@ import numpy as np
 from . import __version__
 
 
+class FileError(ValueError):
+    """A file this program wrote (a result, a checkpoint) that cannot be used: damaged, not
+    ours, or missing parts. The message is one line naming the file and the reason."""
+
+
+#: the user block at the start of every file write_atomic writes (see the module doc)
+USERBLOCK_SIZE = 512
+CHECKSUM_MAGIC = b"hpcwedge-sha256 "
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_CHUNK = 8 << 20
+
+
+def _body_digest(fh) -> str:
+    """SHA-256 (hex) of the bytes of the open binary file fh after the user block."""
+    h = hashlib.sha256()
+    fh.seek(USERBLOCK_SIZE)
+    while chunk := fh.read(_CHUNK):
+        h.update(chunk)
+    return h.hexdigest()
+
+
+def seal(path: str) -> None:
+    """Write the checksum user block of the closed HDF5 file `path` (made with
+    userblock_size=USERBLOCK_SIZE, or changed in place after it was sealed) and fsync it."""
+    with open(path, "rb+") as fh:
+        block = CHECKSUM_MAGIC + _body_digest(fh).encode() + b"\n"
+        fh.seek(0)
+        fh.write(block.ljust(USERBLOCK_SIZE, b"\0"))
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def verify_checksum(path: str) -> bool:
+    """Check the checksum user block of `path` against its bytes. True: verified; False: an
+    HDF5 file without one (written before checksums). FileError when the file is damaged
+    (digest differs, truncated, block altered), is not an HDF5 file, or cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            block = fh.read(USERBLOCK_SIZE)
+            if block[:len(_HDF5_SIGNATURE)] == _HDF5_SIGNATURE:
+                return False
+            if not block.startswith(CHECKSUM_MAGIC):
+                raise FileError(f"{path}: not a file written by hpcwedge (no checksum block, no HDF5 signature)")
+            stored = block[len(CHECKSUM_MAGIC):len(CHECKSUM_MAGIC) + 65]
+            intact = (len(block) == USERBLOCK_SIZE and stored[-1:] == b"\n"
+                      and not block[len(CHECKSUM_MAGIC) + 65:].strip(b"\0"))
+            if not intact or _body_digest(fh).encode() != stored[:-1]:
+                raise FileError(f"{path}: damaged: its SHA-256 checksum does not match its contents, "
+                                f"it was truncated or altered after it was written")
+    except OSError as e:
+        raise FileError(f"{path}: cannot read ({e.strerror or type(e).__name__})") from None
+    return True
+
+
 def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> None:
-    """Write an HDF5 file through `fill(h5file)`: temp file in the same folder,
-    flush + fsync, optionally `verify(tmp)` (raises if the file is bad), then
-    os.replace and an fsync of the folder, so a crash never leaves a half-written
-    file and a bad file never replaces a good one. tmp_path: a fixed temp name
-    (a stale one from a killed writer is simply overwritten); default: a fresh one."""
+    """Write an HDF5 file through `fill(h5file)`: temp file in the same folder, closed,
+    sealed with its checksum (module doc) and fsynced, optionally `verify(tmp)` (raises if
+    the file is bad), then os.replace and an fsync of the folder, so a crash never leaves a
+    half-written file and a bad file never replaces a good one. tmp_path: a fixed temp name
+    (a stale one from a killed writer is simply overwritten); default: a fresh one.
+    A failed write (OSError: full disk, read-only folder...) raises and leaves `path` as it was."""
     folder = os.path.dirname(os.path.abspath(path)) or "."
     os.makedirs(folder, exist_ok=True)
     if tmp_path is None:
@@ -39,17 +105,17 @@ def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> N
     else:
         tmp = tmp_path
     try:
-        with h5py.File(tmp, "w") as f:
+        with h5py.File(tmp, "w", userblock_size=USERBLOCK_SIZE) as f:
             fill(f)
-            f.flush()
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
+        seal(tmp)
         if verify is not None:
             verify(tmp)
         os.replace(tmp, path)
     except BaseException:
-        if os.path.exists(tmp):
+        try:
             os.unlink(tmp)
+        except OSError:
+            pass
         raise
     try:
         dfd = os.open(folder, os.O_RDONLY)
@@ -80,6 +146,7 @@ def write_result(path: str, result) -> None:
                         "mu_c": np.nan if result.mu_c is None else result.mu_c,
                         "mu_c_status": result.mu_c_status or "",
                         "version": __version__, "scene_hash": s.hash,
+                        "inputs": json.dumps(s.input_digests),
                         "scene_dir": os.path.abspath(s.base_dir),
                         "stages": json.dumps(result.stages), "timings": json.dumps(result.timings),
                         "stats": json.dumps(result.stats, default=_plain)})
@@ -110,17 +177,45 @@ def write_result(path: str, result) -> None:
     write_atomic(path, fill)
 
 
+#: what h5py, numpy and json raise on a file whose structure is not a result's
+STRUCTURE_ERRORS = (KeyError, TypeError, ValueError, IndexError, AttributeError, OSError)
+
+
+@contextmanager
+def open_result(path: str, passthrough: tuple = ()):
+    """The result file `path` opened read-only (an h5py.File) after verify_checksum (a file
+    written before checksums is read with a note on stderr). Every problem of the file, also
+    one met in the caller's with block (a missing dataset, a wrong type or shape, bad JSON),
+    is a FileError naming the file; exceptions of the classes in `passthrough` (the caller's
+    own one-line errors) pass as they are."""
+    if not os.path.exists(path):
+        raise FileError(f"{path}: no such file")
+    if not verify_checksum(path):
+        print(f"hpcwedge: note: {path} has no checksum (written by an hpcwedge older than "
+              f"checksummed results): read without verification", file=sys.stderr)
+    try:
+        with h5py.File(path, "r") as f:
+            yield f
+    except (FileError, *passthrough):
+        raise
+    except STRUCTURE_ERRORS as e:
+        reason = " ".join(str(e).split()) or type(e).__name__
+        raise FileError(f"{path}: not a hpcwedge result ({reason})") from None
+
+
 def read_result(path: str, with_rays: bool = True) -> dict:
-    """The `show --json` object of a result file (SPEC §4), rays as nested lists."""
-    with h5py.File(path, "r") as f:
+    """The `show --json` object of a result file (SPEC §4), rays as nested lists.
+    FileError (one line) for a missing, damaged or malformed file."""
+    with open_result(path) as f:
         return _result_object(f, (lambda ds: ds[()].tolist()) if with_rays else None)
 
 
 def dump_result_json(path: str, out, with_rays: bool = True) -> None:
     """Write read_result(path, with_rays) as one JSON object to the text stream `out`, the
     ray arrays streamed RAY_CHUNK rows at a time: a result with millions of rays (plug2d
-    m = 20: 2e6 x 80) never exists as Python lists or as one string."""
-    with h5py.File(path, "r") as f:
+    m = 20: 2e6 x 80) never exists as Python lists or as one string. FileError as read_result
+    (found before anything is written, as the checksum covers the whole file)."""
+    with open_result(path) as f:
         _dump(_result_object(f, _Rows if with_rays else None), out)
         out.write("\n")
 
@@ -174,13 +269,16 @@ def _result_object(f, rays) -> dict:
            "mu_c_status": str(a["mu_c_status"]) or None,
            "runs": [], "timings": json.loads(a["timings"]),
            "stages": json.loads(a["stages"]), "stats": json.loads(a["stats"]),
-           "version": str(a["version"]), "scene_hash": str(a["scene_hash"])}
+           "version": str(a["version"]), "scene_hash": str(a["scene_hash"]),
+           "inputs": json.loads(a["inputs"]) if "inputs" in a else None}
     for k in sorted(f["runs"]):
         g = f["runs"][k]
         run = {"mu": float(g.attrs["mu"])}
         for name in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns"):
             run[name] = int(g.attrs[name]) if name in g.attrs else None
         for name in ("rays", "trivial_rays"):
+            if name in g and (g[name].ndim != 2 or g[name].dtype.kind != "f"):
+                raise TypeError(f"/runs/{k}/{name}: {g[name].ndim}-D {g[name].dtype}, expected 2-D floats")
             run[name] = rays(g[name]) if (name in g and rays is not None) else None
         run["cones"] = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
         run["patterns"] = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
