@@ -65,6 +65,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .checkpoint import CheckpointError, read_checkpoint, write_checkpoint
+from .results import error_reason
 
 if TYPE_CHECKING:
     from .dd import DDResult
@@ -648,8 +649,7 @@ class Engine:
         try:
             write_checkpoint(path, header, text, jobs)
         except (OSError, CheckpointError) as e:   # full disk, read-only folder...: the run goes on
-            why = (e.strerror if isinstance(e, OSError) else None) or " ".join(str(e).split())
-            print(f"hpcwedge: warning: checkpoint not written to {path} ({why}); the previous one "
+            print(f"hpcwedge: warning: checkpoint not written to {path} ({error_reason(e)}); the previous one "
                   f"is kept, the next timer or signal tries again", file=sys.stderr)
             self._next_ckpt = time.monotonic() + every
             return False

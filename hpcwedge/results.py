@@ -26,6 +26,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import sys
 import tempfile
 from contextlib import contextmanager
@@ -39,6 +40,17 @@ from . import __version__
 class FileError(ValueError):
     """A file this program wrote (a result, a checkpoint) that cannot be used: damaged, not
     ours, or missing parts. The message is one line naming the file and the reason."""
+
+
+def error_reason(e: BaseException) -> str:
+    """A short one-line reason for an error of a file operation: the system's words for an
+    OSError's errno, also the errno HDF5 embeds in h5py's messages ("No space left on
+    device"), else the message on one line."""
+    m = re.search(r"errno = (\d+)", str(e))
+    if m:
+        return os.strerror(int(m.group(1)))
+    text = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+    return " ".join(str(text).split()) or type(e).__name__
 
 
 #: the user block at the start of every file write_atomic writes (see the module doc)
@@ -86,7 +98,7 @@ def verify_checksum(path: str) -> bool:
                 raise FileError(f"{path}: damaged: its SHA-256 checksum does not match its contents, "
                                 f"it was truncated or altered after it was written")
     except OSError as e:
-        raise FileError(f"{path}: cannot read ({e.strerror or type(e).__name__})") from None
+        raise FileError(f"{path}: cannot read ({error_reason(e)})") from None
     return True
 
 
@@ -184,15 +196,13 @@ STRUCTURE_ERRORS = (KeyError, TypeError, ValueError, IndexError, AttributeError,
 @contextmanager
 def open_result(path: str, passthrough: tuple = ()):
     """The result file `path` opened read-only (an h5py.File) after verify_checksum (a file
-    written before checksums is read with a note on stderr). Every problem of the file, also
+    written before checksums is read, with a note on stderr once it has been read). Every problem of the file, also
     one met in the caller's with block (a missing dataset, a wrong type or shape, bad JSON),
     is a FileError naming the file; exceptions of the classes in `passthrough` (the caller's
     own one-line errors) pass as they are."""
     if not os.path.exists(path):
         raise FileError(f"{path}: no such file")
-    if not verify_checksum(path):
-        print(f"hpcwedge: note: {path} has no checksum (written by an hpcwedge older than "
-              f"checksummed results): read without verification", file=sys.stderr)
+    verified = verify_checksum(path)
     try:
         with h5py.File(path, "r") as f:
             yield f
@@ -201,6 +211,14 @@ def open_result(path: str, passthrough: tuple = ()):
     except STRUCTURE_ERRORS as e:
         reason = " ".join(str(e).split()) or type(e).__name__
         raise FileError(f"{path}: not a hpcwedge result ({reason})") from None
+    if not verified and path not in _NOTED:
+        _NOTED.add(path)
+        print(f"hpcwedge: note: {path} has no checksum (written by an hpcwedge older than "
+              f"checksummed results): read without verification", file=sys.stderr)
+
+
+#: the files without checksum open_result has read in this process (one note each)
+_NOTED: set = set()
 
 
 def read_result(path: str, with_rays: bool = True) -> dict:
