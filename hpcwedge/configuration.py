@@ -135,7 +135,7 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     body), a run or item index out of range, a run without that kind of item, or a pattern
     whose feasibility point the solvers cannot give.
     """
-    from .results import FileError, index, index_range, open_result
+    from .results import FileError, check_items, index, index_range, open_result
     chosen = [(k, v) for k, v in (("ray", ray), ("cone", cone), ("pattern", pattern)) if v is not None]
     if len(chosen) != 1:
         raise ConfigurationError("give exactly one of ray, cone, pattern")
@@ -153,11 +153,7 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
             rays = np.asarray(g["rays"][()], dtype=float).reshape(-1, 2 * dim * m) if "rays" in g else None
             cones = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
             patterns = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
-            n_rays = 0 if rays is None else len(rays)
-            if not all(isinstance(i, int) and 0 <= i < n_rays for c in cones or [] for i in c["rays"]):
-                raise ValueError(f"/runs/{keys[k]}/cones_json: a cone lists rays the run does not have")
-            if not all(isinstance(i, int) and 0 <= i < m for p in patterns or [] for i in p["contact"]):
-                raise ValueError(f"/runs/{keys[k]}/patterns_json: a pattern lists nodes beyond m = {m}")
+            check_items(cones, patterns, 0 if rays is None else len(rays), m)
             stored = _stored_scene(f)
     except FileError as e:
         raise ConfigurationError(str(e)) from None

@@ -20,7 +20,7 @@ import tempfile
 
 import numpy as np
 
-from .results import index, index_range, open_result
+from .results import check_items, index, index_range, open_result
 
 DISP_FRACTION = 0.10     # largest drawn displacement / body size
 ARROW_FRACTION = 0.15    # largest drawn reaction arrow / body size
@@ -93,6 +93,7 @@ def _read(f, path: str, run: int, ray: int) -> dict:
            "rays": rays, "ray": j if n_rays else None,
            "cones": json.loads(_str(g["cones_json"][()])) if "cones_json" in g else None,
            "model": None}
+    check_items(out["cones"], None, n_rays, m)
     if "model" in f:
         mg = f["model"]
         mdl = {"coords": np.asarray(mg["coords"][()], dtype=float),

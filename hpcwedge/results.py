@@ -300,8 +300,29 @@ def _result_object(f, rays) -> dict:
             run[name] = rays(g[name]) if (name in g and rays is not None) else None
         run["cones"] = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
         run["patterns"] = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
+        n_rays = g["rays"].shape[0] if "rays" in g else int(g.attrs.get("n_wedged_rays", 0))
+        check_items(run["cones"], run["patterns"], n_rays, out["m"])
         out["runs"].append(run)
     return out
+
+
+def check_items(cones, patterns, n_rays: int, m: int) -> None:
+    """ValueError unless a run's cones and patterns (parsed cones_json, patterns_json; None
+    passes) have the layout of the module doc: cones {"rays": wedged-ray indices < n_rays,
+    "zero_u", "zero_r": node indices < m, "mu_c": number or null}, patterns {"contact": node
+    indices < m, "mu_c"}. Readers check before using them, so a malformed file is one line."""
+    def indices(v, n):
+        return isinstance(v, list) and all(type(i) is int and 0 <= i < n for i in v)
+
+    def number(v):
+        return v is None or type(v) in (int, float)
+    if cones is not None and not (isinstance(cones, list) and all(
+            isinstance(c, dict) and indices(c.get("rays"), n_rays) and indices(c.get("zero_u"), m)
+            and indices(c.get("zero_r"), m) and number(c.get("mu_c")) for c in cones)):
+        raise ValueError("cones_json: not the cones of this run")
+    if patterns is not None and not (isinstance(patterns, list) and all(
+            isinstance(p, dict) and indices(p.get("contact"), m) and number(p.get("mu_c")) for p in patterns)):
+        raise ValueError("patterns_json: not the sign patterns of this run")
 
 
 def index(i: int, n: int) -> int | None:

@@ -124,11 +124,17 @@ def _tamper_cones(f):
     f["runs/000/cones_json"] = "[{\"rays\": 3"
 
 
-@pytest.mark.parametrize("tamper", [_tamper_attr, _tamper_runs, _tamper_rays, _tamper_cones])
+def _tamper_cone_items(f):
+    del f["runs/000/cones_json"]
+    f["runs/000/cones_json"] = '[{"rays": [99999], "zero_u": [0], "zero_r": [], "mu_c": "low"}]'
+
+
+@pytest.mark.parametrize("tamper", [_tamper_attr, _tamper_runs, _tamper_rays, _tamper_cones, _tamper_cone_items])
 @pytest.mark.parametrize("sealed", [True, False])
 def test_malformed_result_refused(result, tmp_path, capsys, tamper, sealed):
     """A result changed with h5py (its checksum redone, or an old one without checksum):
-    a wrong attribute type, a missing group, rays of the wrong shape, bad JSON -> one line."""
+    a wrong attribute type, a missing group, rays of the wrong shape, bad JSON, cones that
+    are not this run's -> one line."""
     path = str(tmp_path / "r.h5")
     shutil.copy(result if sealed else OLD_RESULT, path)
     with h5py.File(path, "r+") as f:
