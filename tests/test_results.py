@@ -6,6 +6,7 @@ import hashlib
 import os
 import random
 import shutil
+import time
 
 import h5py
 import pytest
@@ -97,6 +98,27 @@ def test_damage_in_the_ray_values_is_found(result, tmp_path, capsys):
     assert p.returncode == 2 and not p.stdout and len(p.stderr.strip().splitlines()) == 1, p.stderr
     with pytest.raises(FileError, match="checksum"):
         read_result(path)
+
+
+def test_verified_once_until_the_file_changes(result, tmp_path, monkeypatch):
+    """A stable result is hashed once per process however often it is opened, and again as
+    soon as it changes (then the damage is found)."""
+    import hpcwedge.results as R
+    path = str(tmp_path / "r.h5")
+    shutil.copy(result, path)
+    monkeypatch.setattr(R, "STABLE_S", 0.2)
+    time.sleep(0.3)
+    calls, real = [], R.verify_checksum
+    monkeypatch.setattr(R, "verify_checksum", lambda p: calls.append(p) or real(p))
+    assert read_result(path) == read_result(path) and len(calls) == 1
+    with open(path, "r+b") as fh:
+        fh.seek(os.path.getsize(path) // 2)
+        byte = fh.read(1)[0]
+        fh.seek(-1, os.SEEK_CUR)
+        fh.write(bytes([byte ^ 4]))
+    with pytest.raises(FileError, match="checksum"):
+        read_result(path)
+    assert len(calls) == 2
 
 
 @pytest.mark.parametrize("content", [b"", b"not a result\n", b"\x89HDF\r\n\x1a\n" + bytes(3000)])
