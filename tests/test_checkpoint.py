@@ -551,7 +551,8 @@ def _state(n):
 
 def test_write_read_round_trip(tmp_path):
     path = str(tmp_path / "c.h5.ckpt")
-    write_checkpoint(path, {"scene_hash": "h", "inputs": "{}", "elapsed_s": 1.5, "resumes": 2, "ranks": 3, "reason": "timer"},
+    write_checkpoint(path, {"scene_hash": "h", "inputs": "{}", "elapsed_s": 1.5, "resumes": 2, "ranks": 3,
+                            "reason": "timer"},
                      "name = 'x'\n", [("a", _state(4)), ("b", _state(0))])
     ck = read_checkpoint(path)
     assert ck["order"] == ["a", "b"] and ck["scene_text"] == "name = 'x'\n"
