@@ -659,12 +659,18 @@ class Engine:
         return True
 
     def remove_checkpoint(self) -> None:
-        """The result is written: the checkpoint (and a stale temp) are no longer needed."""
+        """The result is written: the checkpoint (and a stale temp) are no longer needed. One
+        that cannot be removed is said in one line (harmless: a later --resume from it ends
+        with the same result)."""
         if self._ckpt is None:
             return
         for p in (self._ckpt[0], self._ckpt[0] + ".tmp"):
-            if os.path.exists(p):
+            try:
                 os.unlink(p)
+            except FileNotFoundError:
+                pass
+            except OSError as e:
+                print(f"hpcwedge: warning: cannot remove {p} ({error_reason(e)})", file=sys.stderr)
 
     @staticmethod
     def _state(job, in_flight, finished: bool) -> dict:

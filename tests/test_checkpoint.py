@@ -533,6 +533,29 @@ def test_checkpoint_write_on_a_full_disk_keeps_the_last_and_goes_on(tmp_path, sm
     pytest.fail("the run always ended before the disk was full")
 
 
+def test_checkpoint_that_cannot_be_replaced_nor_removed(tmp_path, reference):
+    """An immutable checkpoint (chattr +i: not even root may replace or delete it): each failed
+    timer checkpoint and the failed removal at the end are one warning line, the file stays
+    as it was, and the resumed run finishes with the uninterrupted answers."""
+    scene, out = _some_checkpoint(tmp_path)
+    ckpt = checkpoint_path(out)
+    before = open(ckpt, "rb").read()
+    p = subprocess.run(["chattr", "+i", ckpt], capture_output=True, text=True)
+    if p.returncode != 0:
+        pytest.skip(f"chattr +i not possible here: {p.stderr.strip()}")
+    try:
+        r = run(None, "run", scene, "-o", out, "-q", "--resume", check=False)
+        lines = r.stderr.splitlines()
+        assert r.returncode == 0 and lines, r.stderr
+        assert lines[-1] == f"hpcwedge: warning: cannot remove {ckpt} (Operation not permitted)"
+        assert all(line.startswith(f"hpcwedge: warning: checkpoint not written to {ckpt} (Operation not "
+                                   f"permitted)") for line in lines[:-1]), lines
+        assert open(ckpt, "rb").read() == before
+    finally:
+        subprocess.run(["chattr", "-i", ckpt], check=True)
+    assert answers(show_json(out)) == reference
+
+
 def test_resume_without_checkpoint_starts_fresh(tmp_path, reference):
     """SLURM requeue / job chains: `run --resume` is always safe to repeat."""
     scene = write_scene(tmp_path)
