@@ -4,13 +4,16 @@ Path: ``RESULT.h5.ckpt`` beside the result (``checkpoint_path``); it is
 written to ``RESULT.h5.ckpt.tmp``, flushed, fsynced, read back and checked,
 then renamed onto the old checkpoint (and the folder fsynced), so a crash at
 any moment leaves the previous good checkpoint in place. It is removed once
-the result file is written.
+the result file is written. Like a result, it carries the SHA-256 of its bytes
+(results.write_atomic), verified before anything is read: a damaged checkpoint
+is a CheckpointError, and nothing here deletes or rewrites it.
 
 Layout (every job state is plain arrays and attributes; parallel.py's jobs
 fill them, this module never interprets them):
 
     /                attrs: format = "hpcwedge-checkpoint", format_version,
-                     version (program), scene_hash, elapsed_s (all sessions),
+                     version (program), scene_hash, inputs (JSON: Scene.input_digests,
+                     the bytes of the files the scene names), elapsed_s (all sessions),
                      resumes, ranks, reason ("timer" | "SIGUSR1" | "SIGTERM" | ...),
                      written_unix
     /scene_text      the scene file, verbatim
@@ -27,13 +30,14 @@ import h5py
 import numpy as np
 
 from . import __version__
-from .results import compression, write_atomic
+from .results import FileError, compression, verify_checksum, write_atomic
 
 FORMAT = "hpcwedge-checkpoint"
-FORMAT_VERSION = 1
+#: 2: checksummed (results.write_atomic), with the scene's input digests
+FORMAT_VERSION = 2
 
 
-class CheckpointError(Exception):
+class CheckpointError(FileError):
     """A checkpoint that cannot be used: one line naming the file and the reason."""
 
 
@@ -43,7 +47,7 @@ def checkpoint_path(output: str) -> str:
 
 
 def write_checkpoint(path: str, header: dict, scene_text: str, jobs: list[tuple[str, dict]]) -> None:
-    """header: root attributes (scene_hash, elapsed_s, resumes, ranks, reason);
+    """header: root attributes (scene_hash, inputs, elapsed_s, resumes, ranks, reason);
     jobs: (name, {"attrs": {...}, "data": {name: array}}) in the order they ran."""
 
     def fill(f):
@@ -65,7 +69,15 @@ def write_checkpoint(path: str, header: dict, scene_text: str, jobs: list[tuple[
 
 def read_checkpoint(path: str) -> dict:
     """{"attrs", "scene_text", "jobs": {name: {"attrs", "data"}}, "order"}; every
-    problem (unreadable, truncated, not a checkpoint, other format) is a CheckpointError."""
+    problem (unreadable, damaged: its checksum does not verify, not a checkpoint, other
+    format) is a CheckpointError; the file is left as it is."""
+    try:
+        verified = verify_checksum(path)
+    except FileError as e:
+        raise CheckpointError(f"{path}: unreadable checkpoint ({str(e).removeprefix(path + ': ')})") from None
+    if not verified:
+        raise CheckpointError(f"{path}: unreadable checkpoint (no checksum: written by an older hpcwedge); "
+                              f"finish the run with that version, or remove it to start afresh")
     try:
         with h5py.File(path, "r") as f:
             attrs = {k: _plain(v) for k, v in f.attrs.items()}
@@ -74,7 +86,7 @@ def read_checkpoint(path: str) -> dict:
             if attrs.get("format_version") != FORMAT_VERSION:
                 raise CheckpointError(f"{path}: checkpoint format {attrs.get('format_version')}, "
                                       f"this program reads format {FORMAT_VERSION}")
-            for key in ("version", "scene_hash", "elapsed_s", "resumes"):
+            for key in ("version", "scene_hash", "inputs", "elapsed_s", "resumes"):
                 if key not in attrs:
                     raise CheckpointError(f"{path}: checkpoint lacks the attribute {key!r}")
             text = f["scene_text"][()]

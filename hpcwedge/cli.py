@@ -138,7 +138,8 @@ def _run(args) -> int:
             # collective (under mpirun): after the signal handlers, before anything is written
             condensed = _condense_together(comm, args.scene) if comm is not None else None
             scene = load_scene(args.scene)
-            if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume):
+            if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
+                                     inputs=scene.input_digests):
                 progress.note(f"resuming from {ckpt}")
             elif os.path.exists(ckpt):
                 print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
@@ -168,20 +169,21 @@ def _run(args) -> int:
 
 
 def _read(path: str, with_rays: bool = True) -> dict:
-    from .results import read_result
-    if not os.path.exists(path):
-        raise _UserError(f"{path}: no such file")
+    from .results import FileError, read_result
     try:
         return read_result(path, with_rays=with_rays)
-    except (OSError, KeyError) as e:
-        raise _UserError(f"{path}: not a hpcwedge result ({e})") from None
+    except FileError as e:
+        raise _UserError(str(e)) from None
 
 
 def _show(args) -> int:
     if args.json:
-        from .results import dump_result_json
+        from .results import FileError, dump_result_json
         _read(args.result, with_rays=False)
-        dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)
+        try:
+            dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)
+        except FileError as e:
+            raise _UserError(str(e)) from None
         return 0
     res = _read(args.result, with_rays=False)
     mu_c = "null" if res["mu_c"] is None else f"{res['mu_c']:.12g}"

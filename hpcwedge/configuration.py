@@ -135,15 +135,13 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     body), a run or item index out of range, a run without that kind of item, or a pattern
     whose feasibility point the solvers cannot give.
     """
-    from .results import index, index_range
+    from .results import FileError, check_items, index, index_range, open_result
     chosen = [(k, v) for k, v in (("ray", ray), ("cone", cone), ("pattern", pattern)) if v is not None]
     if len(chosen) != 1:
         raise ConfigurationError("give exactly one of ray, cone, pattern")
     what, j = chosen[0]
-    if not os.path.exists(path):
-        raise ConfigurationError(f"{path}: no such file")
     try:
-        with h5py.File(path, "r") as f:
+        with open_result(path, passthrough=(ConfigurationError,)) as f:
             dim, m = int(f.attrs["dim"]), int(f.attrs["m"])
             keys = sorted(f["runs"])
             k = index(run, len(keys))
@@ -155,8 +153,10 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
             rays = np.asarray(g["rays"][()], dtype=float).reshape(-1, 2 * dim * m) if "rays" in g else None
             cones = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
             patterns = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
-    except (OSError, KeyError) as e:
-        raise ConfigurationError(f"{path}: not a hpcwedge result ({e})") from None
+            check_items(cones, patterns, 0 if rays is None else len(rays), m)
+            stored = _stored_scene(f)
+    except FileError as e:
+        raise ConfigurationError(str(e)) from None
     items = {"ray": rays, "cone": cones, "pattern": patterns}[what]
     head = f"run {k} (mu = {mu:.6g})"
     noun = "wedged ray" if what == "ray" else what
@@ -169,7 +169,7 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     if i is None:
         raise ConfigurationError(f"{what} {j} out of range ({head} has {len(items)} {noun}(s): "
                                  f"{index_range(len(items))})")
-    scene, model = rebuild_model(path)
+    scene, model = rebuild_model(path, *stored)
     n = dim * m
     label = f"{head}, {noun} {i} of {len(items)}"
     if what == "ray":
@@ -209,30 +209,38 @@ def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[n
     return u / s, r / s
 
 
-def rebuild_model(path: str):
-    """(Scene, Model) of the result file `path`, from its stored scene text.
+def _stored_scene(f) -> tuple:
+    """(scene text, scene_dir or None, {"coords", "contact_nodes"} of /model or None, the input
+    digests or None) of the open result file f: what rebuild_model needs."""
+    return (_text(f["scene_text"]), _text(f.attrs["scene_dir"]) if "scene_dir" in f.attrs else None,
+            {k: f["model"][k][()] for k in ("coords", "contact_nodes")} if "model" in f else None,
+            dict(json.loads(f.attrs["inputs"])) if "inputs" in f.attrs else None)
+
+
+def rebuild_model(path: str, text: str, scene_dir: str | None, stored: dict | None,
+                  inputs: dict | None = None):
+    """(Scene, Model) of the result file `path`, from its stored scene text and folder, its
+    /model arrays and input digests (_stored_scene, read with the rest of the file).
 
     Files named in the scene (a mesh's model.file) are relative to the scene's folder, which
     the result records (attribute scene_dir); if the file is not there, the result's own
     folder is tried. The rebuilt model must match the result's /model (coordinates and
-    contact nodes), else ConfigurationError (the mesh file changed since the run).
+    contact nodes), and the files the scene names must have the digests the result recorded
+    (`inputs`, Scene.input_digests), else ConfigurationError (the mesh file changed since the run).
     """
     from .build import build_model
     from .scene import SceneError, parse_scene
-    with h5py.File(path, "r") as f:
-        text = _text(f["scene_text"])
-        scene_dir = _text(f.attrs["scene_dir"]) if "scene_dir" in f.attrs else None
-        stored = ({k: f["model"][k][()] for k in ("coords", "contact_nodes")} if "model" in f else None)
     result_dir = os.path.dirname(os.path.abspath(path))
     try:
         data = tomllib.loads(text)
-        kind = data.get("model", {}).get("kind")
+        table = data.get("model") if isinstance(data.get("model"), dict) else {}
+        kind = table.get("kind")
         if kind == "stiffness":
             raise ConfigurationError("the scene is of kind \"stiffness\" (a condensed K only): "
                                      "there is no body to export")
         dirs = [d for d in (scene_dir, result_dir) if d]
         base = dirs[0]
-        name = data.get("model", {}).get("file")
+        name = table.get("file")
         if isinstance(name, str):
             found = [d for d in dirs if os.path.exists(os.path.join(d, name))]
             if not found:
@@ -240,6 +248,10 @@ def rebuild_model(path: str):
                                          f"result's ({' or '.join(dict.fromkeys(dirs))})")
             base = found[0]
         scene = parse_scene(data, text=text, base_dir=base)
+        changed = [k for k, v in (inputs or {}).items() if scene.input_digests.get(k) != v]
+        if changed:
+            raise ConfigurationError(f"{changed[0]} changed since the result was written (its SHA-256 "
+                                     f"differs from the one the result recorded)")
         model = build_model(scene)
     except (SceneError, tomllib.TOMLDecodeError) as e:
         raise ConfigurationError(f"cannot rebuild the body from the stored scene: {str(e).splitlines()[0]}") from None

@@ -56,6 +56,7 @@ import math
 import os
 import signal
 import socket
+import sys
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -64,6 +65,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .checkpoint import CheckpointError, read_checkpoint, write_checkpoint
+from .results import error_reason
 
 if TYPE_CHECKING:
     from .dd import DDResult
@@ -558,7 +560,7 @@ class Engine:
         self._old_handlers: dict = {}
         self._stopped = False
         self._done = False
-        self._ckpt = None                # (path, scene_hash, scene_text, every_s)
+        self._ckpt = None                # (path, scene_hash, scene_text, every_s, inputs)
         self._next_ckpt = math.inf
         self._t0 = time.monotonic()
         self._elapsed_before = 0.0
@@ -578,11 +580,14 @@ class Engine:
     # ---- checkpoints
 
     def use_checkpoint(self, path: str, scene_hash: str, scene_text: str, every_s: float,
-                       resume: bool) -> bool:
-        """Write checkpoints to `path`; with resume, continue from it if it exists
-        (CheckpointError on a damaged file or another scene; the file is left
-        untouched). Returns True when a checkpoint was loaded."""
-        self._ckpt = (path, scene_hash, scene_text, float(every_s))
+                       resume: bool, inputs: dict[str, str] | None = None) -> bool:
+        """Write checkpoints to `path`; with resume, continue from it if it exists. The
+        checkpoint's identity is the scene's hash and `inputs` (Scene.input_digests: the
+        bytes of the files the scene names): a damaged file, another scene or a changed input
+        file is a CheckpointError, and the file is left untouched. Returns True when a
+        checkpoint was loaded."""
+        inputs = dict(inputs or {})
+        self._ckpt = (path, scene_hash, scene_text, float(every_s), inputs)
         self._next_ckpt = time.monotonic() + float(every_s)
         if not (resume and os.path.exists(path)):
             return False
@@ -593,6 +598,16 @@ class Engine:
             raise CheckpointError(f"{path}: the checkpoint belongs to another scene (scene hash "
                                   f"{a['scene_hash'][:12]}..., this scene {scene_hash[:12]}...); "
                                   f"use the scene it was started with, or remove it to start afresh")
+        try:
+            saved = json.loads(a["inputs"])
+            changed = sorted(k for k in saved.keys() | inputs.keys() if saved.get(k) != inputs.get(k))
+        except (TypeError, ValueError, AttributeError):
+            raise CheckpointError(f"{path}: unreadable checkpoint (bad attribute 'inputs')") from None
+        if changed:
+            raise CheckpointError(f"{path}: {changed[0]} changed since the checkpoint was written (SHA-256 "
+                                  f"{(saved.get(changed[0]) or 'none')[:12]}... then, "
+                                  f"{(inputs.get(changed[0]) or 'none')[:12]}... now); put the file back "
+                                  f"as it was, or remove the checkpoint to start afresh")
         if a["version"] != __version__:
             raise CheckpointError(f"{path}: written by hpcwedge {a['version']}, this is {__version__}; "
                                   f"finish the run with that version, or remove it to start afresh")
@@ -612,10 +627,13 @@ class Engine:
         return self._elapsed_before + time.monotonic() - self._t0
 
     def write_checkpoint(self, reason: str = "timer") -> bool:
-        """Write the master's state now (no-op without a checkpoint path)."""
+        """Write the master's state now (no-op without a checkpoint path); True if written.
+        A write that fails (OSError: full disk, read-only folder...) keeps the previous
+        checkpoint, says so in one line on stderr and returns False: the run goes on and the
+        next timer or signal tries again."""
         if self._ckpt is None or not self.is_master:
             return False
-        path, scene_hash, text, every = self._ckpt
+        path, scene_hash, text, every, inputs = self._ckpt
         jobs = []
         for name, job in self._jobs.items():
             jobs.append((name, self._state(job, [], finished=True)))
@@ -626,21 +644,33 @@ class Engine:
         for name in self._restored_order:       # restored jobs this session has not reached yet
             if name not in names and name in self._restored:
                 jobs.append((name, self._restored[name]))
-        header = {"scene_hash": scene_hash, "elapsed_s": self.elapsed(), "resumes": self.resumes,
-                  "ranks": self.size, "reason": reason}
-        write_checkpoint(path, header, text, jobs)
+        header = {"scene_hash": scene_hash, "inputs": json.dumps(inputs), "elapsed_s": self.elapsed(),
+                  "resumes": self.resumes, "ranks": self.size, "reason": reason}
+        try:
+            write_checkpoint(path, header, text, jobs)
+        except (OSError, CheckpointError) as e:   # full disk, read-only folder...: the run goes on
+            print(f"hpcwedge: warning: checkpoint not written to {path} ({error_reason(e)}); the previous one "
+                  f"is kept, the next timer or signal tries again", file=sys.stderr)
+            self._next_ckpt = time.monotonic() + every
+            return False
         self.checkpoints_written += 1
         self.checkpoint_reason = reason
         self._next_ckpt = time.monotonic() + every
         return True
 
     def remove_checkpoint(self) -> None:
-        """The result is written: the checkpoint (and a stale temp) are no longer needed."""
+        """The result is written: the checkpoint (and a stale temp) are no longer needed. One
+        that cannot be removed is said in one line (harmless: a later --resume from it ends
+        with the same result)."""
         if self._ckpt is None:
             return
         for p in (self._ckpt[0], self._ckpt[0] + ".tmp"):
-            if os.path.exists(p):
+            try:
                 os.unlink(p)
+            except FileNotFoundError:
+                pass
+            except OSError as e:
+                print(f"hpcwedge: warning: cannot remove {p} ({error_reason(e)})", file=sys.stderr)
 
     @staticmethod
     def _state(job, in_flight, finished: bool) -> dict:

@@ -18,10 +18,9 @@ import math
 import os
 import tempfile
 
-import h5py
 import numpy as np
 
-from .results import index, index_range
+from .results import check_items, index, index_range, open_result
 
 DISP_FRACTION = 0.10     # largest drawn displacement / body size
 ARROW_FRACTION = 0.15    # largest drawn reaction arrow / body size
@@ -33,8 +32,8 @@ def plot_result(path: str, output: str, run: int = -1, ray: int = 0) -> None:
     """Draw run `run` (Python-style index, -1 = last) and its wedged ray `ray` of the
     result file `path`, and save the figure as PNG to `output` (atomically).
 
-    ValueError (one line) for a 3D result, a bad run or ray index, or a file that is
-    not a hpcwedge result.
+    ValueError (one line) for a 3D result, a bad run or ray index (PlotError), or a file that
+    is missing, damaged or not a hpcwedge result (results.FileError).
     """
     data = _load(path, run, ray)
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -53,38 +52,40 @@ def plot_result(path: str, output: str, run: int = -1, ray: int = 0) -> None:
 
 # --------------------------------------------------------------------------- reading
 
+class PlotError(ValueError):
+    """A figure that cannot be drawn (bad run or ray index, a 3D result): one line."""
+
+
 def _load(path: str, run: int, ray: int) -> dict:
-    try:
-        with h5py.File(path, "r") as f:
-            return _read(f, path, run, ray)
-    except (KeyError, TypeError) as e:
-        raise ValueError(f"plot: {path}: not a hpcwedge result (missing {e})") from None
+    """The data of the figure; results.FileError for a missing, damaged or malformed file."""
+    with open_result(path, passthrough=(PlotError,)) as f:
+        return _read(f, path, run, ray)
 
 
 def _read(f, path: str, run: int, ray: int) -> dict:
     a = f.attrs
     dim = int(a["dim"])
     if dim == 3:
-        raise ValueError("plot: 3D results are not drawn yet")
+        raise PlotError("plot: 3D results are not drawn yet")
     if dim != 2:
-        raise ValueError(f"plot: {path}: dim must be 2 or 3, got {dim}")
+        raise PlotError(f"plot: {path}: dim must be 2 or 3, got {dim}")
     m = int(a["m"])
     keys = sorted(f["runs"])
     n_runs = len(keys)
     k = index(run, n_runs)
     if k is None:
-        raise ValueError(f"plot: run {run} out of range (the result has {n_runs} run(s): {index_range(n_runs)})")
+        raise PlotError(f"plot: run {run} out of range (the result has {n_runs} run(s): {index_range(n_runs)})")
     g = f["runs"][keys[k]]
     rays = np.asarray(g["rays"][()], dtype=float) if "rays" in g else None
     if rays is not None:
         rays = rays.reshape(-1, 4 * m) if rays.size else np.zeros((0, 4 * m))
         if rays.shape[1] != 4 * m:
-            raise ValueError(f"plot: {path}: run {k} rays have {rays.shape[1]} entries, expected 4m = {4 * m}")
+            raise PlotError(f"plot: {path}: run {k} rays have {rays.shape[1]} entries, expected 4m = {4 * m}")
     n_rays = 0 if rays is None else len(rays)
     j = index(ray, n_rays) if n_rays else (0 if ray in (0, -1) else None)
     if j is None:
         what = f"0..{n_rays - 1} or -{n_rays}..-1" if n_rays else "only 0 when there are none"
-        raise ValueError(f"plot: ray {ray} out of range (run {k} has {n_rays} wedged ray(s): {what})")
+        raise PlotError(f"plot: ray {ray} out of range (run {k} has {n_rays} wedged ray(s): {what})")
     mu_c = float(a["mu_c"]) if "mu_c" in a else math.nan
     out = {"name": _str(a.get("name", os.path.basename(path))), "dim": dim, "m": m,
            "run": k, "n_runs": n_runs, "mu": float(g.attrs["mu"]),
@@ -92,6 +93,7 @@ def _read(f, path: str, run: int, ray: int) -> dict:
            "rays": rays, "ray": j if n_rays else None,
            "cones": json.loads(_str(g["cones_json"][()])) if "cones_json" in g else None,
            "model": None}
+    check_items(out["cones"], None, n_rays, m)
     if "model" in f:
         mg = f["model"]
         mdl = {"coords": np.asarray(mg["coords"][()], dtype=float),
@@ -101,7 +103,7 @@ def _read(f, path: str, run: int, ray: int) -> dict:
                          for name in mg if name.startswith("cells_")}}
         if mdl["coords"].ndim != 2 or mdl["coords"].shape[1] != 2 or len(mdl["contact_nodes"]) != m \
                 or mdl["normals"].shape != (m, 2):
-            raise ValueError(f"plot: {path}: /model does not match dim 2 and m = {m}")
+            raise PlotError(f"plot: {path}: /model does not match dim 2 and m = {m}")
         out["model"] = mdl
         out["config"], out["config_note"] = None, None
         if n_rays:

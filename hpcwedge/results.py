@@ -1,10 +1,18 @@
-"""Result files (SPEC §4): HDF5 layout, atomic writes, and the JSON of `show`.
+"""Result files (SPEC §4): HDF5 layout, atomic checksummed writes, and the JSON of `show`.
+
+Every file write_atomic writes (results and checkpoints) starts with a 512-byte HDF5 user
+block: CHECKSUM_MAGIC, the SHA-256 (hex) of all the bytes after the block, a newline, zeros.
+verify_checksum checks it before h5py opens the file, so any damage (a flipped byte
+anywhere, a truncation) is found, also in bytes h5py would never read. Result files
+written before checksums (no user block: they start with the HDF5 signature) are still
+read, with a note on stderr.
 
 Layout of RESULT.h5
     /                attrs: name, dim, m, complete, mu_c (NaN = null), mu_c_status,
-                     version, scene_hash, stages (JSON), timings (JSON), stats (JSON),
-                     scene_dir (absolute folder of the scene file: its file paths are
-                     relative to it)
+                     version, scene_hash, inputs (JSON {"model.file k.npz": SHA-256 of
+                     its bytes}: Scene.input_digests), stages (JSON), timings (JSON),
+                     stats (JSON), scene_dir (absolute folder of the scene file: its file
+                     paths are relative to it)
     /scene_text      the scene file, verbatim
     /model/          coords, contact_nodes, normals, cells_<kind> (when a model was built)
     /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
@@ -14,10 +22,15 @@ Layout of RESULT.h5
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
+import re
+import sys
 import tempfile
+import time
+from contextlib import contextmanager
 
 import h5py
 import numpy as np
@@ -25,12 +38,78 @@ import numpy as np
 from . import __version__
 
 
+class FileError(ValueError):
+    """A file this program wrote (a result, a checkpoint) that cannot be used: damaged, not
+    ours, or missing parts. The message is one line naming the file and the reason."""
+
+
+def error_reason(e: BaseException) -> str:
+    """A short one-line reason for an error of a file operation: the system's words for an
+    OSError's errno, also the errno HDF5 embeds in h5py's messages ("No space left on
+    device"), else the message on one line."""
+    m = re.search(r"errno = (\d+)", str(e))
+    if m:
+        return os.strerror(int(m.group(1)))
+    text = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+    return " ".join(str(text).split()) or type(e).__name__
+
+
+#: the user block at the start of every file write_atomic writes (see the module doc)
+USERBLOCK_SIZE = 512
+CHECKSUM_MAGIC = b"hpcwedge-sha256 "
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_CHUNK = 8 << 20
+
+
+def _body_digest(fh) -> str:
+    """SHA-256 (hex) of the bytes of the open binary file fh after the user block."""
+    h = hashlib.sha256()
+    fh.seek(USERBLOCK_SIZE)
+    while chunk := fh.read(_CHUNK):
+        h.update(chunk)
+    return h.hexdigest()
+
+
+def seal(path: str) -> None:
+    """Write the checksum user block of the closed HDF5 file `path` (made with
+    userblock_size=USERBLOCK_SIZE, or changed in place after it was sealed) and fsync it."""
+    with open(path, "rb+") as fh:
+        block = CHECKSUM_MAGIC + _body_digest(fh).encode() + b"\n"
+        fh.seek(0)
+        fh.write(block.ljust(USERBLOCK_SIZE, b"\0"))
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def verify_checksum(path: str) -> bool:
+    """Check the checksum user block of `path` against its bytes. True: verified; False: an
+    HDF5 file without one (written before checksums). FileError when the file is damaged
+    (digest differs, truncated, block altered), is not an HDF5 file, or cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            block = fh.read(USERBLOCK_SIZE)
+            if block[:len(_HDF5_SIGNATURE)] == _HDF5_SIGNATURE:
+                return False
+            if not block.startswith(CHECKSUM_MAGIC):
+                raise FileError(f"{path}: not a file written by hpcwedge (no checksum block, no HDF5 signature)")
+            stored = block[len(CHECKSUM_MAGIC):len(CHECKSUM_MAGIC) + 65]
+            intact = (len(block) == USERBLOCK_SIZE and stored[-1:] == b"\n"
+                      and not block[len(CHECKSUM_MAGIC) + 65:].strip(b"\0"))
+            if not intact or _body_digest(fh).encode() != stored[:-1]:
+                raise FileError(f"{path}: damaged: its SHA-256 checksum does not match its contents, "
+                                f"it was truncated or altered after it was written")
+    except OSError as e:
+        raise FileError(f"{path}: cannot read ({error_reason(e)})") from None
+    return True
+
+
 def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> None:
-    """Write an HDF5 file through `fill(h5file)`: temp file in the same folder,
-    flush + fsync, optionally `verify(tmp)` (raises if the file is bad), then
-    os.replace and an fsync of the folder, so a crash never leaves a half-written
-    file and a bad file never replaces a good one. tmp_path: a fixed temp name
-    (a stale one from a killed writer is simply overwritten); default: a fresh one."""
+    """Write an HDF5 file through `fill(h5file)`: temp file in the same folder, closed,
+    sealed with its checksum (module doc) and fsynced, optionally `verify(tmp)` (raises if
+    the file is bad), then os.replace and an fsync of the folder, so a crash never leaves a
+    half-written file and a bad file never replaces a good one. tmp_path: a fixed temp name
+    (a stale one from a killed writer is simply overwritten); default: a fresh one.
+    A failed write (OSError: full disk, read-only folder...) raises and leaves `path` as it was."""
     folder = os.path.dirname(os.path.abspath(path)) or "."
     os.makedirs(folder, exist_ok=True)
     if tmp_path is None:
@@ -39,17 +118,17 @@ def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> N
     else:
         tmp = tmp_path
     try:
-        with h5py.File(tmp, "w") as f:
+        with h5py.File(tmp, "w", userblock_size=USERBLOCK_SIZE) as f:
             fill(f)
-            f.flush()
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
+        seal(tmp)
         if verify is not None:
             verify(tmp)
         os.replace(tmp, path)
     except BaseException:
-        if os.path.exists(tmp):
+        try:
             os.unlink(tmp)
+        except OSError:
+            pass
         raise
     try:
         dfd = os.open(folder, os.O_RDONLY)
@@ -80,6 +159,7 @@ def write_result(path: str, result) -> None:
                         "mu_c": np.nan if result.mu_c is None else result.mu_c,
                         "mu_c_status": result.mu_c_status or "",
                         "version": __version__, "scene_hash": s.hash,
+                        "inputs": json.dumps(s.input_digests),
                         "scene_dir": os.path.abspath(s.base_dir),
                         "stages": json.dumps(result.stages), "timings": json.dumps(result.timings),
                         "stats": json.dumps(result.stats, default=_plain)})
@@ -110,17 +190,65 @@ def write_result(path: str, result) -> None:
     write_atomic(path, fill)
 
 
+#: what h5py, numpy and json raise on a file whose structure is not a result's
+STRUCTURE_ERRORS = (KeyError, TypeError, ValueError, IndexError, AttributeError, OSError)
+
+
+@contextmanager
+def open_result(path: str, passthrough: tuple = ()):
+    """The result file `path` opened read-only (an h5py.File) after verify_checksum (a file
+    written before checksums is read, with a note on stderr once it has been read; a file
+    verified before in this process and unchanged since is not hashed again: _VERIFIED).
+    Every problem of the file, also one met in the caller's with block (a missing dataset, a
+    wrong type or shape, bad JSON), is a FileError naming the file; exceptions of the
+    classes in `passthrough` (the caller's own one-line errors) pass as they are."""
+    if not os.path.exists(path):
+        raise FileError(f"{path}: no such file")
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise FileError(f"{path}: cannot read ({error_reason(e)})") from None
+    ident = (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    verified = ident in _VERIFIED or verify_checksum(path)
+    if verified and time.time() - max(st.st_mtime, st.st_ctime) > STABLE_S:
+        _VERIFIED.add(ident)
+    try:
+        with h5py.File(path, "r") as f:
+            yield f
+    except (FileError, *passthrough):
+        raise
+    except STRUCTURE_ERRORS as e:
+        reason = " ".join(str(e).split()) or type(e).__name__
+        raise FileError(f"{path}: not a hpcwedge result ({reason})") from None
+    if not verified and path not in _NOTED:
+        _NOTED.add(path)
+        print(f"hpcwedge: note: {path} has no checksum (written by an hpcwedge older than "
+              f"checksummed results): read without verification", file=sys.stderr)
+
+
+#: the files without checksum open_result has read in this process (one note each)
+_NOTED: set = set()
+#: (path, device, inode, size, mtime, ctime) of the files open_result verified in this process
+#: that had not changed for STABLE_S seconds. Any later change gives such a file new times
+#: (far beyond the clock's granularity), hence a new identity that is verified again. show,
+#: plot and export open a result up to three times; a pass over a 1.3 GB result costs ~2 s.
+_VERIFIED: set = set()
+STABLE_S = 2.0
+
+
 def read_result(path: str, with_rays: bool = True) -> dict:
-    """The `show --json` object of a result file (SPEC §4), rays as nested lists."""
-    with h5py.File(path, "r") as f:
+    """The `show --json` object of a result file (SPEC §4), rays as nested lists.
+    FileError (one line) for a missing, damaged or malformed file."""
+    with open_result(path) as f:
         return _result_object(f, (lambda ds: ds[()].tolist()) if with_rays else None)
 
 
 def dump_result_json(path: str, out, with_rays: bool = True) -> None:
     """Write read_result(path, with_rays) as one JSON object to the text stream `out`, the
     ray arrays streamed RAY_CHUNK rows at a time: a result with millions of rays (plug2d
-    m = 20: 2e6 x 80) never exists as Python lists or as one string."""
-    with h5py.File(path, "r") as f:
+    m = 20: 2e6 x 80) never exists as Python lists or as one string. FileError as read_result
+    (found before anything is written, as the checksum covers the whole file)."""
+    with open_result(path) as f:
         _dump(_result_object(f, _Rows if with_rays else None), out)
         out.write("\n")
 
@@ -174,18 +302,42 @@ def _result_object(f, rays) -> dict:
            "mu_c_status": str(a["mu_c_status"]) or None,
            "runs": [], "timings": json.loads(a["timings"]),
            "stages": json.loads(a["stages"]), "stats": json.loads(a["stats"]),
-           "version": str(a["version"]), "scene_hash": str(a["scene_hash"])}
+           "version": str(a["version"]), "scene_hash": str(a["scene_hash"]),
+           "inputs": json.loads(a["inputs"]) if "inputs" in a else None}
     for k in sorted(f["runs"]):
         g = f["runs"][k]
         run = {"mu": float(g.attrs["mu"])}
         for name in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns"):
             run[name] = int(g.attrs[name]) if name in g.attrs else None
         for name in ("rays", "trivial_rays"):
+            if name in g and (g[name].ndim != 2 or g[name].dtype.kind != "f"):
+                raise TypeError(f"/runs/{k}/{name}: {g[name].ndim}-D {g[name].dtype}, expected 2-D floats")
             run[name] = rays(g[name]) if (name in g and rays is not None) else None
         run["cones"] = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
         run["patterns"] = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
+        n_rays = g["rays"].shape[0] if "rays" in g else int(g.attrs.get("n_wedged_rays", 0))
+        check_items(run["cones"], run["patterns"], n_rays, out["m"])
         out["runs"].append(run)
     return out
+
+
+def check_items(cones, patterns, n_rays: int, m: int) -> None:
+    """ValueError unless a run's cones and patterns (parsed cones_json, patterns_json; None
+    passes) have the layout of the module doc: cones {"rays": wedged-ray indices < n_rays,
+    "zero_u", "zero_r": node indices < m, "mu_c": number or null}, patterns {"contact": node
+    indices < m, "mu_c"}. Readers check before using them, so a malformed file is one line."""
+    def indices(v, n):
+        return isinstance(v, list) and all(type(i) is int and 0 <= i < n for i in v)
+
+    def number(v):
+        return v is None or type(v) in (int, float)
+    if cones is not None and not (isinstance(cones, list) and all(
+            isinstance(c, dict) and indices(c.get("rays"), n_rays) and indices(c.get("zero_u"), m)
+            and indices(c.get("zero_r"), m) and number(c.get("mu_c")) for c in cones)):
+        raise ValueError("cones_json: not the cones of this run")
+    if patterns is not None and not (isinstance(patterns, list) and all(
+            isinstance(p, dict) and indices(p.get("contact"), m) and number(p.get("mu_c")) for p in patterns)):
+        raise ValueError("patterns_json: not the sign patterns of this run")
 
 
 def index(i: int, n: int) -> int | None:

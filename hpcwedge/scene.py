@@ -5,6 +5,7 @@ reason; the command line turns it into exit status 2 with nothing written.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import inspect
 import math
@@ -85,6 +86,28 @@ class Scene:
         model), in a fixed order; the scene file itself is not among them."""
         f = self.model.get("file") if self.kind in ("stiffness", "mesh") else None
         return (os.path.abspath(os.path.join(self.base_dir, f)),) if isinstance(f, str) and f else ()
+
+    @functools.cached_property
+    def input_digests(self) -> dict[str, str]:
+        """{"model.file k.npz": SHA-256 (hex) of the file's bytes} for every file in
+        input_files, read once (the first use): with `hash` (the text), the identity of what a
+        run depends on, kept in checkpoints and results. SceneError when a file is missing or
+        unreadable."""
+        out = {}
+        for path in self.input_files:
+            key, name = next(((f"model.{k}", v) for k, v in self.model.items() if isinstance(v, str)
+                              and os.path.abspath(os.path.join(self.base_dir, v)) == path), ("file", path))
+            h = hashlib.sha256()
+            try:
+                with open(path, "rb") as fh:
+                    while chunk := fh.read(8 << 20):
+                        h.update(chunk)
+            except FileNotFoundError:
+                raise SceneError(f"{key}: {name} not found") from None
+            except OSError as e:
+                raise SceneError(f"{key}: cannot read {name} ({e.strerror or type(e).__name__})") from None
+            out[f"{key} {name}"] = h.hexdigest()
+        return out
 
     def plan(self) -> Plan:
         enum = self.enumerate is not False

@@ -3,10 +3,12 @@ master at random moments (serially and under mpirun), SIGTERM, SIGUSR1, a
 killed worker, and both in the middle of a 2D double description split over
 faces — then --resume gives exactly the uninterrupted answers; a checkpoint of
 another scene or a damaged one is refused (exit 2) and left as is."""
+import errno
 import os
 import random
 import shutil
 import signal
+import subprocess
 import time
 
 import h5py
@@ -15,7 +17,7 @@ import pytest
 
 from hpcwedge.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
 from hpcwedge.parallel import EXIT_INTERRUPTED
-from mpi_helpers import (all_gone, answers, interrupt_cycles, launch, needs_mpirun, rank_pids, ray_arrays,
+from mpi_helpers import (all_gone, answers, command, env, interrupt_cycles, launch, needs_mpirun, rank_pids, ray_arrays,
                          rays_answers, run, scene_text, show, show_json, usr1_handled, wait_for_checkpoint,
                          write_rays_scene, write_scene)
 
@@ -347,6 +349,18 @@ def test_resume_with_another_scene_exit_2(tmp_path):
     assert os.path.exists(out) and not os.path.exists(ckpt)
 
 
+def _refused(scene: str, out: str, phrase: str) -> None:
+    """`run --resume` must refuse the checkpoint of `out`: exit 2, one line naming the
+    checkpoint and `phrase`, the checkpoint byte for byte as it was, no result written."""
+    ckpt = checkpoint_path(out)
+    before = open(ckpt, "rb").read()
+    p = run(None, "run", scene, "-o", out, "--resume", check=False)
+    err = p.stderr.strip()
+    assert p.returncode == 2 and len(err.splitlines()) == 1, p.stderr
+    assert err.startswith("hpcwedge: error: ") and ckpt in err and phrase in err, err
+    assert open(ckpt, "rb").read() == before and not os.path.exists(out)
+
+
 @pytest.mark.parametrize("damage", ["truncate", "garbage", "empty"])
 def test_damaged_checkpoint_exit_2_left_untouched(tmp_path, damage):
     if damage == "truncate":
@@ -359,12 +373,187 @@ def test_damaged_checkpoint_exit_2_left_untouched(tmp_path, damage):
         out = str(tmp_path / "r.h5")
         ckpt = checkpoint_path(out)
         open(ckpt, "wb").write(b"" if damage == "empty" else b"\x89HDF\r\n\x1a\n" + os.urandom(3000))
+    _refused(scene, out, "unreadable checkpoint")
+
+
+def test_random_damage_of_a_real_checkpoint_refused_and_kept(tmp_path, reference):
+    """20 random damages (fixed seed) of a checkpoint written by a real SIGTERM'd run: 1 or 16
+    flipped bytes at random offsets (anywhere: h5py never reads some of them), or a
+    truncation. Each --resume is refused (exit 2, one line) and leaves the file as it is;
+    the intact checkpoint then resumes to the uninterrupted answers."""
+    scene, out = _some_checkpoint(tmp_path)
+    ckpt = checkpoint_path(out)
+    good = open(ckpt, "rb").read()
+    rng = random.Random(11)
+    for i in range(20):
+        data = bytearray(good)
+        if i % 4 == 3:
+            del data[rng.randrange(len(data)):]
+        else:
+            for k in rng.sample(range(len(data)), rng.choice((1, 16))):
+                data[k] ^= rng.randrange(1, 256)
+        open(ckpt, "wb").write(data)
+        _refused(scene, out, "unreadable checkpoint")
+    open(ckpt, "wb").write(good)
+    assert answers(_finish(scene, out)) == reference
+
+
+def test_one_flipped_bit_in_the_saved_patterns_refused(tmp_path):
+    """One bit of a saved sign-pattern word (a dataset h5py reads back without complaint,
+    giving other patterns) makes the checkpoint refused."""
+    scene, out = _some_checkpoint(tmp_path)
+    ckpt = checkpoint_path(out)
+    with h5py.File(ckpt, "r") as f:
+        found = []
+        f["jobs"].visititems(lambda name, ds: found.append((name, ds.id.get_offset(), ds[()]))
+                             if isinstance(ds, h5py.Dataset) and name.endswith("_contact") and ds.size
+                             and ds.id.get_offset() is not None else None)
+    name, offset, words = found[0]
+    with open(ckpt, "r+b") as fh:
+        fh.seek(offset)
+        byte = fh.read(1)[0]
+        fh.seek(offset)
+        fh.write(bytes([byte ^ 1]))
+    with h5py.File(ckpt, "r") as f:                 # HDF5 alone does not notice
+        assert not np.array_equal(f["jobs"][name][()], words)
+    _refused(scene, out, "checksum")
+
+
+def test_resume_after_the_stiffness_file_changed_exit_2(tmp_path, reference):
+    """The checkpoint's identity covers the bytes of model.file: another K under the same name
+    is refused (resuming would mix two problems); the original K resumes as usual."""
+    scene, out = _some_checkpoint(tmp_path)
+    k = tmp_path / "plug8.npz"
+    good = k.read_bytes()
+    with np.load(k) as z:
+        K, N = z["K"], z["null_space"]
+    np.savez(k, K=2 * K, null_space=N)              # a stiffer body: other u in every ray
+    _refused(scene, out, "model.file plug8.npz changed since the checkpoint was written")
+    k.write_bytes(good)
+    assert answers(_finish(scene, out)) == reference
+
+
+def test_resume_after_the_mesh_file_changed_exit_2(tmp_path):
+    """The same for a mesh scene (its model.file), with a checkpoint the engine writes."""
+    import meshio
+
+    from hpcwedge.models import block2d
+    from hpcwedge.parallel import Engine
+    from hpcwedge.scene import load_scene
+    ref = block2d(rows=2)
+    meshio.write(str(tmp_path / "body.vtu"), meshio.Mesh(ref.coords, [("quad", ref.cells["quad"])]))
+    path = tmp_path / "s.toml"
+    path.write_text('name = "m"\ndim = 2\n[model]\nkind = "mesh"\nfile = "body.vtu"\n[contact]\n'
+                    f"nodes = {ref.contact_nodes.tolist()}\nnormals = {ref.normals.tolist()}\n"
+                    "[friction]\nmu = [0.65]\n")
+    out = str(tmp_path / "r.h5")
+    scene = load_scene(str(path))
+    engine = Engine()
+    engine.use_checkpoint(checkpoint_path(out), scene.hash, scene.text, 60.0, False, inputs=scene.input_digests)
+    assert engine.write_checkpoint("SIGTERM")
+    moved = ref.coords.copy()
+    moved[0] += 0.01
+    meshio.write(str(tmp_path / "body.vtu"), meshio.Mesh(moved, [("quad", ref.cells["quad"])]))
+    _refused(str(path), out, "model.file body.vtu changed since the checkpoint was written")
+
+
+@pytest.fixture
+def small_fs(tmp_path):
+    """A real 4 MB file system (tmpfs; mounting needs root), unmounted afterwards."""
+    d = tmp_path / "fs"
+    d.mkdir()
+    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4M", "tmpfs", str(d)], capture_output=True, text=True)
+    if p.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs: {p.stderr.strip() or p.returncode}")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=True)
+
+
+def _fill(path) -> None:
+    """Write `path` (appending) until its file system is full."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND)
+    try:
+        while True:
+            os.write(fd, b"\0" * 4096)
+    except OSError as e:
+        assert e.errno == errno.ENOSPC, e
+    finally:
+        os.close(fd)
+
+
+def _lines(path, phrase: str) -> list[str]:
+    with open(path) as f:
+        return [line for line in f if phrase in line]
+
+
+def test_checkpoint_write_on_a_full_disk_keeps_the_last_and_goes_on(tmp_path, small_fs, reference):
+    """The output's file system fills up mid-run: every timer checkpoint that fails says so
+    in one line, the last good checkpoint stays as it was, and the run goes on; once there
+    is room again it finishes with the uninterrupted answers."""
+    scene = write_scene(tmp_path, every=0.05)
+    out = str(small_fs / "r.h5")
+    ckpt, filler, errors = checkpoint_path(out), small_fs / "filler", tmp_path / "stderr.txt"
+    warning = f"hpcwedge: warning: checkpoint not written to {ckpt} (No space left on device)"
+    for attempt in range(4):                        # a run may end before the disk is full: start again
+        for f in (out, ckpt, filler):
+            if os.path.exists(f):
+                os.unlink(f)
+        with open(errors, "w") as err:
+            p = subprocess.Popen(command(None, "run", scene, "-o", out, "-q"), env=env(),
+                                 stdout=subprocess.DEVNULL, stderr=err)
+        try:
+            if not wait_for_checkpoint(ckpt, 0, p):
+                continue
+            _fill(filler)
+            deadline = time.monotonic() + 60
+            while not _lines(errors, "warning") and p.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.01)
+            _fill(filler)                           # what the failed write had used is free again: take it
+            n, kept = len(_lines(errors, "warning")), open(ckpt, "rb").read()
+            while len(_lines(errors, "warning")) <= n and p.poll() is None and time.monotonic() < deadline:
+                time.sleep(0.01)
+            running = p.poll() is None
+            if running:
+                assert open(ckpt, "rb").read() == kept and read_checkpoint(ckpt)["order"]
+            os.unlink(filler)
+            code = p.wait(timeout=120)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        if not running:                             # ended (the result write failed) before the test looked
+            continue
+        lines = open(errors).read().splitlines()
+        assert code == 0 and lines and all(line.startswith(warning) for line in lines), lines
+        assert answers(show_json(out)) == dict(reference, scene_hash=show_json(out)["scene_hash"])
+        assert not os.path.exists(ckpt)
+        return
+    pytest.fail("the run always ended before the disk was full")
+
+
+def test_checkpoint_that_cannot_be_replaced_nor_removed(tmp_path, reference):
+    """An immutable checkpoint (chattr +i: not even root may replace or delete it): each failed
+    timer checkpoint and the failed removal at the end are one warning line, the file stays
+    as it was, and the resumed run finishes with the uninterrupted answers."""
+    scene, out = _some_checkpoint(tmp_path)
+    ckpt = checkpoint_path(out)
     before = open(ckpt, "rb").read()
-    p = run(None, "run", scene, "-o", out, "--resume", check=False)
-    assert p.returncode == 2, p.stderr
-    err = p.stderr.strip()
-    assert len(err.splitlines()) == 1 and ckpt in err and "unreadable checkpoint" in err
-    assert open(ckpt, "rb").read() == before and not os.path.exists(out)
+    p = subprocess.run(["chattr", "+i", ckpt], capture_output=True, text=True)
+    if p.returncode != 0:
+        pytest.skip(f"chattr +i not possible here: {p.stderr.strip()}")
+    try:
+        r = run(None, "run", scene, "-o", out, "-q", "--resume", check=False)
+        lines = r.stderr.splitlines()
+        assert r.returncode == 0 and lines, r.stderr
+        assert lines[-1] == f"hpcwedge: warning: cannot remove {ckpt} (Operation not permitted)"
+        assert all(line.startswith(f"hpcwedge: warning: checkpoint not written to {ckpt} (Operation not "
+                                   f"permitted)") for line in lines[:-1]), lines
+        assert open(ckpt, "rb").read() == before
+    finally:
+        subprocess.run(["chattr", "-i", ckpt], check=True)
+    assert answers(show_json(out)) == reference
 
 
 def test_resume_without_checkpoint_starts_fresh(tmp_path, reference):
@@ -385,7 +574,8 @@ def _state(n):
 
 def test_write_read_round_trip(tmp_path):
     path = str(tmp_path / "c.h5.ckpt")
-    write_checkpoint(path, {"scene_hash": "h", "elapsed_s": 1.5, "resumes": 2, "ranks": 3, "reason": "timer"},
+    write_checkpoint(path, {"scene_hash": "h", "inputs": "{}", "elapsed_s": 1.5, "resumes": 2, "ranks": 3,
+                            "reason": "timer"},
                      "name = 'x'\n", [("a", _state(4)), ("b", _state(0))])
     ck = read_checkpoint(path)
     assert ck["order"] == ["a", "b"] and ck["scene_text"] == "name = 'x'\n"
@@ -396,7 +586,7 @@ def test_write_read_round_trip(tmp_path):
 
 def test_failed_write_keeps_the_good_checkpoint(tmp_path, monkeypatch):
     path = str(tmp_path / "c.h5.ckpt")
-    header = {"scene_hash": "h", "elapsed_s": 1.0, "resumes": 0, "ranks": 1, "reason": "timer"}
+    header = {"scene_hash": "h", "inputs": "{}", "elapsed_s": 1.0, "resumes": 0, "ranks": 1, "reason": "timer"}
     write_checkpoint(path, header, "s", [("a", _state(3))])
     good = open(path, "rb").read()
 

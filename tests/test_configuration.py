@@ -284,5 +284,5 @@ def test_mesh_file_found_beside_the_scene_or_the_result(tmp_path):
     moved = ref.coords.copy()
     moved[0] += 0.01
     meshio.write(str(out_dir / "body.vtu"), meshio.Mesh(moved, [("quad", ref.cells["quad"])]))
-    with pytest.raises(ConfigurationError, match="differs from the result's /model"):
+    with pytest.raises(ConfigurationError, match="model.file body.vtu changed since the result was written"):
         load_configuration(res, ray=0)

@@ -11,7 +11,7 @@ pytest.importorskip("matplotlib")
 from hpcwedge.cli import main
 from hpcwedge.pipeline import Result, Run, run_scene
 from hpcwedge.plot import plot_result
-from hpcwedge.results import write_result
+from hpcwedge.results import seal, write_result
 from hpcwedge.scene import parse_scene
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -131,6 +131,7 @@ def test_run_without_wedged_rays(tmp_path):
 def test_3d_result_refused(stiffness_h5, tmp_path):
     with h5py.File(stiffness_h5, "r+") as f:
         f.attrs["dim"] = 3
+    seal(stiffness_h5)                                 # changed on purpose: a new checksum
     with pytest.raises(ValueError, match=r"^plot: 3D results are not drawn yet$"):
         plot_result(stiffness_h5, str(tmp_path / "fig.png"))
 
@@ -214,6 +215,7 @@ def test_block2d_whole_body_von_mises(tmp_path):
     _check_png(png)
     with h5py.File(h5, "r+") as f:
         f["model/coords"][0, 0] += 0.5                 # no longer the scene's body
+    seal(h5)
     d = _load(h5, -1, 1)
     assert d["config"] is None and "differs" in d["config_note"]
     plot_result(h5, str(png), ray=1)
