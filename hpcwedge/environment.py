@@ -66,6 +66,7 @@ def environment() -> dict:
     per loaded BLAS, by library name], "numpy_simd" (the SIMD extensions numpy dispatches
     to here), "cpu" {"model", "logical_cpus"}, "platform"}. The same in every rank of a job
     on one machine (no pid, host name, affinity or time)."""
+    import scipy.linalg  # noqa: F401  (loads the BLAS of numpy and scipy, the ones to record)
     from threadpoolctl import threadpool_info
     blas = sorted(({"library": os.path.basename(lib.get("filepath") or ""),
                     "api": lib.get("internal_api"), "version": lib.get("version"),
