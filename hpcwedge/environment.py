@@ -3,9 +3,11 @@
 Thread policy (SPEC §5: the same float bits for any rank count, budget or resume on one
 machine, whatever the caller's BLAS thread settings). Every BLAS, LAPACK and OpenMP kernel
 runs on **one thread**; parallelism comes from MPI ranks only. OpenBLAS's rounding
-depends on its thread count (plug2d m = 12: 127 of the ray entries of `X @ U.T` differ
-by up to 5.6e-17 between 1 and 4 threads), and that count differs between a serial run
-(every core), a rank Open MPI binds to one core, and oversubscribed unbound ranks. So:
+depends on its thread count (plug2d m = 12, the ray vectors `X @ U.T`: 127 entries differ
+by up to 5.6e-17 between a serial run and mpirun on an EPYC without AVX-512, issue 11;
+156 between 1 and 2 threads with OpenBLAS's Haswell kernels on ours), and that count
+differs between a serial run (every core), a rank Open MPI binds to one core, and
+oversubscribed unbound ranks. So:
 
 - importing hpcwedge (`hpcwedge/__init__.py`, first in every process of the command line
   and of mpirun) sets THREAD_VARIABLES to "1" in os.environ, *overriding* the caller's
@@ -15,13 +17,15 @@ by up to 5.6e-17 between 1 and 4 threads), and that count differs between a seri
   imported numpy before hpcwedge) with threadpoolctl, for the duration of a block;
   pipeline.run_scene runs inside it.
 
-A caller who wants more BLAS threads for their own numpy work after importing hpcwedge
-sets them back with threadpoolctl outside run_scene; the program's answers never use them.
+The policy covers the command line (every rank) and run_scene. A caller who wants more
+BLAS threads for their own numpy work after importing hpcwedge sets them with
+threadpoolctl; run_scene still runs on one. (Engine functions called directly, outside
+run_scene, in a process that loaded numpy first run at the caller's setting.)
 
 Within one machine the bits then depend on nothing the caller sets except what changes
 the kernels themselves (OPENBLAS_CORETYPE, NPY_DISABLE_CPU_FEATURES): those select other
 SIMD code, like another CPU, and give the same answers with floats equal to rounding
-(tests/test_determinism.py runs the tests under them).
+(tests/test_environment.py runs the determinism and numerics tests under them).
 
 `environment()` is the record stored as a result's stats["environment"] and in every
 benchmark JSON: package versions, the BLAS libraries (threadpoolctl: library, version,
