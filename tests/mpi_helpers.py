@@ -90,6 +90,13 @@ def write_scene(tmp_path, every: float = 0.1, name: str = "scene.toml", text: st
     return str(p)
 
 
+#: BLAS thread settings a caller may have (for `caller=`): 2 threads (more than a bound
+#: rank has), 1, or unset (OpenBLAS's default: every core it may run on); the program's
+#: answers must not depend on them (SPEC §5, hpcwedge/environment.py)
+THREADS_2, THREADS_1, THREADS_UNSET = ({k: v for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+                                       for v in ("2", "1", None))
+
+
 def env(caller: dict | None = None) -> dict:
     """The tests' environment for the command line; `caller`: variables to set on top
     (a value None unsets the variable)."""

@@ -17,16 +17,10 @@ import pytest
 from numpy._core._multiarray_umath import __cpu_features__ as CPU
 
 from hpcwedge.dd import branching_nodes
-from mpi_helpers import needs_mpirun, run, show_json, write_rays_scene
+from mpi_helpers import THREADS_1, THREADS_2, THREADS_UNSET, needs_mpirun, run, show_json, write_rays_scene
 
 #: the kernels every run of this module uses (see module doc); the caller's core type wins
 KERNELS = {} if not CPU.get("AVX2") else {"OPENBLAS_CORETYPE": "Haswell"}
-
-#: the BLAS thread settings a caller may have: set to 2 (more threads than a bound rank
-#: has), to 1, or unset (OpenBLAS's default: every core it may run on)
-THREADS_2, THREADS_1, UNSET = ({k: v for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
-                               for v in ("2", "1", None))
-
 
 def caller_env(threads: dict) -> dict:
     kernels = {k: v for k, v in KERNELS.items() if k not in os.environ}
@@ -59,7 +53,7 @@ def rays_reference(tmp_path_factory):
 
 @pytest.mark.mpi
 @needs_mpirun
-@pytest.mark.parametrize("ranks", [((1, THREADS_1), (2, UNSET)), ((3, THREADS_2), (4, UNSET))])
+@pytest.mark.parametrize("ranks", [((1, THREADS_1), (2, THREADS_UNSET)), ((3, THREADS_2), (4, THREADS_UNSET))])
 def test_2d_rays_same_result_for_1_to_4_ranks(tmp_path, rays_reference, ranks):
     """2D rays under mpirun with the scene's split (run.face_split = 3: 8 faces per
     mu, each a task; serially the same tasks in-process): `show --json` equals the

@@ -24,7 +24,8 @@ from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.scene import parse_scene
 from instances import random_problem
-from mpi_helpers import MPIRUN, ROOT, answers, env, needs_mpirun, run, show, show_json, write_scene
+from mpi_helpers import (MPIRUN, ROOT, THREADS_1, THREADS_2, THREADS_UNSET, answers, env, needs_mpirun, run, show,
+                         show_json, write_scene)
 
 
 def _tree_factory(seed, m=5, free=False):
@@ -278,30 +279,27 @@ def test_plan_patterns_2d():
 # ---------------------------------------------------------------- the real mpirun
 
 
-def _serial_reference(tmp_path_factory, name: str, write, read):
-    """(scene, read(result)) of the uninterrupted serial run of the scene write(folder) writes."""
-    tmp = tmp_path_factory.mktemp(name)
-    scene = write(tmp)
-    out = str(tmp / "ref.h5")
-    run(None, "run", scene, "-o", out, "-q")
-    return scene, read(out)
-
-
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """The uninterrupted serial run of the pattern scene: (scene path, show JSON)."""
-    # plug2d: condensation (PETSc) under mpirun too
-    return _serial_reference(tmp_path_factory, "ref", lambda tmp: write_scene(tmp, raw=False), show)
+    """The uninterrupted serial run of the pattern scene, its caller asking for 2 BLAS
+    threads: (scene path, show JSON)."""
+    tmp = tmp_path_factory.mktemp("ref")
+    scene = write_scene(tmp, raw=False)     # plug2d: condensation (PETSc) under mpirun too
+    out = str(tmp / "ref.h5")
+    run(None, "run", scene, "-o", out, "-q", caller=THREADS_2)
+    return scene, show(out)
 
 
 @pytest.mark.mpi
 @needs_mpirun
-@pytest.mark.parametrize("ranks", [(1, 2), (3, 4)])
+@pytest.mark.parametrize("ranks", [((1, THREADS_1), (2, THREADS_UNSET)), ((3, THREADS_2), (4, THREADS_UNSET))])
 def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
+    """The pattern scene on 1-4 ranks, whatever BLAS threads the caller asks for: the
+    serial run's answers (mu^c and stats.environment included)."""
     scene, want = reference
-    for n in ranks:
+    for n, threads in ranks:
         out = str(tmp_path / f"r{n}.h5")
-        p = run(n, "run", scene, "-o", out)
+        p = run(n, "run", scene, "-o", out, caller=threads)
         assert p.stdout == ""                                  # nobody prints on stdout
         assert p.stderr.count("wrote") == 1                    # only the master reports
         got = show_json(out)
