@@ -23,6 +23,7 @@ import numpy as np
 
 from .build import build_model, contact_problem
 from .dd import branching_nodes, canonical_order
+from .environment import environment, single_threaded
 from .model import Model
 from .mu_critical import mu_critical
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
@@ -88,7 +89,14 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     the scene, not on the rank count; a resumed run keeps its checkpoint's split.
     `condensed`: (model, problem, seconds) of this scene condensed already (the
     command line's distributed condensation under mpirun); None: built and
-    condensed here."""
+    condensed here. Runs under the thread policy (environment.single_threaded);
+    stats["environment"] records what it ran on (environment.environment)."""
+    with single_threaded():
+        return _run_scene(scene, progress, engine, condensed)
+
+
+def _run_scene(scene: Scene, progress: Progress | None, engine: Engine | None,
+               condensed: tuple[Model, ContactProblem, float] | None) -> Result:
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
     t0 = time.perf_counter()
@@ -238,6 +246,7 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     stats["numerics"] = numerics.as_dict()
     timings["total"] = time.perf_counter() - t0
     stats["parallel"] = engine.summary()
+    stats["environment"] = environment()
     result.stats = stats
     return result
 

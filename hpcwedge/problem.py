@@ -215,6 +215,9 @@ def ray_vectors(param: Parametrization, X: np.ndarray, m: int,
     Returns (wedged, V (R, 2n)) with V rows [u..., r...] normalised to sum(r_n) = 1
     for wedged rays and to sum(u_n) = 1 for trivial ones (r set to exact zero).
     Exact rays are mapped and normalised in rational arithmetic, rounded once.
+    Float rays: a BLAS product, whose rounding depends on the BLAS thread count
+    (OpenBLAS); the thread policy (environment.py) keeps that at one thread, so the
+    bits are the same serially and on any rank count.
     """
     n = param.U.shape[0]
     if X.dtype == object:

@@ -478,11 +478,12 @@ def main(argv=None) -> int:
                             "" if r.get("rays_per_second") is None else f"{r['rays_per_second']:.6g}",
                             r["status"]])
     os.replace(csv_path + ".tmp", csv_path)
+    from hpcwedge.environment import environment
     with open(os.path.join(args.out, "bench_2d.json"), "w") as f:
         json.dump({"scene": {"model": "plug2d", "cols": COLS, "taper_deg": TAPER, "mu": mu},
                    "peer_budget_s": budget, "peer_used_s": peer_used, "quick": args.quick,
                    "records": [records[k] for k in sorted(records, key=lambda k: (k[1], ENGINES.index(k[0])))],
-                   "mismatches": mismatches}, f, indent=1, default=str)
+                   "mismatches": mismatches, "environment": environment()}, f, indent=1, default=str)
     plot(records, sizes, budget, os.path.join(args.out, "bench_2d.png"), mu)
 
     # ----------------------------------------------------------------- summary

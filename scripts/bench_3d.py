@@ -21,6 +21,7 @@ import numpy as np
 
 from hpcwedge.build import contact_problem
 from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
+from hpcwedge.environment import environment
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.patterns import BnBStats, PatternTree, Subtree, global_mu_critical
 from hpcwedge.problem import parametrize
@@ -103,7 +104,7 @@ def main():
     os.makedirs("results", exist_ok=True)
     path = f"results/bench_3d_{args.levels}x{args.ring}.json"
     with open(path, "w") as f:
-        json.dump(summary, f, indent=1)
+        json.dump({**summary, "environment": environment()}, f, indent=1)
     print("wrote", path)
 
 

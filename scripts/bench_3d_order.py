@@ -22,6 +22,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 
 from hpcwedge.build import contact_problem                       # noqa: E402
+from hpcwedge.environment import environment                     # noqa: E402
 from hpcwedge.patterns import PatternTree                          # noqa: E402
 from hpcwedge.problem import parametrize                           # noqa: E402
 from hpcwedge.scene import parse_scene                             # noqa: E402
@@ -77,7 +78,7 @@ def main():
     print("total:", {k: (v[0], round(v[1], 2)) for k, v in tot.items()})
     os.makedirs("results", exist_ok=True)
     with open("results/bench_3d_order.json", "w") as f:
-        json.dump({"rows": rows, "total": tot}, f, indent=1)
+        json.dump({"rows": rows, "total": tot, "environment": environment()}, f, indent=1)
 
 
 if __name__ == "__main__":

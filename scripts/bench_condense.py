@@ -121,10 +121,11 @@ def main() -> None:
     for row in rows:
         row["rel_diff_vs_first"] = float(np.abs(Ks[row["ranks"]] - K1).max() / np.abs(K1).max())
     from hpcwedge.condense import _petsc
+    from hpcwedge.environment import environment
     PETSc = _petsc()
     res = {"model": f"block2d(rows={ROWS}, cols={COLS}, refine={refine})", "machine_cores": os.cpu_count(),
            "python": platform.python_version(), "petsc": ".".join(map(str, PETSc.Sys.getVersion())),
-           "solver": "MUMPS LDL^T (parallel), reference BLAS", "rows": rows}
+           "solver": "MUMPS LDL^T (parallel), reference BLAS", "rows": rows, "environment": environment()}
     stem = os.path.join(OUT, "bench_condense" + ("_quick" if refine == 71 and a.quick else ""))
     os.makedirs(OUT, exist_ok=True)
     with open(stem + ".json", "w") as f:

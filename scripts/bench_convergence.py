@@ -24,6 +24,7 @@ import json
 import os
 import time
 
+from hpcwedge.environment import environment
 from hpcwedge.models.patch import boundary_nodes, patch_slaves
 from hpcwedge.pipeline import run_scene
 from hpcwedge.scene import parse_scene
@@ -99,7 +100,7 @@ def main() -> None:
     with open(os.path.join(OUT, stem + ".json"), "w") as f:
         json.dump({"rows_model": args.rows, "mu": args.mu, "contact_patch": args.patch,
                    "contact_patch_kind": args.patch_kind, "levels": levels,
-                   "cones": rows}, f, indent=1)
+                   "cones": rows, "environment": environment()}, f, indent=1)
     plot(levels, rows, stem, args.patch, args.patch_kind)
     print(f"\n{'cone (zero sets)':<44}" + "".join(f"{'r=' + str(lv['refine']):>15}" for lv in levels)
           + f"{'last change':>13}")

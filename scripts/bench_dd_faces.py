@@ -223,9 +223,10 @@ def main(argv=None) -> int:
                 report.append({"m": m, "kind": "parallel", **r})
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, "bench_dd_faces.json")
+    from hpcwedge.environment import environment
     with open(path, "w") as f:
         json.dump({"scene": f"plug2d cols {COLS} taper {TAPER} mu {args.mu}", "load": os.getloadavg(),
-                   "records": report}, f, indent=1, default=str)
+                   "records": report, "environment": environment()}, f, indent=1, default=str)
     print("wrote", path)
     return 0
 

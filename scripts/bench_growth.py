@@ -210,8 +210,9 @@ def print_summary(f: dict) -> None:
 
 def write(records, f, out: str) -> None:
     os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
+    from hpcwedge.environment import environment
     with open(out + ".json", "w") as fh:
-        json.dump({"mu_2d": MU_2D, "mu_3d": MU_3D, "fits": f, "points": records},
+        json.dump({"mu_2d": MU_2D, "mu_3d": MU_3D, "fits": f, "points": records, "environment": environment()},
                   fh, indent=1)
     stages = sorted({k for r in records for k in r.get("stages", {})})
     cols = ["dim", "engine", "m", "size", "status", "seconds", "wall", "maxrss_mb", "rss_above_first_mb"]

@@ -34,6 +34,7 @@ import time
 import numpy as np
 
 from hpcwedge.conic import solver_tolerances
+from hpcwedge.environment import environment
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
@@ -122,7 +123,7 @@ def main() -> None:
         w.writerows(rows)
     summary = {f"{d}d": summarise([r for r in rows if r["dim"] == d]) for d in (2, 3)}
     with open(os.path.join(args.out, "bench_mu_c.json"), "w") as f:
-        json.dump({"summary": summary, "rows": rows}, f, indent=1)
+        json.dump({"summary": summary, "rows": rows, "environment": environment()}, f, indent=1)
     plot(summary, args.out)
     for key, sm in summary.items():
         print(f"{key}: {'method':<22}{'worst rel. error':>18}{'mean time [ms]':>16}{'mean solves':>12}")

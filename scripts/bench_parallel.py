@@ -113,8 +113,9 @@ def main() -> None:
         w.writeheader()
         w.writerows(rows)
     socp = os.path.join(OUT, "bench_socp_count.json")
+    from hpcwedge.environment import environment
     doc = {"scene": scene_text(args.levels, args.ring, args.mu), "machine_cores": os.cpu_count(), "rows": rows,
-           "socp_count": json.load(open(socp)) if os.path.exists(socp) else None}
+           "socp_count": json.load(open(socp)) if os.path.exists(socp) else None, "environment": environment()}
     with open(os.path.join(OUT, "bench_parallel.json"), "w") as f:
         json.dump(doc, f, indent=1)
     for r in rows:

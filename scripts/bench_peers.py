@@ -366,8 +366,10 @@ def write(recs: list[dict], mismatches: list[str], out: str, meta: dict) -> None
         w.writeheader()
         w.writerows(rows)
     slim = [{k: v for k, v in r.items() if k != "patterns" or r["section"] == "3d"} for r in recs]
+    from hpcwedge.environment import environment
     with open(out + ".json", "w") as f:
-        json.dump({**meta, "mismatches": mismatches, "records": slim}, f, indent=1, default=str)
+        json.dump({**meta, "mismatches": mismatches, "records": slim, "environment": environment()},
+                  f, indent=1, default=str)
 
 
 def table(recs: list[dict]) -> str:

@@ -27,6 +27,7 @@ import numpy as np
 
 from hpcwedge.build import contact_problem
 from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
+from hpcwedge.environment import environment
 from hpcwedge.patterns import PatternTree, Subtree
 from hpcwedge.problem import parametrize
 from hpcwedge.scene import parse_scene
@@ -96,7 +97,7 @@ def main():
                   f"{st.pruned:6d} {2 ** m:6d} {2 ** m / max(st.solves, 1):9.1f} {t_bnb:7.2f} {tb:8.2f} {same:>5}", flush=True)
     os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
     with open(args.out, "w") as f:
-        json.dump({"runs": rows}, f, indent=1)
+        json.dump({"runs": rows, "environment": environment()}, f, indent=1)
     print("wrote", args.out)
 
 

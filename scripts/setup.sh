@@ -4,6 +4,11 @@
 #   scripts/setup.sh            core: Open MPI, PETSc (system), SLURM (for the job tests), .venv, petsc4py, package
 #   scripts/setup.sh bench      also the benchmark peers (pycddlib on libcdd/libgmp)
 #
+# Versions: pip installs the tested versions of constraints.txt (pip install -c). For the
+# newest versions setup.cfg allows instead: HPCWEDGE_CONSTRAINTS=none scripts/setup.sh
+# (or make setup); HPCWEDGE_CONSTRAINTS=FILE uses another constraints file (relative to
+# the repository). The stamp covers the constraints, so changing them reinstalls.
+#
 # Cluster path: if PETSC_DIR (and optionally PETSC_ARCH) is set, or petsc4py
 # already imports in the chosen Python, that PETSc is used and no system PETSc
 # is installed.  PYTHON selects the interpreter used to create .venv.
@@ -14,7 +19,15 @@ VENV=${VENV:-$ROOT/.venv}
 PY=${PYTHON:-python3}
 EXTRA=${1:-core}
 PETSC4PY_VERSION=3.18.5
-STAMP_SRC=$(cat setup.cfg scripts/setup.sh | sha1sum | cut -c1-12)
+CONSTRAINTS=${HPCWEDGE_CONSTRAINTS:-constraints.txt}
+if [ "$CONSTRAINTS" = none ]; then
+  PIN=(--upgrade --upgrade-strategy eager)       # the newest that setup.cfg allows
+else
+  [ -f "$CONSTRAINTS" ] || { echo "[setup] error: HPCWEDGE_CONSTRAINTS: no file $CONSTRAINTS (or: none)" >&2; exit 2; }
+  PIN=(-c "$CONSTRAINTS")
+fi
+STAMP_SRC=$( { cat setup.cfg scripts/setup.sh; echo "constraints: $CONSTRAINTS";
+               [ "$CONSTRAINTS" = none ] || cat "$CONSTRAINTS"; } | sha1sum | cut -c1-12)
 STAMP=$VENV/.hpcwedge-$EXTRA-$STAMP_SRC
 
 if [ -f "$STAMP" ]; then exit 0; fi
@@ -56,8 +69,8 @@ if [ ! -x "$VENV/bin/python" ]; then
   fi
 fi
 VPY=$VENV/bin/python
-"$VPY" -m pip install -q --upgrade pip "setuptools>=64,<70" wheel   # petsc4py 3.18 does not link with newer distutils
-"$VPY" -m pip install -q "numpy>=1.24" "cython>=3" mpi4py
+"$VPY" -m pip install -q "${PIN[@]}" --upgrade pip "setuptools>=64,<70" wheel   # petsc4py 3.18 does not link with newer distutils
+"$VPY" -m pip install -q "${PIN[@]}" "numpy>=1.24" "cython>=3" mpi4py
 
 if ! have_petsc4py "$VPY"; then
   if [ -z "${PETSC_DIR:-}" ]; then
@@ -69,13 +82,13 @@ if ! have_petsc4py "$VPY"; then
   ver=$(sed -n 's/^#define PETSC_VERSION_\(MAJOR\|MINOR\|SUBMINOR\) *\([0-9]*\)/\2/p' "$PETSC_DIR/include/petscversion.h" | paste -sd.)
   case "$ver" in 3.18.*) want=$PETSC4PY_VERSION ;; *) want="$(echo "$ver" | cut -d. -f1,2).*" ;; esac
   log "building petsc4py==$want against PETSc $ver at $PETSC_DIR (a few minutes, once)"
-  "$VPY" -m pip install -q --no-build-isolation "petsc4py==$want"
+  "$VPY" -m pip install -q "${PIN[@]}" --no-build-isolation "petsc4py==$want"
 fi
 
 if [ "$EXTRA" = bench ]; then
-  "$VPY" -m pip install -q -e ".[test,bench]"
+  "$VPY" -m pip install -q "${PIN[@]}" -e ".[test,bench]"
 else
-  "$VPY" -m pip install -q -e ".[test]"
+  "$VPY" -m pip install -q "${PIN[@]}" -e ".[test]"
 fi
 have_petsc4py "$VPY" || { log "petsc4py does not import"; exit 1; }
 rm -f "$VENV"/.hpcwedge-"$EXTRA"-*

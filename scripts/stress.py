@@ -61,6 +61,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path[:0] = [ROOT, os.path.join(ROOT, "tests")]
 
 from hpcwedge.dd import complementary_rays                         # noqa: E402
+from hpcwedge.environment import environment                       # noqa: E402
 from hpcwedge.models.library import plug2d                          # noqa: E402
 from hpcwedge.patterns import implied_patterns                      # noqa: E402
 from hpcwedge.pipeline import run_scene                              # noqa: E402
@@ -313,7 +314,7 @@ def write(rows: list[dict], out_dir: str, meta: dict) -> None:
         for r in rows:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
     with open(os.path.join(out_dir, "stress.json"), "w") as f:
-        json.dump({"meta": meta, "cases": rows}, f, indent=1, default=_plain)
+        json.dump({"meta": meta, "cases": rows, "environment": environment()}, f, indent=1, default=_plain)
 
 
 def _plain(o):

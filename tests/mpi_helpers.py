@@ -90,11 +90,25 @@ def write_scene(tmp_path, every: float = 0.1, name: str = "scene.toml", text: st
     return str(p)
 
 
-def env() -> dict:
+#: BLAS thread settings a caller may have (for `caller=`): 2 threads (more than a bound
+#: rank has), 1, or unset (OpenBLAS's default: every core it may run on); the program's
+#: answers must not depend on them (SPEC §5, hpcwedge/environment.py)
+THREADS_2, THREADS_1, THREADS_UNSET = ({k: v for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+                                       for v in ("2", "1", None))
+
+
+def env(caller: dict | None = None) -> dict:
+    """The tests' environment for the command line; `caller`: variables to set on top
+    (a value None unsets the variable)."""
     e = dict(os.environ)
     e["PYTHONPATH"] = ROOT + (os.pathsep + e["PYTHONPATH"] if e.get("PYTHONPATH") else "")
     for k in ("SLURM_NTASKS", "HPCWEDGE_MPI"):
         e.pop(k, None)
+    for k, v in (caller or {}).items():
+        if v is None:
+            e.pop(k, None)
+        else:
+            e[k] = v
     return e
 
 
@@ -106,8 +120,8 @@ def command(ranks: int | None, *args: str) -> list[str]:
     return [MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(ranks), "-x", "PYTHONPATH", *py]
 
 
-def run(ranks, *args, timeout=120, check=True) -> subprocess.CompletedProcess:
-    p = subprocess.run(command(ranks, *args), env=env(), capture_output=True, text=True, timeout=timeout)
+def run(ranks, *args, timeout=120, check=True, caller: dict | None = None) -> subprocess.CompletedProcess:
+    p = subprocess.run(command(ranks, *args), env=env(caller), capture_output=True, text=True, timeout=timeout)
     if check and p.returncode != 0:
         raise AssertionError(f"exit {p.returncode}\nstdout:\n{p.stdout}\nstderr:\n{p.stderr}")
     return p

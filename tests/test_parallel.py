@@ -1,7 +1,8 @@
 """The master/worker engine: the same answers serially, in-process and under the
 real mpirun with 1-4 ranks; subtrees really move (budgets, hand-backs); the 2D
 rays split over faces (tasks "face") give the unsplit answers and survive a
-checkpoint; idle ranks sleep (CPU time from /proc); 2D sign patterns agree with
+checkpoint (bit for bit on 1-4 ranks: tests/test_determinism.py); idle ranks sleep
+(CPU time from /proc); 2D sign patterns agree with
 the rays; the SLURM_NTASKS check."""
 import itertools
 import json
@@ -23,8 +24,8 @@ from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.scene import parse_scene
 from instances import random_problem
-from mpi_helpers import (MPIRUN, ROOT, answers, env, needs_mpirun, rays_answers, run, show,
-                         show_json, write_rays_scene, write_scene)
+from mpi_helpers import (MPIRUN, ROOT, THREADS_1, THREADS_2, THREADS_UNSET, answers, env, needs_mpirun, run, show,
+                         show_json, write_scene)
 
 
 def _tree_factory(seed, m=5, free=False):
@@ -278,30 +279,27 @@ def test_plan_patterns_2d():
 # ---------------------------------------------------------------- the real mpirun
 
 
-def _serial_reference(tmp_path_factory, name: str, write, read):
-    """(scene, read(result)) of the uninterrupted serial run of the scene write(folder) writes."""
-    tmp = tmp_path_factory.mktemp(name)
-    scene = write(tmp)
-    out = str(tmp / "ref.h5")
-    run(None, "run", scene, "-o", out, "-q")
-    return scene, read(out)
-
-
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """The uninterrupted serial run of the pattern scene: (scene path, show JSON)."""
-    # plug2d: condensation (PETSc) under mpirun too
-    return _serial_reference(tmp_path_factory, "ref", lambda tmp: write_scene(tmp, raw=False), show)
+    """The uninterrupted serial run of the pattern scene, its caller asking for 2 BLAS
+    threads: (scene path, show JSON)."""
+    tmp = tmp_path_factory.mktemp("ref")
+    scene = write_scene(tmp, raw=False)     # plug2d: condensation (PETSc) under mpirun too
+    out = str(tmp / "ref.h5")
+    run(None, "run", scene, "-o", out, "-q", caller=THREADS_2)
+    return scene, show(out)
 
 
 @pytest.mark.mpi
 @needs_mpirun
-@pytest.mark.parametrize("ranks", [(1, 2), (3, 4)])
+@pytest.mark.parametrize("ranks", [((1, THREADS_1), (2, THREADS_UNSET)), ((3, THREADS_2), (4, THREADS_UNSET))])
 def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
+    """The pattern scene on 1-4 ranks, whatever BLAS threads the caller asks for: the
+    serial run's answers (mu^c and stats.environment included)."""
     scene, want = reference
-    for n in ranks:
+    for n, threads in ranks:
         out = str(tmp_path / f"r{n}.h5")
-        p = run(n, "run", scene, "-o", out)
+        p = run(n, "run", scene, "-o", out, caller=threads)
         assert p.stdout == ""                                  # nobody prints on stdout
         assert p.stderr.count("wrote") == 1                    # only the master reports
         got = show_json(out)
@@ -314,44 +312,6 @@ def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
         if n >= 3:
             assert all(t > 0 for t in st["tasks_per_rank"][1:])   # work reached every worker
             assert st["tasks_per_rank"][0] == 0                   # the master only dispatches
-
-
-@pytest.fixture(scope="module")
-def rays_reference(tmp_path_factory):
-    """The serial run of a 2D rays scene (plug2d m = 12, two mu, split on 3 nodes):
-    (scene, show JSON)."""
-    return _serial_reference(tmp_path_factory, "rays",
-                             lambda tmp: write_rays_scene(tmp, 6, mus=(0.65, 1.0), split=3), show_json)
-
-
-@pytest.mark.mpi
-@needs_mpirun
-@pytest.mark.parametrize("ranks", [(1, 2), (3, 4)])
-def test_2d_rays_same_result_for_1_to_4_ranks(tmp_path, rays_reference, ranks):
-    """2D rays under mpirun with the scene's split (run.face_split = 3: 8 faces per
-    mu, each a task; serially the same tasks in-process): the answers equal the
-    serial run's bit for bit, ray vectors included, on 1 to 4 ranks; with workers,
-    the workers ran every face."""
-    scene, ref = rays_reference
-    want, want_vectors = rays_answers(ref)
-    m = ref["m"]
-    nodes = branching_nodes(m, 3)
-    assert all(d["branching_nodes"] == nodes and d["faces"] == 8 for d in ref["stats"]["dd"])
-    for n in ranks:
-        out = str(tmp_path / f"r{n}.h5")
-        p = run(n, "run", scene, "-o", out)
-        assert p.stdout == "" and p.stderr.count("wrote") == 1
-        got = show_json(out)
-        answers_, vectors = rays_answers(got)
-        assert answers_ == want, f"{n} ranks"
-        assert vectors_equal(vectors, want_vectors), f"{n} ranks"
-        st, dd = got["stats"]["parallel"], got["stats"]["dd"]
-        assert st["ranks"] == n
-        for run_dd in dd:
-            assert run_dd["branching_nodes"] == nodes and len(run_dd["face_seconds"]) == 8
-        assert st["jobs"]["rays"]["tasks"] == 8 * len(ref["runs"])
-        if n > 1:
-            assert st["tasks_per_rank"][0] == 0 and all(t > 0 for t in st["tasks_per_rank"][1:])
 
 
 @pytest.mark.mpi
@@ -377,10 +337,6 @@ def test_2d_exact_rays_identical_under_mpirun(tmp_path):
         d["stats"].pop("dd")
         d.pop("scene_hash")
     assert a == b and a["runs"][0]["n_wedged_rays"] == 44
-
-
-def vectors_equal(a: list, b: list) -> bool:
-    return all(np.array_equal(x, y) for ra, rb in zip(a, b, strict=True) for x, y in zip(ra, rb, strict=True))
 
 
 @pytest.mark.mpi
