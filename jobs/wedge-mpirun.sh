@@ -88,7 +88,6 @@ if [ "$RANKS" -gt "$CPUS" ]; then
   EXTRA=(--oversubscribe "${EXTRA[@]}")
 fi
 [ "$(id -u)" = 0 ] && export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
-export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 SETSID=()
 command -v setsid >/dev/null && SETSID=(setsid)
 
