@@ -372,8 +372,11 @@ class SubtreeJob:
 class Patterns:
     """run_patterns' answer: per mu (in the given order) the feasible full
     patterns (patterns.Subtree, depth m) in canonical order, the ones among
-    them no solver decided, and the job's counters (nodes is the number of
-    tree nodes visited: the same for every split, rank count or resume)."""
+    them no solver decided, and the job's counters: nodes (tree nodes visited),
+    solves, skipped, pruned, undecided and status_* (how each solve was decided)
+    are the same for every split, rank count or resume (open subtrees carry their
+    witness; PatternTree learns no cores by default); tasks and handed_back depend
+    on the schedule (the pipeline reports them under stats.parallel only)."""
 
     mus: list
     m: int
