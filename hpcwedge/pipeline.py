@@ -21,7 +21,7 @@ from functools import cache as once, partial
 
 import numpy as np
 
-from .build import build_model, contact_problem
+from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .dd import branching_nodes, canonical_order
 from .model import Model
 from .mu_critical import mu_critical
@@ -30,7 +30,7 @@ from .parallel import Engine, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
 from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from .progress import Progress
-from .scene import Scene
+from .scene import Scene, SceneError
 from .symmetry import node_symmetries
 
 
@@ -137,8 +137,9 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
                     for dd, (p, cond_T), run in zip(dds, coords, result.runs)]
         else:
             done = (_rays_whole(param, m, run.mu, numerics, exact_param, progress) for run in result.runs)
+        e = stiffness_exponent(scene)
         for run, (dd, p_run) in zip(result.runs, done):
-            _fill_rays(run, dd, p_run, m, plan.cones)
+            _fill_rays(run, dd, p_run, m, plan.cones, e)
             stats["dd"].append({"mu": run.mu, **dd.stats})
         timings["enumerate"] = time.perf_counter() - t
         if plan.cones:
@@ -256,12 +257,21 @@ def _rays_whole(param, m: int, mu: float, numerics: Numerics, exact_param, progr
     return dd, p_run
 
 
-def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
+def _fill_rays(run: Run, dd, param, m: int, want_cones: bool, e: int = 0) -> None:
+    """The run's rays (canonical order; a wedged ray's u back in the scene's units:
+    build.unscale_u with the stiffness exponent e) and cones."""
     order = canonical_order(dd.zero)
     zero = dd.zero[order]
     wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
     for name, sel in (("rays", wedged), ("trivial_rays", ~wedged)):
         _, V = ray_vectors(param, dd.X[order[sel]], m, np.full(int(sel.sum()), sel is wedged))
+        if sel is wedged:                      # trivial rays: sum u_n = 1, no scale to undo
+            with np.errstate(over="ignore"):
+                V[:, :V.shape[1] // 2] = unscale_u(V[:, :V.shape[1] // 2], e)
+            if not np.isfinite(V).all():
+                raise SceneError(f"model: the stiffness is so small (~2^{e}) that the wedged rays' "
+                                 "displacements u (sum r_n = 1) overflow a double; give K or the "
+                                 "moduli in other units")
         setattr(run, name, V)
     run.ray_zero = zero[wedged]
     if not want_cones:
