@@ -405,6 +405,7 @@ class FaceContext:
     rows: list
     m: int
     exact: bool = False
+    max_memory_gb: float | str = "auto"     # run.max_memory_gb (progress.MemoryGuard)
 
 
 def face_payloads(n_mu: int, m: int, nodes) -> list[tuple]:
@@ -417,7 +418,8 @@ def face_payloads(n_mu: int, m: int, nodes) -> list[tuple]:
 
 def face_task(ctx: FaceContext, payload: tuple) -> dict:
     """Task "face": payload (mu index, (contact, gap)) -> the DD of that face
-    (dd.complementary_rays(..., face=...); task_tick() after every step) as a dict
+    (dd.complementary_rays(..., face=...); task_tick() and the memory guard after every
+    step: progress.MemoryLimit when run.max_memory_gb would be exceeded) as a dict
     of numbers and arrays, so that checkpoints can hold it: mu_index; contact, gap
     ((m,) bool masks of the face); X (R, d) float64 rays, or exact integers as
     decimal strings (bytes); zero (R, ceil(3m / 8)) uint8, the zero flags packed
@@ -426,9 +428,16 @@ def face_task(ctx: FaceContext, payload: tuple) -> dict:
     cancellation and closest (NaN: no close call). face_result() turns it back into
     a dd.DDResult."""
     from .dd import complementary_rays
+    from .progress import MemoryGuard
     i, (contact, gap) = payload
-    dd = complementary_rays(ctx.rows[i], ctx.m, exact=ctx.exact, face=(contact, gap),
-                            progress=lambda info: task_tick())
+    guard = MemoryGuard(ctx.max_memory_gb, ranks_on_host())
+    where = f" of face (contact {list(contact)}, gap {list(gap)})"
+
+    def tick(info):
+        task_tick()
+        guard.dd_step(info, where)
+
+    dd = complementary_rays(ctx.rows[i], ctx.m, exact=ctx.exact, face=(contact, gap), progress=tick)
     nodes = np.arange(ctx.m)
     out = {"mu_index": int(i), "contact": np.isin(nodes, list(contact)), "gap": np.isin(nodes, list(gap)),
            "X": _encode_rays(dd.X), "zero": np.packbits(dd.zero, axis=1)}
@@ -589,6 +598,7 @@ class Engine:
         self._ckpt = None                # (path, scene_hash, scene_text, every_s)
         self._next_ckpt = math.inf
         self._t0 = time.monotonic()
+        self._job_start = (self._t0, 0)    # (when, tasks done) as the current job started
         self._elapsed_before = 0.0
         self.resumes = 0
         self.checkpoints_written = 0
@@ -755,6 +765,7 @@ class Engine:
                 job.counters.update(json.loads(state["attrs"]["counters"]))
             self._job_id += 1
             self._current, self._inflight = job, {}
+            self._job_start = (time.monotonic(), job.counters.get("tasks", 0))
             self._restored.pop(job.name, None)
             if self._stop_flag():
                 raise Interrupted(self._stop_flag())
@@ -829,6 +840,9 @@ class Engine:
             self._inflight[w] = token
             return
         self.tasks_per_rank[w] += 1
+        if tag == _ERROR and isinstance(msg, _UserFailure):
+            from .scene import SceneError
+            raise SceneError(msg.line)
         if tag == _ERROR:
             raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task:\n{msg}")
         job.merge(token, msg)
@@ -877,9 +891,15 @@ class Engine:
         now = time.monotonic()
         if self.progress is None or now - last < 10.0:
             return last
-        self.progress.note(f"{job.name}: {job.counters.get('tasks', 0)} tasks done, "
-                           f"{job.pending()} pending, {len(self._inflight)} running "
-                           f"({self.size} rank(s), {self.elapsed():.0f} s)")
+        from .progress import eta
+        done = job.counters.get("tasks", 0)
+        left = ""
+        if isinstance(job, TaskJob):           # a fixed list of tasks: the time left at this session's rate
+            t0, done0 = self._job_start
+            total = len(job.payloads)
+            left = eta(now - t0, done - done0, total - done0)
+        self.progress.note(f"{job.name}: {done} tasks done, {job.pending()} pending, "
+                           f"{len(self._inflight)} running ({self.size} rank(s), {self.elapsed():.0f} s{left})")
         return now
 
     def summary(self) -> dict:
@@ -939,8 +959,13 @@ class Engine:
                                           lambda: _probe(comm, 0, _STOP, status))
             except TaskCancelled:
                 comm.send(None, dest=0, tag=_CANCELLED)     # the stop is read next
-            except Exception:
-                comm.send(traceback.format_exc(), dest=0, tag=_ERROR)
+            except MemoryError:
+                from .progress import out_of_memory
+                comm.send(_UserFailure(str(out_of_memory(f"a {kind!r} task on rank {comm.rank}"))), dest=0, tag=_ERROR)
+            except Exception as e:          # noqa: BLE001  (the master reports it)
+                from .scene import SceneError
+                comm.send(_UserFailure(str(e)) if isinstance(e, SceneError) else traceback.format_exc(),
+                          dest=0, tag=_ERROR)
             else:
                 comm.send(result, dest=0, tag=_RESULT)
 
@@ -968,6 +993,23 @@ class Engine:
             for sig, h in self._old_handlers.items():
                 signal.signal(sig, h)
             self._old_handlers = {}
+
+
+@dataclass
+class _UserFailure:
+    """A worker's task stopped on a user-facing error (run.max_memory_gb, bad input):
+    its one line, raised again on the master (exit status 2, no traceback)."""
+
+    line: str
+
+
+def ranks_on_host() -> int:
+    """How many ranks of this MPI job share the host (1 outside mpirun)."""
+    for key in ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS_PER_NODE"):
+        v = os.environ.get(key, "")
+        if v.isdigit() and int(v) > 0:
+            return int(v)
+    return 1
 
 
 def _pid_alive(pid: int) -> bool:
@@ -1035,7 +1077,7 @@ def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, 
 
 
 def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = None,
-              nodes=(), name: str = "rays") -> list["DDResult"]:
+              nodes=(), name: str = "rays", max_memory_gb: float | str = "auto") -> list["DDResult"]:
     """The complementary rays at every mu, the double description split over the
     faces of the branching nodes `nodes` (SPEC §5; the scene's choice,
     dd.branching_nodes; none: one face, the whole cone), one "face" task per
@@ -1057,7 +1099,7 @@ def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = N
         return face_payloads(len(rows), m, layout["branching_nodes"])
 
     layout = {"branching_nodes": nodes}
-    out = run_tasks("face", FaceContext(list(rows), m, exact), payloads_for(layout), engine, name,
+    out = run_tasks("face", FaceContext(list(rows), m, exact, max_memory_gb), payloads_for(layout), engine, name,
                     layout=layout, payloads_for=payloads_for)
     per_mu: list = [[] for _ in rows]
     for res in out:

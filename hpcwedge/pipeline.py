@@ -26,10 +26,10 @@ from .dd import branching_nodes, canonical_order
 from .model import Model
 from .mu_critical import mu_critical
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
-from .parallel import Engine, run_faces, run_mu_c, run_patterns, strip_exact
+from .parallel import Engine, ranks_on_host, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
 from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
-from .progress import Progress
+from .progress import MemoryGuard, Progress, out_of_memory
 from .scene import Scene, SceneError
 from .symmetry import node_symmetries
 
@@ -88,9 +88,22 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     the scene, not on the rank count; a resumed run keeps its checkpoint's split.
     `condensed`: (model, problem, seconds) of this scene condensed already (the
     command line's distributed condensation under mpirun); None: built and
-    condensed here."""
+    condensed here.
+
+    Memory: progress.MemoryGuard (run.max_memory_gb) checks every double description step,
+    and a MemoryError that still happens becomes one line (progress.MemoryLimit, a
+    SceneError: exit status 2, nothing written)."""
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
+    progress.guard = MemoryGuard(scene.max_memory_gb, ranks_on_host())
+    try:
+        return _run_scene(scene, progress, engine, condensed)
+    except MemoryError:
+        raise out_of_memory("this run") from None
+
+
+def _run_scene(scene: Scene, progress: Progress, engine: Engine,
+               condensed: tuple[Model, ContactProblem, float] | None) -> Result:
     t0 = time.perf_counter()
     plan = scene.plan()
     timings = {"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0}
@@ -132,7 +145,8 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
             coords = [(param, None) if scene.exact else balanced_2d(param, run.mu, m, numerics.scale)
                       for run in result.runs]
             rows = [friction_rows_2d(p, run.mu, m, exact=scene.exact) for (p, _), run in zip(coords, result.runs)]
-            dds = run_faces(rows, m, exact=scene.exact, engine=engine, nodes=nodes, name=RAYS_JOB)
+            dds = run_faces(rows, m, exact=scene.exact, engine=engine, nodes=nodes, name=RAYS_JOB,
+                            max_memory_gb=scene.max_memory_gb)
             done = [judge_2d(dd, p, cond_T, m, run.mu, numerics, exact_param, progress)
                     for dd, (p, cond_T), run in zip(dds, coords, result.runs)]
         else:
