@@ -83,6 +83,8 @@ PROBE_BURST = 32
 BUDGET_SCALE = 16
 #: default node budget of a subtree task (scene key run.task_budget)
 DEFAULT_BUDGET = 64
+#: the master checks the memory guard (Engine.guard) at most this often (seconds)
+GUARD_EVERY_S = 1.0
 
 _TASK, _RESULT, _ERROR, _STOP, _HELLO, _CANCELLED = 1, 2, 3, 4, 5, 6
 #: how often an idle worker checks that its master (same host) is still alive
@@ -599,6 +601,9 @@ class Engine:
         self._next_ckpt = math.inf
         self._t0 = time.monotonic()
         self._job_start = (self._t0, 0)    # (when, tasks done) as the current job started
+        #: progress.MemoryGuard of the run (run.max_memory_gb), checked after merges (pipeline sets it)
+        self.guard = None
+        self._guarded = 0.0
         self._elapsed_before = 0.0
         self.resumes = 0
         self.checkpoints_written = 0
@@ -888,7 +893,13 @@ class Engine:
             time.sleep(_backoff(now - t0, POLL_MAX_MASTER))
 
     def _note(self, job, last: float) -> float:
+        """After a merge: the memory guard (at most every GUARD_EVERY_S), and every 10 s a
+        progress line."""
         now = time.monotonic()
+        if self.guard is not None and now - self._guarded >= GUARD_EVERY_S:
+            self._guarded = now
+            self.guard.check(0, f"the {job.name!r} stage holds its results and {job.pending()} "
+                                f"open tasks after {job.counters.get('tasks', 0)} tasks")
         if self.progress is None or now - last < 10.0:
             return last
         from .progress import eta

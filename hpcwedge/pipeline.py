@@ -90,12 +90,12 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     command line's distributed condensation under mpirun); None: built and
     condensed here.
 
-    Memory: progress.MemoryGuard (run.max_memory_gb) checks every double description step,
-    and a MemoryError that still happens becomes one line (progress.MemoryLimit, a
+    Memory: progress.MemoryGuard (run.max_memory_gb) checks every double description step
+    and the engine's merges (sign patterns, mu^c: Engine.guard), and a MemoryError that still happens becomes one line (progress.MemoryLimit, a
     SceneError: exit status 2, nothing written)."""
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
-    progress.guard = MemoryGuard(scene.max_memory_gb, ranks_on_host())
+    progress.guard = engine.guard = MemoryGuard(scene.max_memory_gb, ranks_on_host())
     try:
         return _run_scene(scene, progress, engine, condensed)
     except MemoryError:

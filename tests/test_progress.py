@@ -115,3 +115,19 @@ def test_progress_lines_give_the_time_left():
     pr = Progress(stream=buf, every=0.0).stage("rays mu=0.65")
     pr({"done": 2, "total": 6, "rays": 10, "bytes": 100, "elapsed": 4.0})
     assert "2/6 constraints" in buf.getvalue() and "about 8 s left" in buf.getvalue()
+
+
+def test_guard_on_3d_pattern_stage(tmp_path):
+    """The engine checks the guard after its merges: a 3D pattern run (plug3d m = 10)
+    with run.max_memory_gb below what the process holds stops at the first merge, in
+    one line naming the key and the stage (exit 2, nothing written)."""
+    scene = tmp_path / "s.toml"
+    scene.write_text('name = "p"\ndim = 3\n[model]\nkind = "plug3d"\n[friction]\nmu = [1.0]\n'
+                     '[compute]\nenumerate = true\nmu_c = "none"\n[run]\nmax_memory_gb = 0.01\n')
+    out = tmp_path / "r.h5"
+    p = subprocess.run(command(None, "run", str(scene), "-o", str(out), "-q"), env=env(), capture_output=True,
+                       text=True, timeout=300)
+    assert p.returncode == 2, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hpcwedge: error: run.max_memory_gb: the 'patterns' stage")
+    assert not out.exists()
