@@ -5,6 +5,8 @@ model, no condensation); every other kind builds a Model and condenses it.
 """
 from __future__ import annotations
 
+import dataclasses
+import math
 import os
 
 import numpy as np
@@ -24,15 +26,87 @@ SINGULAR_RTOL = 1e-10  # lambda_min <= SINGULAR_RTOL * lambda_max: numerically s
 MECHANISM_RTOL = 1e-12
 
 
+#: the scene keys of each kind whose values are stiffnesses (moduli, ground springs), with
+#: the models' defaults
+MODULI = {"truss": {"EA": 1.0}, "mesh": {"E": 1.0}, "block2d": {"E": 1.0}, "vgroove_bar": {"EA": 1.0, "eps": 0.0}}
+#: the Model.material entries that are moduli (restored to the scene's units)
+MATERIAL_MODULI = ("E", "EA")
+
+
+def stiffness_exponent(scene: Scene) -> int:
+    """The e with which the numerics run scale-free: the stiffnesses of the scene (a raw K;
+    the moduli E, EA and ground springs eps of a model) are multiplied by 2**-e, the power
+    of two nearest their largest magnitude, so that they lie near 1. A power of two is
+    exact in floating point: mu^c, patterns, rays' r and zero sets do not change, and a
+    ray's u (which scales with 1/stiffness) is multiplied back by 2**-e on output
+    (`unscale_u`). 0 for unit moduli (the built-in plugs) and for values the model's own
+    validation rejects."""
+    if scene.kind == "stiffness":
+        try:
+            K = _raw_arrays(scene)[0]
+        except SceneError:
+            return 0
+        return _exponent(K)
+    vals = []
+    for key, default in MODULI.get(scene.kind, {}).items():
+        v = scene.model.get(key, default)
+        if v is not None and not isinstance(v, (str, bool)):
+            try:
+                vals.append(np.asarray(v, dtype=float).ravel())
+            except (TypeError, ValueError):
+                return 0
+    return _exponent(np.concatenate(vals)) if vals else 0
+
+
+def _exponent(values: np.ndarray) -> int:
+    a = np.abs(np.asarray(values, dtype=float))
+    a = a[np.isfinite(a) & (a > 0)]
+    if a.size == 0:
+        return 0
+    mant, e = math.frexp(float(a.max()))        # max = mant 2**e, mant in [0.5, 1)
+    return e if mant >= math.sqrt(0.5) else e - 1
+
+
+def _scaled(value, e: int):
+    """value (a scalar or a list of numbers) times 2**-e; anything else as it is."""
+    if e == 0 or value is None or isinstance(value, (str, bool)):
+        return value
+    try:
+        return np.ldexp(np.asarray(value, dtype=float), -e).tolist()
+    except (TypeError, ValueError):
+        return value
+
+
+def unscale_u(u: np.ndarray, scene_or_e) -> np.ndarray:
+    """Displacements computed on the rescaled stiffness (stiffness_exponent) in the
+    scene's units: u times 2**-e (exact)."""
+    e = scene_or_e if isinstance(scene_or_e, int) else stiffness_exponent(scene_or_e)
+    return u if e == 0 else np.ldexp(u, -e)
+
+
 def build_model(scene: Scene) -> Model:
-    """The Model of a non-stiffness scene (ValueError from the models -> SceneError)."""
+    """The Model of a non-stiffness scene (ValueError from the models -> SceneError), its
+    stiffness K scaled by 2**-stiffness_exponent(scene) (the moduli scaled before assembly,
+    so that no modulus overflows it); Model.material keeps the scene's moduli (stresses in
+    the scene's units)."""
+    e = stiffness_exponent(scene)
+    if e == 0:
+        return _build_model(scene, scene.model)
+    params = {k: _scaled(v, e) if k in MODULI.get(scene.kind, ()) else v for k, v in scene.model.items()}
+    model = _build_model(scene, params)
+    material = {k: np.ldexp(np.asarray(v, dtype=float), e) if k in MATERIAL_MODULI else v
+                for k, v in model.material.items()}
+    return dataclasses.replace(model, material=material)
+
+
+def _build_model(scene: Scene, params: dict) -> Model:
     from .models import library, truss
     try:
         if scene.kind == "truss":
             c = scene.contact
             if "nodes" not in c or "normals" not in c:
                 raise SceneError("contact.nodes, contact.normals: required for a truss")
-            m = scene.model
+            m = params
             for key in ("nodes", "bars"):
                 if key not in m:
                     raise SceneError(f"model.{key}: required for a truss")
@@ -42,19 +116,20 @@ def build_model(scene: Scene) -> Model:
             return truss.truss_model(nodes, m["bars"], m.get("EA", 1.0), m.get("supports", []),
                                      c["nodes"], c["normals"], c.get("tangents"))
         if scene.kind == "mesh":
-            return _mesh_model(scene)
-        return library.builtin(scene.kind, scene.model)
+            return _mesh_model(scene, params)
+        return library.builtin(scene.kind, params)
     except SceneError:
         raise
     except (ValueError, TypeError, IndexError) as e:
         raise SceneError(str(e).splitlines()[0]) from None
 
 
-def _mesh_model(scene: Scene) -> Model:
-    """kind = "mesh": read model.file (relative to the scene file) and build the Model."""
+def _mesh_model(scene: Scene, m: dict) -> Model:
+    """kind = "mesh": read model.file (relative to the scene file) and build the Model
+    (m: the scene's model table, moduli scaled)."""
     from .models import mesh
     from .models.obstacle import parse_obstacles
-    m, c = scene.model, scene.contact
+    c = scene.contact
     data = mesh.read_mesh(os.path.join(scene.base_dir, m["file"]), scene.dim, name=m["file"])
     obstacles = (parse_obstacles(scene.obstacles, scene.dim, scene.obstacle_key)
                  if scene.obstacles is not None else None)
@@ -98,8 +173,8 @@ def check_not_mechanism(problem: ContactProblem) -> None:
                          "the body is a mechanism (add bars/elements or supports)")
 
 
-def raw_stiffness(scene: Scene) -> ContactProblem:
-    """Validate a raw block-ordered K (inline or file) and its null space (SPEC §3)."""
+def _raw_arrays(scene: Scene):
+    """(K, N or None) of a stiffness scene as given (inline or file), unvalidated."""
     m = scene.model
     for k in m:
         if k not in ("K", "file", "null_space"):
@@ -115,6 +190,17 @@ def raw_stiffness(scene: Scene) -> ContactProblem:
         if N is not None:
             raise SceneError("model.null_space: given both inline and in model.file")
         N = array(m["null_space"], "model.null_space")
+    return K, N
+
+
+def raw_stiffness(scene: Scene) -> ContactProblem:
+    """Validate a raw block-ordered K (inline or file) and its null space (SPEC §3); the
+    ContactProblem's K is scaled by 2**-stiffness_exponent(scene) (values in messages are
+    in the scene's units)."""
+    K, N = _raw_arrays(scene)
+    e = _exponent(K)
+    K = np.ldexp(K, -e)
+    units = lambda v: float(np.ldexp(v, e))     # noqa: E731  (a value of the scaled K in the scene's units)
     n = K.shape[0]
     if K.shape != (n, n) or n == 0:
         raise SceneError(f"model.K: must be square, got shape {K.shape}")
@@ -124,11 +210,11 @@ def raw_stiffness(scene: Scene) -> ContactProblem:
     if scale == 0:
         raise SceneError("model.K: all zero")
     if np.abs(K - K.T).max() > SYM_RTOL * scale:
-        raise SceneError(f"model.K: not symmetric (max |K - K^T| = {np.abs(K - K.T).max():.3g})")
+        raise SceneError(f"model.K: not symmetric (max |K - K^T| = {units(np.abs(K - K.T).max()):.3g})")
     K = 0.5 * (K + K.T)
     lam = np.linalg.eigvalsh(K)
     if lam[0] < -PSD_RTOL * lam[-1]:
-        raise SceneError(f"model.K: indefinite (eigenvalue {lam[0]:.3g} < 0)")
+        raise SceneError(f"model.K: indefinite (eigenvalue {units(lam[0]):.3g} < 0)")
     if N is not None:
         N = N.reshape(n, -1) if N.ndim == 1 else N
         if N.shape[0] != n:
@@ -140,7 +226,7 @@ def raw_stiffness(scene: Scene) -> ContactProblem:
             raise SceneError("model.null_space: columns are linearly dependent")
         Q = np.linalg.qr(N)[0]
         if np.abs(K @ Q).max() > 1e-8 * lam[-1]:
-            raise SceneError(f"model.null_space: K @ null_space is not zero (max {np.abs(K @ Q).max():.3g})")
+            raise SceneError(f"model.null_space: K @ null_space is not zero (max {units(np.abs(K @ Q).max()):.3g})")
         lam_r = np.linalg.eigvalsh(K + lam[-1] * Q @ Q.T)
         if lam_r[0] <= SINGULAR_RTOL * lam[-1]:
             raise SceneError("model.null_space: K has more null directions than the given null_space")

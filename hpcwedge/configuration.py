@@ -193,7 +193,7 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
 def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[np.ndarray, np.ndarray]:
     """(u_local, r_local) of one solution of the sign pattern (C = contact, G = the other nodes)
     at mu, normalised to sum r_n = 1: conic.feasible on pattern_rows of the parametrisation."""
-    from .build import contact_problem
+    from .build import contact_problem, unscale_u
     from .conic import FEASIBLE, feasible, pattern_rows
     from .problem import parametrize
     problem = contact_problem(scene, model)
@@ -204,7 +204,7 @@ def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[n
     if status != FEASIBLE:
         raise ConfigurationError(f"pattern with contact {list(contact)} at mu = {mu:.6g}: the solvers "
                                  f"return {status}, no configuration to export")
-    u, r = param.U @ x, param.R @ x
+    u, r = unscale_u(param.U @ x, scene), param.R @ x      # K is rescaled (build.stiffness_exponent)
     s = r[:m].sum()
     return u / s, r / s
 

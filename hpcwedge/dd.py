@@ -151,7 +151,8 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
       takes the row after which the ray set is expected to be smallest (_next_row;
       float only). "static": nodes 0..m-1. None (default): "greedy" in float,
       "static" in exact mode.
-    progress: called after every constraint with {"done", "total", "rays", "elapsed"}.
+    progress: called after every constraint with {"done", "total", "rays", "bytes" (of the
+      live rays and their zero flags), "elapsed"}.
     face: (contact, gap), node indices: only the rays on the face of P where
       u_n,i = 0 for i in contact and r_i = 0 (both friction rows tight, so r_n,i =
       r_t,i = 0) for i in gap (a node may be in both). The DD then runs on that face
@@ -219,7 +220,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
         stats["max_rays"] = max(stats["max_rays"], int(X.shape[0]))
         if progress is not None:
             progress({"done": step, "total": total, "rays": int(X.shape[0]),
-                      "elapsed": time.perf_counter() - t0})
+                      "bytes": int(X.nbytes + Z.nbytes), "elapsed": time.perf_counter() - t0})
     stats["seconds"] = time.perf_counter() - t0
     return DDResult(X=X, zero=bits.unpack(Z), stats=stats)
 

@@ -32,6 +32,9 @@ a generalised fractional program):
      flagged (polished = False).
 3D, route "bisection": bisection on SOCP feasibility (conic.decide, undecided
 counted and taken as feasible) to mu_c_tol.
+
+Every iteration calls parallel.task_tick(): inside an engine task a SIGTERM (or the
+master's stop) cancels the computation within one solve; the task is redone on resume.
 """
 from __future__ import annotations
 
@@ -45,6 +48,7 @@ import scipy.linalg as sla
 from .conic import (ATTEMPTS, FEASIBLE, LEAST_NORM_ATTEMPT, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, ConeRows, Rows,
                     _count, _settings, _socp_data, _csc_dense, _csc_zero, decide, feasible, pattern_rows,
                     problem_dim, pyramid_sides_for, violation)
+from .parallel import task_tick
 from .problem import Parametrization, balanced_2d
 
 BRACKET_RTOL = 1e-7
@@ -145,6 +149,7 @@ def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100
     rtol = BRACKET_RTOL if method == "accurate" else tol
     x_hi = None
     while hi - lo > rtol * hi and hi > 1e-12 * mu_hi:
+        task_tick()
         mid = 0.5 * (lo + hi)
         ok, x = feasible_at(mid)
         if ok:
@@ -175,6 +180,7 @@ def polish(rows: Rows, x: np.ndarray, lo: float, hi: float, seed: int = 0) -> fl
     # width 1e-7); a wrong active set has no verified root
     wide = tuple(t for t in POLISH_WIDE_TAUS if t > 10 * width)
     for tau in (10 * width, width, 1e-3 * width) + wide:
+        task_tick()
         act = rows.eq | (np.abs(slack) <= tau)
         sc = np.linalg.norm(rows.a0[act], axis=1) + hi * np.linalg.norm(rows.a1[act], axis=1)
         sc[sc == 0] = 1.0
@@ -258,6 +264,7 @@ def _bisect(ok, lo: float, hi: float, rtol: float) -> tuple[float, float]:
     ok(mid, spread): spread = (hi - lo) / (2 mid), how near mid lies to the bracket's ends."""
     top = hi
     while hi - lo > rtol * hi and hi > 1e-12 * top:
+        task_tick()
         mid = 0.5 * (lo + hi)
         if ok(mid, 0.5 * (hi - lo) / mid):
             hi = mid
@@ -357,6 +364,7 @@ def dinkelbach(rows: ConeRows, x: np.ndarray, mu_hi: float, out: MuC) -> tuple[f
     if not math.isfinite(mu):
         return mu_hi, x
     for _ in range(DINKELBACH_MAX):
+        task_tick()
         if mu <= 0.0:
             return 0.0, x
         weights = np.maximum(rows.rn @ x, 0.0)
@@ -432,6 +440,7 @@ def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
     tried = set()
     unsigned = None
     for tau, apex_tau in [(t, at) for t in taus for at in (APEX_RTOL, t)]:
+        task_tick()
         apex = rsize <= apex_tau * max(rsize.max(), 1e-300)
         smooth = ~apex & (rt - mu * rn >= -tau * (mu * np.abs(rn) + rt))
         lin = (L @ w0 <= tau * size) if L.shape[0] else np.zeros(0, bool)

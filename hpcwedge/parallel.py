@@ -85,6 +85,8 @@ PROBE_BURST = 32
 BUDGET_SCALE = 16
 #: default node budget of a subtree task (scene key run.task_budget)
 DEFAULT_BUDGET = 64
+#: the master checks the memory guard (Engine.guard) at most this often (seconds)
+GUARD_EVERY_S = 1.0
 
 _TASK, _RESULT, _ERROR, _STOP, _HELLO, _CANCELLED = 1, 2, 3, 4, 5, 6
 #: how often an idle worker checks that its master (same host) is still alive
@@ -107,34 +109,44 @@ class TaskCancelled(Exception):
 _cancel_check = None
 _TICK_EVERY_S = 0.05
 _last_tick = 0.0
+_stopping = False
+
+
+def task_stopping() -> bool:
+    """Long loops of a task call this now and then: True when the engine is stopping —
+    a worker whose master sent stop (after SIGTERM: the master checkpoints, then stops
+    the workers; mpirun would otherwise wait for the task, or kill it), or the
+    in-process engine after SIGTERM/SIGINT. A loop that can hand back what is left
+    (PatternTree.explore: its open subtrees) returns then; others call task_tick().
+    In-process, the call also serves SIGUSR1 and the checkpoint timer (the running
+    task is saved as open). Cheap: looks at most every 50 ms; once True, stays True
+    to the end of the task; False outside a task."""
+    global _last_tick, _stopping
+    if _cancel_check is None:
+        return False
+    if not _stopping:
+        now = time.monotonic()
+        if now - _last_tick >= _TICK_EVERY_S:
+            _last_tick = now
+            _stopping = bool(_cancel_check())
+    return _stopping
 
 
 def task_tick() -> None:
-    """Long task handlers call this now and then (face_task: after every DD step).
-    Raises TaskCancelled when the engine is stopping — a worker whose master sent
-    stop (after SIGTERM: the master checkpoints, then stops the workers; without
-    this a worker would finish its task first, and mpirun would wait for it), or
-    the in-process engine after SIGTERM. A cancelled task counts as not done (it is
-    in flight, so the checkpoint keeps it as open). Cheap: checks at most every
-    50 ms; a no-op outside a task."""
-    global _last_tick
-    if _cancel_check is None:
-        return
-    now = time.monotonic()
-    if now - _last_tick < _TICK_EVERY_S:
-        return
-    _last_tick = now
-    if _cancel_check():
+    """Raises TaskCancelled when task_stopping() (face_task: after every DD step; the
+    mu^c iterations). A cancelled task counts as not done (it is in flight, so the
+    checkpoint keeps it as open). A no-op outside a task."""
+    if task_stopping():
         raise TaskCancelled()
 
 
 def _run_cancellable(handler, ctx, payload, check):
-    global _cancel_check, _last_tick
-    _cancel_check, _last_tick = check, time.monotonic()
+    global _cancel_check, _last_tick, _stopping
+    _cancel_check, _last_tick, _stopping = check, time.monotonic(), False
     try:
         return handler(ctx, payload)
     finally:
-        _cancel_check = None
+        _cancel_check, _stopping = None, False
 
 
 # ---------------------------------------------------------------- task kinds
@@ -222,14 +234,15 @@ STAT_KEYS = ("nodes", "solves", "skipped", "pruned", "undecided")
 
 
 def explore_task(ctx: PatternContext, payload):
-    """Task "subtree": payload (mu index, Subtree, budget) ->
-    (found, open, stats dict, undecided found)."""
-    i, subtree, budget = payload
-    out = ctx.tree(i).explore(subtree, budget)
+    """Task "subtree": payload (mu index, Subtree, budget, witness x or None) ->
+    (found, open, stats dict, undecided found, open witnesses). Stopped by the
+    engine (task_stopping), it returns what it found and hands the rest back as open."""
+    i, subtree, budget, x = payload
+    out = ctx.tree(i).explore(subtree, budget, x=x)
     stats = {k: getattr(out.stats, k) for k in STAT_KEYS}
     for k, v in (getattr(out.stats, "statuses", None) or {}).items():
         stats[f"status_{k}"] = v
-    return out.found, out.open, stats, list(getattr(out, "undecided", []))
+    return out.found, out.open, stats, list(getattr(out, "undecided", [])), list(out.open_x)
 
 
 def _bits_to_words(values, words: int) -> np.ndarray:
@@ -256,9 +269,15 @@ def canonical_key(subtree, m: int) -> int:
 class SubtreeJob:
     """The sign-pattern trees of every mu, explored by budgeted subtree tasks.
 
+    An open subtree travels with its root's witness (the parent's point that proves
+    it feasible, or None), so that the tree, and every counter of it (nodes, solves,
+    skipped, undecided, solver statuses), is the same for every split of the work:
+    plain, resumed, any budget or rank count.
+
     Checkpoint data: mus, m; found_mu, found_depth, found_contact, found_gap,
     found_undecided (one row per found pattern); open_mu, open_depth,
-    open_contact, open_gap (the pool and the tasks in flight). Bit sets are
+    open_contact, open_gap, open_has_x, open_x (the pool and the tasks in flight;
+    open_x: (rows, d) float64, rows without a witness zero). Bit sets are
     (rows, ceil(m/64)) uint64 words, bit i of word w = node 64 w + i."""
 
     kind = "subtree"
@@ -276,8 +295,8 @@ class SubtreeJob:
         for i, tree in enumerate(trees):
             self._push(i, tree.root())
 
-    def _push(self, i, subtree):
-        heapq.heappush(self._pool, (subtree.depth, self._seq, i, subtree))
+    def _push(self, i, subtree, x=None):
+        heapq.heappush(self._pool, (subtree.depth, self._seq, i, subtree, x))
         self._seq += 1
 
     def pending(self) -> int:
@@ -286,17 +305,17 @@ class SubtreeJob:
     def take(self, n_workers: int):
         if not self._pool:
             return None
-        _, _, i, subtree = heapq.heappop(self._pool)
+        _, _, i, subtree, x = heapq.heappop(self._pool)
         budget = self.budget if len(self._pool) < 2 * n_workers else self.budget * BUDGET_SCALE
-        return (i, subtree), (i, subtree, budget)
+        return (i, subtree, x), (i, subtree, budget, x)
 
     def merge(self, token, result) -> None:
         i = token[0]
-        found, open_, stats, undecided = result
+        found, open_, stats, undecided, open_x = result
         self.found[i].extend(found)
         self.undecided[i].extend(undecided)
-        for s in open_:
-            self._push(i, s)
+        for s, x in zip(open_, open_x, strict=True):
+            self._push(i, s, x)
         self.counters["tasks"] += 1
         self.counters["handed_back"] += len(open_)
         for k, v in stats.items():
@@ -306,17 +325,22 @@ class SubtreeJob:
         words = max(1, math.ceil(self.m / 64))
         doubt = [set(u) for u in self.undecided]
         found = [(i, s) for i, lst in enumerate(self.found) for s in lst]
-        opens = [(i, s) for _, _, i, s in self._pool] + list(in_flight)
+        opens = [(i, s, x) for _, _, i, s, x in self._pool] + [tuple(t) for t in in_flight]
+        xs = [x for _, _, x in opens]
+        d = next((len(x) for x in xs if x is not None), 0)
         data = {"mus": np.array(self.mus, dtype=float),
                 "found_mu": np.array([i for i, _ in found], dtype=np.int32),
                 "found_depth": np.array([s.depth for _, s in found], dtype=np.int32),
                 "found_contact": _bits_to_words([s.contact for _, s in found], words),
                 "found_gap": _bits_to_words([s.gap for _, s in found], words),
                 "found_undecided": np.array([s in doubt[i] for i, s in found], dtype=bool),
-                "open_mu": np.array([i for i, _ in opens], dtype=np.int32),
-                "open_depth": np.array([s.depth for _, s in opens], dtype=np.int32),
-                "open_contact": _bits_to_words([s.contact for _, s in opens], words),
-                "open_gap": _bits_to_words([s.gap for _, s in opens], words)}
+                "open_mu": np.array([i for i, _, _ in opens], dtype=np.int32),
+                "open_depth": np.array([s.depth for _, s, _ in opens], dtype=np.int32),
+                "open_contact": _bits_to_words([s.contact for _, s, _ in opens], words),
+                "open_gap": _bits_to_words([s.gap for _, s, _ in opens], words),
+                "open_has_x": np.array([x is not None for x in xs], dtype=bool),
+                "open_x": np.array([np.zeros(d) if x is None else np.asarray(x, dtype=np.float64) for x in xs],
+                                   dtype=np.float64).reshape(len(xs), d)}
         return {"attrs": {"m": self.m, "budget": self.budget}, "data": data}
 
     def load(self, state: dict) -> None:
@@ -333,9 +357,12 @@ class SubtreeJob:
             if u:
                 self.undecided[int(i)].append(s)
         self._pool, self._seq = [], 0
-        for i, depth, c, g in zip(d["open_mu"], d["open_depth"], _words_to_bits(d["open_contact"]),
-                                  _words_to_bits(d["open_gap"])):
-            self._push(int(i), Subtree(int(depth), c, g))
+        n = len(d["open_mu"])
+        has_x = d.get("open_has_x", np.zeros(n, dtype=bool))
+        xs = d.get("open_x", np.zeros((n, 0)))
+        for i, depth, c, g, h, x in zip(d["open_mu"], d["open_depth"], _words_to_bits(d["open_contact"]),
+                                        _words_to_bits(d["open_gap"]), has_x, xs):
+            self._push(int(i), Subtree(int(depth), c, g), np.array(x, dtype=np.float64) if h else None)
 
     def output(self) -> "Patterns":
         key = lambda s: canonical_key(s, self.m)
@@ -349,8 +376,11 @@ class SubtreeJob:
 class Patterns:
     """run_patterns' answer: per mu (in the given order) the feasible full
     patterns (patterns.Subtree, depth m) in canonical order, the ones among
-    them no solver decided, and the job's counters (nodes is the number of
-    tree nodes visited: the same for every split, rank count or resume)."""
+    them no solver decided, and the job's counters: nodes (tree nodes visited),
+    solves, skipped, pruned, undecided and status_* (how each solve was decided)
+    are the same for every split, rank count or resume (open subtrees carry their
+    witness; PatternTree learns no cores by default); tasks and handed_back depend
+    on the schedule (the pipeline reports them under stats.parallel only)."""
 
     mus: list
     m: int
@@ -379,6 +409,7 @@ class FaceContext:
     rows: list
     m: int
     exact: bool = False
+    max_memory_gb: float | str = "auto"     # run.max_memory_gb (progress.MemoryGuard)
 
 
 def face_payloads(n_mu: int, m: int, nodes) -> list[tuple]:
@@ -391,7 +422,8 @@ def face_payloads(n_mu: int, m: int, nodes) -> list[tuple]:
 
 def face_task(ctx: FaceContext, payload: tuple) -> dict:
     """Task "face": payload (mu index, (contact, gap)) -> the DD of that face
-    (dd.complementary_rays(..., face=...); task_tick() after every step) as a dict
+    (dd.complementary_rays(..., face=...); task_tick() and the memory guard after every
+    step: progress.MemoryLimit when run.max_memory_gb would be exceeded) as a dict
     of numbers and arrays, so that checkpoints can hold it: mu_index; contact, gap
     ((m,) bool masks of the face); X (R, d) float64 rays, or exact integers as
     decimal strings (bytes); zero (R, ceil(3m / 8)) uint8, the zero flags packed
@@ -400,9 +432,16 @@ def face_task(ctx: FaceContext, payload: tuple) -> dict:
     cancellation and closest (NaN: no close call). face_result() turns it back into
     a dd.DDResult."""
     from .dd import complementary_rays
+    from .progress import MemoryGuard
     i, (contact, gap) = payload
-    dd = complementary_rays(ctx.rows[i], ctx.m, exact=ctx.exact, face=(contact, gap),
-                            progress=lambda info: task_tick())
+    guard = MemoryGuard(ctx.max_memory_gb, ranks_on_host())
+    where = f" of face (contact {list(contact)}, gap {list(gap)})"
+
+    def tick(info):
+        task_tick()
+        guard.dd_step(info, where)
+
+    dd = complementary_rays(ctx.rows[i], ctx.m, exact=ctx.exact, face=(contact, gap), progress=tick)
     nodes = np.arange(ctx.m)
     out = {"mu_index": int(i), "contact": np.isin(nodes, list(contact)), "gap": np.isin(nodes, list(gap)),
            "X": _encode_rays(dd.X), "zero": np.packbits(dd.zero, axis=1)}
@@ -563,6 +602,10 @@ class Engine:
         self._ckpt = None                # (path, scene_hash, scene_text, every_s, inputs)
         self._next_ckpt = math.inf
         self._t0 = time.monotonic()
+        self._job_start = (self._t0, 0)    # (when, tasks done) as the current job started
+        #: progress.MemoryGuard of the run (run.max_memory_gb), checked after merges (pipeline sets it)
+        self.guard = None
+        self._guarded = 0.0
         self._elapsed_before = 0.0
         self.resumes = 0
         self.checkpoints_written = 0
@@ -719,11 +762,24 @@ class Engine:
         stop = self._stop_flag()
         if stop:
             raise Interrupted(stop)
+        self._serve_checkpoint()
+
+    def _serve_checkpoint(self) -> None:
+        """Write the checkpoint SIGUSR1 or the timer asks for (tasks in flight saved as open)."""
         if "SIGUSR1" in self._flags:
             self._flags.discard("SIGUSR1")
             self.write_checkpoint("SIGUSR1")
         elif time.monotonic() >= self._next_ckpt:
             self.write_checkpoint("timer")
+
+    def _in_task(self) -> bool:
+        """In-process engine, polled inside a task (task_stopping): serves SIGUSR1 and
+        the checkpoint timer there (the running task is saved as open), and says
+        whether a SIGTERM/SIGINT asks the task to stop."""
+        if self._stop_flag():
+            return True
+        self._serve_checkpoint()
+        return False
 
     # ---- running jobs
 
@@ -744,6 +800,7 @@ class Engine:
                 job.counters.update(json.loads(state["attrs"]["counters"]))
             self._job_id += 1
             self._current, self._inflight = job, {}
+            self._job_start = (time.monotonic(), job.counters.get("tasks", 0))
             self._restored.pop(job.name, None)
             if self._stop_flag():
                 raise Interrupted(self._stop_flag())
@@ -770,10 +827,10 @@ class Engine:
             token, payload = taken
             self._inflight[0] = token
             try:
-                result = _run_cancellable(handler, job.context, payload, self._stop_flag)
+                result = _run_cancellable(handler, job.context, payload, self._in_task)
             except TaskCancelled:
                 raise Interrupted(self._stop_flag()) from None
-            job.merge(token, result)           # done: in the master's state
+            job.merge(token, result)           # done (or stopped, the rest handed back as open)
             del self._inflight[0]
             self.tasks_per_rank[0] += 1
             last_note = self._note(job, last_note)
@@ -801,14 +858,56 @@ class Engine:
             got = self._wait_any(MPI, deadline=self._next_ckpt)
             if got is not None:
                 w, tag, msg = got
-                token = self._inflight.pop(w)
                 idle.append(w)
-                self.tasks_per_rank[w] += 1
-                if tag == _ERROR:
-                    raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task:\n{msg}")
-                job.merge(token, msg)          # done: in the master's state
-            self._safe_point()
+                self._take_result(job, w, tag, msg)
+            try:
+                self._safe_point()
+            except Interrupted:
+                self._stop_workers(job)
+                raise
             last_note = self._note(job, last_note)
+
+    def _take_result(self, job, w: int, tag: int, msg) -> None:
+        """Merge worker w's answer to its task in flight (done: in the master's state);
+        a cancelled task stays open (not in flight any more: the caller keeps it)."""
+        token = self._inflight.pop(w)
+        if tag == _CANCELLED:
+            self._inflight[w] = token
+            return
+        self.tasks_per_rank[w] += 1
+        if tag == _ERROR and isinstance(msg, _UserFailure):
+            from .scene import SceneError
+            raise SceneError(msg.line)
+        if tag == _ERROR:
+            raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task:\n{msg}")
+        job.merge(token, msg)
+
+    def _stop_workers(self, job, timeout: float = 60.0) -> None:
+        """SIGTERM/SIGINT on the master, inside a job: stop every worker and collect
+        what is in flight before the checkpoint — a subtree task hands back what it
+        found and its open subtrees (merged, nothing lost), another kind is
+        cancelled (kept as open). At most `timeout` seconds (a worker blocked in a
+        large send would never read the stop); afterwards close() has nothing to do."""
+        from mpi4py import MPI
+        if self._stopped:
+            return
+        self._stopped = True
+        for w in self.workers:
+            self.comm.send(None, dest=w, tag=_STOP)
+        status = MPI.Status()
+        waiting = set(self._inflight)
+        end = time.monotonic() + timeout
+        while waiting and time.monotonic() < end:
+            if _probe(self.comm, MPI.ANY_SOURCE, MPI.ANY_TAG, status):
+                src, tag = status.Get_source(), status.Get_tag()
+                msg = self.comm.recv(source=src, tag=tag)
+                if src in waiting:
+                    waiting.discard(src)
+                    if tag == _ERROR:                # the checkpoint must still be written
+                        continue
+                    self._take_result(job, src, tag, msg)
+            else:
+                time.sleep(0.005)
 
     def _wait_any(self, MPI, deadline: float):
         """The next message from any worker, or None at the deadline or on a signal."""
@@ -824,12 +923,24 @@ class Engine:
             time.sleep(_backoff(now - t0, POLL_MAX_MASTER))
 
     def _note(self, job, last: float) -> float:
+        """After a merge: the memory guard (at most every GUARD_EVERY_S), and every 10 s a
+        progress line."""
         now = time.monotonic()
+        if self.guard is not None and now - self._guarded >= GUARD_EVERY_S:
+            self._guarded = now
+            self.guard.check(0, f"the {job.name!r} stage holds its results and {job.pending()} "
+                                f"open tasks after {job.counters.get('tasks', 0)} tasks")
         if self.progress is None or now - last < 10.0:
             return last
-        self.progress.note(f"{job.name}: {job.counters.get('tasks', 0)} tasks done, "
-                           f"{job.pending()} pending, {len(self._inflight)} running "
-                           f"({self.size} rank(s), {self.elapsed():.0f} s)")
+        from .progress import eta
+        done = job.counters.get("tasks", 0)
+        left = ""
+        if isinstance(job, TaskJob):           # a fixed list of tasks: the time left at this session's rate
+            t0, done0 = self._job_start
+            total = len(job.payloads)
+            left = eta(now - t0, done - done0, total - done0)
+        self.progress.note(f"{job.name}: {done} tasks done, {job.pending()} pending, "
+                           f"{len(self._inflight)} running ({self.size} rank(s), {self.elapsed():.0f} s{left})")
         return now
 
     def summary(self) -> dict:
@@ -889,8 +1000,13 @@ class Engine:
                                           lambda: _probe(comm, 0, _STOP, status))
             except TaskCancelled:
                 comm.send(None, dest=0, tag=_CANCELLED)     # the stop is read next
-            except Exception:
-                comm.send(traceback.format_exc(), dest=0, tag=_ERROR)
+            except MemoryError:
+                from .progress import out_of_memory
+                comm.send(_UserFailure(str(out_of_memory(f"a {kind!r} task on rank {comm.rank}"))), dest=0, tag=_ERROR)
+            except Exception as e:          # noqa: BLE001  (the master reports it)
+                from .scene import SceneError
+                comm.send(_UserFailure(str(e)) if isinstance(e, SceneError) else traceback.format_exc(),
+                          dest=0, tag=_ERROR)
             else:
                 comm.send(result, dest=0, tag=_RESULT)
 
@@ -918,6 +1034,23 @@ class Engine:
             for sig, h in self._old_handlers.items():
                 signal.signal(sig, h)
             self._old_handlers = {}
+
+
+@dataclass
+class _UserFailure:
+    """A worker's task stopped on a user-facing error (run.max_memory_gb, bad input):
+    its one line, raised again on the master (exit status 2, no traceback)."""
+
+    line: str
+
+
+def ranks_on_host() -> int:
+    """How many ranks of this MPI job share the host (1 outside mpirun)."""
+    for key in ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS_PER_NODE"):
+        v = os.environ.get(key, "")
+        if v.isdigit() and int(v) > 0:
+            return int(v)
+    return 1
 
 
 def _pid_alive(pid: int) -> bool:
@@ -985,7 +1118,7 @@ def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, 
 
 
 def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = None,
-              nodes=(), name: str = "rays") -> list["DDResult"]:
+              nodes=(), name: str = "rays", max_memory_gb: float | str = "auto") -> list["DDResult"]:
     """The complementary rays at every mu, the double description split over the
     faces of the branching nodes `nodes` (SPEC §5; the scene's choice,
     dd.branching_nodes; none: one face, the whole cone), one "face" task per
@@ -1007,7 +1140,7 @@ def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = N
         return face_payloads(len(rows), m, layout["branching_nodes"])
 
     layout = {"branching_nodes": nodes}
-    out = run_tasks("face", FaceContext(list(rows), m, exact), payloads_for(layout), engine, name,
+    out = run_tasks("face", FaceContext(list(rows), m, exact, max_memory_gb), payloads_for(layout), engine, name,
                     layout=layout, payloads_for=payloads_for)
     per_mu: list = [[] for _ in rows]
     for res in out:

@@ -20,6 +20,7 @@ import numpy as np
 from .conic import (INFEASIBLE, UNDECIDED, VERIFY_TOL, decide, infeasible_core, lp_violation, node_rows, pattern_rows,
                     problem_dim, violation)
 from .mu_critical import mu_critical
+from .parallel import task_stopping
 from .problem import Parametrization
 from .symmetry import Symmetry
 
@@ -84,6 +85,12 @@ class Explored:
     open: list[Subtree]
     stats: BnBStats
     undecided: list[Subtree] = field(default_factory=list)   # found patterns no solver decided
+    #: per open subtree, the parent's point that proves its root feasible (or None): passed
+    #: back to explore(..., x=), the root is decided as in one uninterrupted pass (no solve,
+    #: the same branching node), so every counter is the same however the tree is split
+    open_x: list = field(default_factory=list)
+    #: the search stopped early because the engine asked it to (parallel.task_stopping)
+    stopped: bool = False
 
 
 class PatternTree:
@@ -115,7 +122,8 @@ class PatternTree:
     `expand` gives back all of them."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
-                 order: list[int] | None = None, symmetry: Symmetry | None = None):
+                 order: list[int] | None = None, symmetry: Symmetry | None = None,
+                 learn_cores: bool = False):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
         self.symmetry = symmetry if symmetry is not None and symmetry.order > 1 else None
         self.dim = problem_dim(param, m)
@@ -129,18 +137,27 @@ class PatternTree:
         self.steer = self.dim == 3 and friction and not self.dynamic
         U = param.U[:m]
         self._steer = U / np.maximum(np.linalg.norm(U, axis=1, keepdims=True), 1e-300)
-        #: 3D with friction: the infeasible cores learnt so far (see `_prunes`)
-        self._cores = Cores(m) if self.dim == 3 and friction and m <= Cores.MAX_M else None
+        #: 3D with friction and learn_cores: the infeasible cores learnt so far (Cores). Off by
+        #: default: a core learnt in one subtree prunes nodes of another, so the solver
+        #: counters would depend on how the tree is split over tasks, ranks and resumes,
+        #: and they save no time (plug3d 2x5, 3x4, 2x6, 2x7 at mu 0.65 and 1, with and
+        #: without symmetry: 0-6 % fewer SOCPs, the same B&B time within noise)
+        self._cores = Cores(m) if learn_cores and self.dim == 3 and friction and m <= Cores.MAX_M else None
         self._node_rows = node_rows(param, m) if self._cores is not None else None
 
     def root(self) -> Subtree:
         return Subtree(0)
 
     def explore(self, subtree: Subtree, budget: int | None = None,
-                first_only: bool = False) -> Explored:
+                first_only: bool = False, x: np.ndarray | None = None) -> Explored:
         """Depth-first from `subtree`, contact before gap, for at most `budget`
         tree nodes (None: to the end). Returns found patterns in discovery order
-        and the open subtrees (their union with the explored part is `subtree`).
+        and the open subtrees (their union with the explored part is `subtree`),
+        each with its witness (Explored.open_x; give it back as `x`).
+
+        Stops early, handing back the rest as open like a spent budget, when the
+        engine asks (parallel.task_stopping: a SIGTERM, a master's stop; checked
+        between tree nodes, so within one solve).
 
         3D: the SOCP of a tree node minimises u_n of the node branched on next;
         its optimum lies on u_n = 0 when the contact child is feasible (the
@@ -151,9 +168,13 @@ class PatternTree:
         stats = BnBStats()
         found: list[Subtree] = []
         undecided: list[Subtree] = []
-        stack = [(subtree, None)]
+        stack = [(subtree, x)]
+        stopped = False
         while stack:
             if budget is not None and stats.nodes >= budget:
+                break
+            if task_stopping():
+                stopped = True
                 break
             node, x = stack.pop()
             stats.nodes += 1
@@ -202,7 +223,9 @@ class PatternTree:
                 kids.append((kid, None if x is None else self._witness(kid, x, fixed, contact, mu)))
             stack.extend(reversed(kids))
         stats.lps = stats.statuses.get("lp_calls", 0)
-        return Explored(found, [node for node, _ in reversed(stack)], stats, undecided)
+        rest = stack[::-1]
+        return Explored(found, [node for node, _ in rest], stats, undecided,
+                        open_x=[w for _, w in rest], stopped=stopped)
 
     def _near_boundary(self, node: Subtree, x: np.ndarray, mu: float) -> bool:
         """2D: the full pattern's LP point x violates a row by more than NEAR_BOUNDARY_TOL."""

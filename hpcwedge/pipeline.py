@@ -21,17 +21,17 @@ from functools import cache as once, partial
 
 import numpy as np
 
-from .build import build_model, contact_problem
+from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .dd import branching_nodes, canonical_order
 from .environment import environment, single_threaded
 from .model import Model
 from .mu_critical import mu_critical
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
-from .parallel import Engine, run_faces, run_mu_c, run_patterns, strip_exact
+from .parallel import Engine, ranks_on_host, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
 from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
-from .progress import Progress
-from .scene import Scene
+from .progress import MemoryGuard, Progress, out_of_memory
+from .scene import Scene, SceneError
 from .symmetry import node_symmetries
 
 
@@ -90,15 +90,24 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     `condensed`: (model, problem, seconds) of this scene condensed already (the
     command line's distributed condensation under mpirun); None: built and
     condensed here. Runs under the thread policy (environment.single_threaded);
-    stats["environment"] records what it ran on (environment.environment)."""
-    with single_threaded():
-        return _run_scene(scene, progress, engine, condensed)
+    stats["environment"] records what it ran on (environment.environment).
 
-
-def _run_scene(scene: Scene, progress: Progress | None, engine: Engine | None,
-               condensed: tuple[Model, ContactProblem, float] | None) -> Result:
+    Memory: progress.MemoryGuard (run.max_memory_gb) checks every double description step
+    and the engine's merges (sign patterns, mu^c: Engine.guard), and a MemoryError that
+    still happens becomes one line (progress.MemoryLimit, a SceneError: exit status 2,
+    nothing written)."""
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
+    progress.guard = engine.guard = MemoryGuard(scene.max_memory_gb, ranks_on_host())
+    try:
+        with single_threaded():
+            return _run_scene(scene, progress, engine, condensed)
+    except MemoryError:
+        raise out_of_memory("this run") from None
+
+
+def _run_scene(scene: Scene, progress: Progress, engine: Engine,
+               condensed: tuple[Model, ContactProblem, float] | None) -> Result:
     t0 = time.perf_counter()
     plan = scene.plan()
     timings = {"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0}
@@ -140,13 +149,15 @@ def _run_scene(scene: Scene, progress: Progress | None, engine: Engine | None,
             coords = [(param, None) if scene.exact else balanced_2d(param, run.mu, m, numerics.scale)
                       for run in result.runs]
             rows = [friction_rows_2d(p, run.mu, m, exact=scene.exact) for (p, _), run in zip(coords, result.runs)]
-            dds = run_faces(rows, m, exact=scene.exact, engine=engine, nodes=nodes, name=RAYS_JOB)
+            dds = run_faces(rows, m, exact=scene.exact, engine=engine, nodes=nodes, name=RAYS_JOB,
+                            max_memory_gb=scene.max_memory_gb)
             done = [judge_2d(dd, p, cond_T, m, run.mu, numerics, exact_param, progress)
                     for dd, (p, cond_T), run in zip(dds, coords, result.runs)]
         else:
             done = (_rays_whole(param, m, run.mu, numerics, exact_param, progress) for run in result.runs)
+        e = stiffness_exponent(scene)
         for run, (dd, p_run) in zip(result.runs, done):
-            _fill_rays(run, dd, p_run, m, plan.cones)
+            _fill_rays(run, dd, p_run, m, plan.cones, e)
             stats["dd"].append({"mu": run.mu, **dd.stats})
         timings["enumerate"] = time.perf_counter() - t
         if plan.cones:
@@ -265,12 +276,21 @@ def _rays_whole(param, m: int, mu: float, numerics: Numerics, exact_param, progr
     return dd, p_run
 
 
-def _fill_rays(run: Run, dd, param, m: int, want_cones: bool) -> None:
+def _fill_rays(run: Run, dd, param, m: int, want_cones: bool, e: int = 0) -> None:
+    """The run's rays (canonical order; a wedged ray's u back in the scene's units:
+    build.unscale_u with the stiffness exponent e) and cones."""
     order = canonical_order(dd.zero)
     zero = dd.zero[order]
     wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
     for name, sel in (("rays", wedged), ("trivial_rays", ~wedged)):
         _, V = ray_vectors(param, dd.X[order[sel]], m, np.full(int(sel.sum()), sel is wedged))
+        if sel is wedged:                      # trivial rays: sum u_n = 1, no scale to undo
+            with np.errstate(over="ignore"):
+                V[:, :V.shape[1] // 2] = unscale_u(V[:, :V.shape[1] // 2], e)
+            if not np.isfinite(V).all():
+                raise SceneError(f"model: the stiffness is so small (~2^{e}) that the wedged rays' "
+                                 "displacements u (sum r_n = 1) overflow a double; give K or the "
+                                 "moduli in other units")
         setattr(run, name, V)
     run.ray_zero = zero[wedged]
     if not want_cones:

@@ -1,8 +1,98 @@
-"""Progress on stderr: a tqdm bar on a terminal, periodic plain lines in a batch log."""
+"""Progress on stderr: a tqdm bar on a terminal, periodic plain lines in a batch log
+(with an estimate of the time left); the memory guard of a run (run.max_memory_gb)."""
 from __future__ import annotations
 
+import os
 import sys
 import time
+
+from .scene import SceneError
+
+GB = float(2 ** 30)
+#: run.max_memory_gb = "auto": this fraction of the memory available when the run starts
+#: (MemAvailable, plus what the process holds already), shared by the ranks on this host
+AUTO_FRACTION = 0.8
+#: a DD step copies the live rays and adds new ones: the guard asks for room for
+#: this many times the rays' current bytes before the next step
+DD_GROWTH = 3.0
+
+
+class MemoryLimit(SceneError):
+    """The run would exceed run.max_memory_gb (one line, exit status 2)."""
+
+
+def rss_bytes() -> int:
+    """Resident memory of this process (/proc/self/statm; 0 where there is none)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def available_bytes() -> float:
+    """Memory this process may still take: MemAvailable (/proc/meminfo), or the cgroup's
+    memory.max less its usage when that is lower (a SLURM job's allocation); inf if unknown."""
+    avail = float("inf")
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    avail = int(line.split()[1]) * 1024.0
+    except (OSError, ValueError):
+        pass
+    try:
+        with open("/sys/fs/cgroup/memory.max") as f:
+            cap = f.read().strip()
+        with open("/sys/fs/cgroup/memory.current") as f:
+            used = int(f.read())
+        if cap != "max":
+            avail = min(avail, float(int(cap) - used))
+    except (OSError, ValueError):
+        pass
+    return avail
+
+
+class MemoryGuard:
+    """Refuses, in one line naming run.max_memory_gb, a run about to exceed its memory.
+
+    limit_gb: a number, or "auto": AUTO_FRACTION of the memory available at start (plus
+    the process's own), divided among `ranks_here` ranks on this host. check(need, what)
+    raises MemoryLimit when the resident memory plus `need` more bytes exceeds it."""
+
+    def __init__(self, limit_gb: float | str = "auto", ranks_here: int = 1):
+        self.auto = limit_gb == "auto"
+        if self.auto:
+            self.limit = AUTO_FRACTION * (available_bytes() + rss_bytes() * ranks_here) / max(1, ranks_here)
+        else:
+            self.limit = float(limit_gb) * GB
+
+    def check(self, need: float, what: str) -> None:
+        rss = rss_bytes()
+        if rss + need <= self.limit:
+            return
+        whose = (f"run.max_memory_gb = \"auto\" ({self.limit / GB:.3g} GB: {AUTO_FRACTION:.0%} of this "
+                 "machine's available memory)" if self.auto else f"run.max_memory_gb = {self.limit / GB:.3g}")
+        raise MemoryLimit(f"run.max_memory_gb: {what}: about {(rss + need) / GB:.3g} GB needed "
+                          f"({rss / GB:.3g} GB in use), more than {whose}; stopped before it runs out "
+                          "(nothing written): raise run.max_memory_gb if the machine has the memory, "
+                          "or run a smaller scene (fewer contact nodes, mu nearer mu^c)")
+
+    def dd_step(self, info: dict, where: str = "") -> None:
+        """After a DD step (dd.complementary_rays progress: "rays", "bytes", "done", "total"):
+        room for DD_GROWTH times the live rays' bytes."""
+        if "bytes" in info:
+            self.check(DD_GROWTH * info["bytes"],
+                       f"the double description{where} holds {info['rays']:,} live rays "
+                       f"({info['bytes'] / GB:.3g} GB) after {info['done']} of {info['total']} "
+                       "constraints and grows")
+
+
+def out_of_memory(where: str) -> MemoryLimit:
+    """The one-line error of a MemoryError that still happened (in `where`)."""
+    return MemoryLimit(f"run.max_memory_gb: out of memory in {where} ({rss_bytes() / GB:.3g} GB "
+                       "in use when it struck; nothing written): run a smaller scene, or on a machine "
+                       "with more memory")
 
 
 class Progress:
@@ -15,6 +105,8 @@ class Progress:
     def __init__(self, quiet: bool = False, every: float = 10.0, stream=None):
         self.stream = stream or sys.stderr
         self.quiet = quiet
+        #: MemoryGuard checked at every DD step (set by the pipeline), quiet or not
+        self.guard: MemoryGuard | None = None
         self.every = every
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.label = ""
@@ -28,6 +120,8 @@ class Progress:
         return self
 
     def __call__(self, info: dict) -> None:
+        if self.guard is not None:
+            self.guard.dd_step(info)
         if self.quiet:
             return
         done, total = info.get("done", 0), info.get("total", 0)
@@ -43,8 +137,9 @@ class Progress:
         now = time.monotonic()
         if now - self._last >= self.every or done == total:
             self._last = now
+            elapsed = info.get("elapsed", 0.0)
             print(f"[hpcwedge] {self.label}: {done}/{total} constraints, "
-                  f"{info.get('rays', 0)} live rays, {info.get('elapsed', 0.0):.1f} s",
+                  f"{info.get('rays', 0)} live rays, {elapsed:.1f} s{eta(elapsed, done, total)}",
                   file=self.stream, flush=True)
 
     def note(self, text: str) -> None:
@@ -56,3 +151,11 @@ class Progress:
         if self._bar is not None:
             self._bar.close()
             self._bar = None
+
+
+def eta(elapsed: float, done: int, total: int) -> str:
+    """", about N s left" at the rate so far (empty before the first unit or at the end)."""
+    if done <= 0 or done >= total:
+        return ""
+    left = elapsed / done * (total - done)
+    return f", about {left:.0f} s left" if left < 120 else f", about {left / 60:.0f} min left"

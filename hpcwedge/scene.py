@@ -28,7 +28,7 @@ COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
                     "exact_fallback_max_m": 10}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
-                "condense": "auto"}
+                "condense": "auto", "max_memory_gb": "auto"}
 #: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
 CONDENSE_MODES = ("auto", "serial", "distributed")
 
@@ -75,6 +75,8 @@ class Scene:
     #: compute.exact_fallback_max_m: a 2D float enumeration whose decisions were too close to
     #: call is redone in exact arithmetic when m is at most this (0: never; pipeline.py)
     exact_fallback_max_m: int = 10
+    #: run.max_memory_gb: memory a run may use ("auto": from the machine's; progress.MemoryGuard)
+    max_memory_gb: float | str = "auto"
 
     @property
     def hash(self) -> str:
@@ -198,6 +200,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     v = run["face_split"]
     if v != "auto" and (isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 8):
         raise SceneError(f"run.face_split: \"auto\" or a whole number 0..8 (branching nodes), got {v!r}")
+    v = run["max_memory_gb"]
+    if v != "auto" and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf")):
+        raise SceneError(f"run.max_memory_gb: \"auto\" or a number of GB > 0, got {v!r}")
     if run["condense"] not in CONDENSE_MODES:
         raise SceneError(f"run.condense: one of {', '.join(CONDENSE_MODES)}, got {run['condense']!r}")
     contact = data.get("contact", {})
@@ -229,7 +234,7 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  text=text, base_dir=base_dir, task_budget=run["task_budget"],
                  symmetry=run["symmetry"], face_split=run["face_split"], condense=run["condense"],
                  obstacles=obstacles, obstacle_key=obstacle_key,
-                 exact_fallback_max_m=compute["exact_fallback_max_m"])
+                 exact_fallback_max_m=compute["exact_fallback_max_m"], max_memory_gb=run["max_memory_gb"])
 
 
 def _unknown(table, allowed, prefix):

@@ -168,7 +168,7 @@ def test_learnt_cores_rule_out_only_infeasible_patterns(seed):
     prob = random_problem_3d(rng, m, free=bool(seed % 2))
     mu = float(np.exp(rng.uniform(np.log(0.3), np.log(3.0))))
     p = parametrize(prob)
-    tree = PatternTree(p, m, mu)
+    tree = PatternTree(p, m, mu, learn_cores=True)
     out = tree.explore(tree.root())
     feasible = _brute_3d(p, m, mu)
     assert {s.contact for s in out.found} == feasible

@@ -208,3 +208,91 @@ def test_plug3d_global_mu_c_below_every_listed_mu(symmetry):
     assert r.runs[0].n_patterns == 0 and r.mu_c_status == "found"
     assert abs(r.mu_c - want) <= 1e-9 * want
     assert r.stats.get("symmetry", {}).get("order", 1) == (8 if symmetry else 1)
+
+
+# ------------------------------------------------------------------ scale-free numerics (issue 11)
+
+def _cli_result(tmp_path, name: str, text: str, files: dict | None = None):
+    """(exit status, stderr, show --json or None) of `hpcwedge run` on a scene text, in a
+    subprocess (a crash of the old code must not take the test process with it)."""
+    import json
+    import subprocess
+    import sys
+    for fname, arrays in (files or {}).items():
+        np.savez(tmp_path / fname, **arrays)
+    (tmp_path / f"{name}.toml").write_text(text)
+    out = tmp_path / f"{name}.h5"
+    p = subprocess.run([sys.executable, "-m", "hpcwedge", "run", str(tmp_path / f"{name}.toml"), "-o", str(out),
+                        "-q"], capture_output=True, text=True, timeout=300)
+    if p.returncode:
+        return p.returncode, p.stderr, None
+    s = subprocess.run([sys.executable, "-m", "hpcwedge", "show", str(out), "--json"], capture_output=True,
+                       text=True, timeout=120)
+    return 0, p.stderr, json.loads(s.stdout)
+
+
+BLOCK = 'name = "b"\ndim = 2\n[model]\nkind = "block2d"\nrows = 3\nE = {E}\n[friction]\nmu = [0.65]\n' \
+        '[compute]\nenumerate = true\nmu_c = "cones"\n'
+
+
+def _rays(d):
+    X = np.array(d["runs"][0]["rays"])
+    n = X.shape[1] // 2
+    return X[:, :n], X[:, n:]
+
+
+@pytest.mark.parametrize("E", [1e308, 1e200, 1e-200])
+def test_block2d_extreme_modulus_same_answers(tmp_path, E):
+    """block2d with E = 1e308, 1e200, 1e-200: the moduli are rescaled before assembly,
+    so the answers are those of E = 1 (mu^c to 1e-12, counts, cones), r equal to 1e-12,
+    u = u(E = 1) / E to 1e-9 relative (before: a PETSc SEGV or a traceback)."""
+    rc, _, ref = _cli_result(tmp_path, "ref", BLOCK.format(E=1.0))
+    assert rc == 0
+    rc, err, got = _cli_result(tmp_path, "big", BLOCK.format(E=E))
+    assert rc == 0, err
+    assert abs(got["mu_c"] - ref["mu_c"]) <= 1e-12 * ref["mu_c"]
+    assert got["runs"][0]["n_wedged_rays"] == ref["runs"][0]["n_wedged_rays"] == 244
+    assert [c["zero_u"] for c in got["runs"][0]["cones"]] == [c["zero_u"] for c in ref["runs"][0]["cones"]]
+    (u0, r0), (u, r) = _rays(ref), _rays(got)
+    assert np.abs(r - r0).max() <= 1e-12
+    big = np.abs(u0) > 1e-9 * np.abs(u0).max()
+    assert np.abs(u[big] * E / u0[big] - 1).max() <= 1e-9
+
+
+def test_raw_K_scaled_by_powers_of_two_and_1e_minus_300(tmp_path):
+    """A valid raw K (plug2d m = 8) times 2^-1000 gives the unscaled run's answers bit
+    for bit, u times 2^1000 exactly; times 1e-300 the same mu^c to 1e-12 (before: exit 0
+    with mu^c = 2e-24)."""
+    from hpcwedge.build import contact_problem
+    prob = contact_problem(scene({"kind": "plug2d", "rows": 4}))
+    text = 'name = "k"\ndim = 2\n[model]\nkind = "stiffness"\nfile = "{f}"\n[friction]\nmu = [0.65]\n' \
+           '[compute]\nenumerate = true\nmu_c = "cones"\n'
+    runs = {}
+    for name, K in (("one", prob.K), ("pow2", np.ldexp(prob.K, -1000)), ("tiny", prob.K * 1e-300)):
+        rc, err, runs[name] = _cli_result(tmp_path, name, text.format(f=f"{name}.npz"),
+                                          {f"{name}.npz": {"K": K, "null_space": prob.N}})
+        assert rc == 0, err
+    one, pow2, tiny = runs["one"], runs["pow2"], runs["tiny"]
+    assert pow2["mu_c"] == one["mu_c"] and pow2["runs"][0]["cones"] == one["runs"][0]["cones"]
+    (u0, r0), (u, r) = _rays(one), _rays(pow2)
+    assert np.array_equal(r, r0) and np.array_equal(u, np.ldexp(u0, 1000))
+    assert abs(tiny["mu_c"] - one["mu_c"]) <= 1e-12 * one["mu_c"]
+    assert tiny["runs"][0]["n_wedged_rays"] == one["runs"][0]["n_wedged_rays"]
+
+
+def test_stiffness_too_small_for_the_displacements_is_one_line(tmp_path):
+    """E = 5e-324 (the least subnormal): the rays' u would overflow a double: exit 2,
+    one line naming model, no result."""
+    rc, err, got = _cli_result(tmp_path, "sub", BLOCK.format(E=5e-324))
+    assert rc == 2 and got is None
+    assert err.startswith("hpcwedge: error: model:") and "overflow" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "sub.h5").exists()
+
+
+def test_unit_moduli_are_not_rescaled():
+    """Ordinary scenes keep their bits: the built-in plugs and unit moduli get exponent 0."""
+    from hpcwedge.build import stiffness_exponent
+    for model in ({"kind": "plug2d"}, {"kind": "block2d", "E": 1.0}, {"kind": "vgroove_bar", "eps": 0.1}):
+        assert stiffness_exponent(scene(model)) == 0
+    assert stiffness_exponent(scene({"kind": "block2d", "E": 2.0 ** 40})) == 40
+    assert stiffness_exponent(scene({"kind": "vgroove_bar", "EA": 3e-7, "eps": 1e-9})) == -22

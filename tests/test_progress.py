@@ -1,0 +1,133 @@
+"""Progress lines (time left) and the runaway guard (run.max_memory_gb): a run that
+would outgrow its memory stops early with one line naming the key (exit 2, nothing
+written), serially and under mpirun; a MemoryError that still happens is one line too."""
+from __future__ import annotations
+
+import io
+import os
+import resource
+import subprocess
+import sys
+
+import pytest
+
+from hpcwedge.progress import GB, MemoryGuard, MemoryLimit, Progress, eta, rss_bytes
+from hpcwedge.scene import SceneError, parse_scene
+from mpi_helpers import command, env, needs_mpirun
+
+#: plug2d with 36 contact nodes: its rays outgrow any small memory within seconds
+RUNAWAY = """name = "runaway"
+dim = 2
+[model]
+kind = "plug2d"
+rows = 18
+[friction]
+mu = [0.65]
+[compute]
+enumerate = true
+mu_c = "cones"
+[run]
+max_memory_gb = {gb}
+"""
+
+
+def _run(tmp_path, gb, ranks=None, limit_as=None):
+    scene = tmp_path / "s.toml"
+    scene.write_text(RUNAWAY.format(gb=gb))
+    out = tmp_path / "r.h5"
+
+    def cap():
+        if limit_as:
+            resource.setrlimit(resource.RLIMIT_AS, (limit_as, limit_as))
+
+    p = subprocess.run(command(ranks, "run", str(scene), "-o", str(out), "-q"), env=env(), capture_output=True,
+                       text=True, timeout=300, preexec_fn=cap)
+    return p, out
+
+
+def test_runaway_2d_run_refused_early_in_one_line(tmp_path):
+    """plug2d m = 36 with run.max_memory_gb = 0.4: stopped at the double description step
+    that would exceed it — one line with the estimate and the key, exit 2, no result
+    and no checkpoint, peak memory near the limit (before: allocation up to a
+    MemoryError traceback at ~5 GB)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    p, out = _run(tmp_path, 0.4)
+    peak_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024 / GB
+    assert p.returncode == 2, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hpcwedge: error: run.max_memory_gb: "), p.stderr
+    assert "live rays" in lines[0] and "GB needed" in lines[0] and "max_memory_gb = 0.4" in lines[0]
+    assert not out.exists() and not os.path.exists(str(out) + ".ckpt")
+    assert before * 1024 / GB > 2.0 or peak_gb < 2.0, peak_gb
+
+
+def test_memory_error_is_one_line(tmp_path):
+    """A MemoryError the guard did not foresee (address space capped at 2.5 GB, the key
+    at 1000 GB): one line naming run.max_memory_gb, exit 2, nothing written."""
+    p, out = _run(tmp_path, 1000, limit_as=int(2.5 * GB))
+    assert p.returncode == 2, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and "run.max_memory_gb: out of memory" in lines[0], p.stderr
+    assert "Traceback" not in p.stderr and not out.exists()
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_runaway_refused_under_mpirun(tmp_path):
+    """mpirun -n 3: the face task of a worker hits the guard; the master reports the
+    worker's one line (exit 2, no traceback), every rank ends."""
+    p, out = _run(tmp_path, 0.4, ranks=3)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.count("hpcwedge: error: run.max_memory_gb: the double description of face") == 1
+    assert "Traceback" not in p.stderr and not out.exists()
+
+
+def test_guard_limit_and_message():
+    """"auto" takes a share of the machine's available memory; a number is GB; the
+    error names the key and the need."""
+    auto = MemoryGuard("auto")
+    assert 0 < auto.limit < float("inf")
+    assert MemoryGuard("auto", ranks_here=4).limit < auto.limit
+    g = MemoryGuard(0.001)
+    assert g.limit == 0.001 * GB
+    with pytest.raises(MemoryLimit, match=r"^run.max_memory_gb: building X: about .* GB needed") as e:
+        g.check(0, "building X")
+    assert isinstance(e.value, SceneError) and "\n" not in str(e.value)
+    MemoryGuard(1e6).check(10 * GB, "fits")          # a large limit: no error
+    assert rss_bytes() > 0
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, "lots", True, float("inf")])
+def test_max_memory_gb_key_checked(bad):
+    with pytest.raises(SceneError, match="run.max_memory_gb"):
+        parse_scene({"name": "s", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": [1.0]},
+                     "run": {"max_memory_gb": bad}})
+    sc = parse_scene({"name": "s", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": [1.0]},
+                      "run": {"max_memory_gb": 2}})
+    assert sc.max_memory_gb == 2
+
+
+def test_progress_lines_give_the_time_left():
+    assert eta(10.0, 1, 4) == ", about 30 s left"
+    assert eta(60.0, 1, 11) == ", about 10 min left"
+    assert eta(1.0, 0, 4) == "" and eta(1.0, 4, 4) == ""
+    buf = io.StringIO()
+    pr = Progress(stream=buf, every=0.0).stage("rays mu=0.65")
+    pr({"done": 2, "total": 6, "rays": 10, "bytes": 100, "elapsed": 4.0})
+    assert "2/6 constraints" in buf.getvalue() and "about 8 s left" in buf.getvalue()
+
+
+def test_guard_on_3d_pattern_stage(tmp_path):
+    """The engine checks the guard after its merges: a 3D pattern run (plug3d m = 10)
+    with run.max_memory_gb below what the process holds stops at the first merge, in
+    one line naming the key and the stage (exit 2, nothing written)."""
+    scene = tmp_path / "s.toml"
+    scene.write_text('name = "p"\ndim = 3\n[model]\nkind = "plug3d"\n[friction]\nmu = [1.0]\n'
+                     '[compute]\nenumerate = true\nmu_c = "none"\n[run]\nmax_memory_gb = 0.01\n')
+    out = tmp_path / "r.h5"
+    p = subprocess.run(command(None, "run", str(scene), "-o", str(out), "-q"), env=env(), capture_output=True,
+                       text=True, timeout=300)
+    assert p.returncode == 2, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hpcwedge: error: run.max_memory_gb: the 'patterns' stage")
+    assert not out.exists()
