@@ -16,9 +16,9 @@ pattern=J): bars coloured by axial force, or the mesh's boundary faces by von Mi
 the pattern's contact set C (filled) and gap set G (open) marked, the reactions as arrows
 pointing at the contact nodes from the obstacle side, and the obstacle: the scene's
 [[obstacle]] cones and planes as translucent surfaces, else (built-in bodies) a small wall
-square in the tangent plane of every contact node. When the body cannot be rebuilt, only
-the contact nodes move along their normals; without a /model group, bars of r_n and u_n of
-the pattern's point. Right: the mu^c of every pattern of the run (pattern J highlighted)
+square in the tangent plane of every contact node. When the body cannot be rebuilt (there is
+then no point of the pattern to draw), the undeformed body with C and G marked, and the
+title says why; without a /model group, bars of r_n and u_n of the pattern's point. Right: the mu^c of every pattern of the run (pattern J highlighted)
 with the run's mu and the global mu^c, and below it the number of feasible patterns
 against mu, one point per run (steps between runs).
 
@@ -439,7 +439,7 @@ def _body_3d(ax, d: dict) -> None:
     n = mdl["normals"] / np.maximum(np.linalg.norm(mdl["normals"], axis=1, keepdims=True), 1e-300)
     if cfg is not None:
         D, reac = cfg.displacement, cfg.reaction[c]
-    else:                          # no tangents without the body: the normal components only
+    else:                          # no point of the pattern without the body: the body as it is
         D = np.zeros_like(X)
         reac = np.zeros((m, 3))
     size = max(float(np.max(np.ptp(X, axis=0))), 1e-300) if len(X) > 1 else 1.0
@@ -452,7 +452,7 @@ def _body_3d(ax, d: dict) -> None:
     ax.computed_zorder = False                # layers below, not depth-sorted: the nodes stay on top
     edges = [X[b] for b in bars] + [X[np.append(f, f[0])] for f in faces]
     ax.add_collection3d(Line3DCollection(edges, colors="0.72", linewidths=0.6, zorder=1, label="undeformed"))
-    label = f"deformed (displacement x{scale:.3g})"
+    label = f"deformed (displacement x{scale:.3g})" if cfg is not None else "body (not rebuilt: undeformed)"
     if faces:
         vm = values.get(VON_MISES)
         pc = Poly3DCollection([Y[f] for f in faces], edgecolors="0.3", linewidths=0.2, alpha=0.6, zorder=3,
@@ -514,11 +514,14 @@ def _body_3d(ax, d: dict) -> None:
     ax.tick_params(labelsize=7, pad=0)
     ax.figure.legend(*ax.get_legend_handles_labels(), loc="lower left", ncol=3, fontsize=8, frameon=False,
                      bbox_to_anchor=(0.01, 0.0))     # below the 3D box, which draws past its frame
-    first = (f"sign pattern {j} of {len(d['patterns'])}: the whole body at a feasible point"
-             if cfg is not None else f"sign pattern {j} of {len(d['patterns'])}: body not rebuilt "
-             f"({d['config_note'] or 'no configuration'}), undeformed")
-    ax.set_title(f"{first}\ncontact C = {pat['contact']}; arrows: reactions, pointing at the nodes",
-                 fontsize=9)
+    head = f"sign pattern {j} of {len(d['patterns'])}, contact C = {pat['contact']}"
+    if cfg is not None:
+        title = f"{head}:\nthe whole body at a feasible point; arrows: reactions, pointing at the nodes"
+    else:
+        import textwrap
+        title = "\n".join([f"{head}: body not rebuilt, drawn undeformed"]
+                          + textwrap.wrap(d["config_note"] or "no configuration", 100))
+    ax.set_title(title, fontsize=9)
 
 
 def _obstacles_3d(ax, obstacles: list | None, P: np.ndarray, n: np.ndarray, size: float):
@@ -567,9 +570,9 @@ def _obstacles_3d(ax, obstacles: list | None, P: np.ndarray, n: np.ndarray, size
             polys.append([p + h * (s1 * e1 + s2 * e2) for s1, s2 in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
         label = "obstacle wall at each contact node"
     ax.add_collection3d(Poly3DCollection(polys, facecolor="tan", edgecolor="none" if obstacles else "0.4",
-                                         linewidths=0.4, alpha=0.25, zorder=2, label=label))
+                                         linewidths=0.4, alpha=0.2, zorder=4, label=label))
     if lines:
-        ax.add_collection3d(Line3DCollection(lines, colors="0.5", linewidths=0.5, zorder=2))
+        ax.add_collection3d(Line3DCollection(lines, colors="0.5", linewidths=0.5, zorder=4))
     return np.vstack([np.asarray(q) for q in polys])
 
 
