@@ -18,9 +18,10 @@ pointing at the contact nodes from the obstacle side, and the obstacle: the scen
 [[obstacle]] cones and planes as translucent surfaces, else (built-in bodies) a small wall
 square in the tangent plane of every contact node. When the body cannot be rebuilt (there is
 then no point of the pattern to draw), the undeformed body with C and G marked, and the
-title says why; without a /model group, bars of r_n and u_n of the pattern's point. Right: the mu^c of every pattern of the run (pattern J highlighted)
-with the run's mu and the global mu^c, and below it the number of feasible patterns
-against mu, one point per run (steps between runs).
+title says why; without a /model group, bars of r_n and u_n of the pattern's point.
+Right: the mu^c of every pattern of the run (pattern J highlighted) with the run's mu and
+the global mu^c, and below it the number of feasible patterns against mu, one point per
+run (steps between runs).
 
 Drawn with matplotlib's Agg canvas on a bare Figure (no pyplot, no display).
 """

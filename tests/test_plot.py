@@ -336,6 +336,16 @@ def test_gmsh_plug_png(tmp_path):
     _check_3d_png(png, contact_and_gap=False)
 
 
+@pytest.mark.skipif(_petsc_missing() is not None, reason=str(_petsc_missing()))
+@pytest.mark.parametrize("compute", [{"mu_c": "none"}, {"enumerate": False, "mu_c": "global"}])
+def test_3d_missing_answers_are_said_in_text(tmp_path, compute):
+    # patterns' mu^c not computed / no patterns: the panels say so, the figure is still written
+    h5 = _result_file(tmp_path, PLUG3D_TOML.replace("mu = [0.3, 1.0]", "mu = [1.0]"), compute=compute)
+    png = tmp_path / "fig.png"
+    plot_result(h5, str(png))
+    assert _check_png(png) == (1500, 750)
+
+
 def test_stiffness_3d_bars(tmp_path, capsys):
     """A raw-stiffness 3D scene (no body): bars of r_n and u_n of the pattern's feasible
     point; a run without patterns says so; an index into none is one line."""
