@@ -415,15 +415,16 @@ def _figure_3d(fig, d: dict) -> None:
 def _boundary(cells: dict) -> tuple[list, list, list]:
     """(faces, the cell type and index owning each, segments) of the cells to draw: the
     boundary faces (seen by one cell only) of the 3D cells, and the bars."""
-    faces, owner, seen = [], [], {}
+    faces, owner = [], []
     for kind, q in cells.items():
-        for f in CELL_FACES.get(kind, ()):
-            for e, face in enumerate(np.asarray(q).reshape(len(q), -1)[:, f]):
-                seen.setdefault(tuple(sorted(face)), []).append((face, kind, e))
-    for hits in seen.values():
-        if len(hits) == 1:
-            faces.append(hits[0][0])
-            owner.append(hits[0][1:])
+        if kind not in CELL_FACES or not len(q):
+            continue
+        q = np.asarray(q).reshape(len(q), -1)
+        F = np.concatenate([q[:, f] for f in CELL_FACES[kind]])            # face-major
+        _, first, count = np.unique(np.sort(F, axis=1), axis=0, return_index=True, return_counts=True)
+        for i in np.sort(first[count == 1]):
+            faces.append(F[i])
+            owner.append((kind, int(i % len(q))))
     bars = np.asarray(cells["line"]).reshape(-1, 2) if "line" in cells else np.zeros((0, 2), dtype=int)
     return faces, owner, bars
 
