@@ -40,6 +40,7 @@ DISP_FRACTION = 0.10     # largest drawn displacement / body size
 ARROW_FRACTION = 0.15    # largest drawn reaction arrow / body size (3D: twice that)
 WALL_FRACTION = 0.12     # length of a wall segment / body size
 MAX_TICKS = 40           # per-item tick labels only up to this many bars
+AXIAL_LABEL = "bar axial force (tension > 0)"
 VON_MISES_PERCENTILE = 95  # 3D: the colour scale ends here (point contacts concentrate the stress)
 #: boundary faces of the 3D cells (meshio / VTK node order), for the drawn surface
 CELL_FACES = {"tetra": ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)),
@@ -356,7 +357,6 @@ def _coloured_body(ax, cells: dict, Y: np.ndarray, values: dict, label: str) -> 
     """The deformed body Y (n, 2): continuum cells filled by von Mises stress, bars coloured
     by axial force (diverging, tension red), each with a colour bar."""
     from matplotlib.collections import LineCollection, PolyCollection
-    from matplotlib.colors import TwoSlopeNorm
 
     from .configuration import AXIAL_FORCE, VON_MISES
     fig = ax.figure
@@ -370,12 +370,20 @@ def _coloured_body(ax, cells: dict, Y: np.ndarray, values: dict, label: str) -> 
         ax.add_collection(pc)
         fig.colorbar(pc, ax=ax, shrink=0.8, label="von Mises stress (element centroid)")
     if AXIAL_FORCE in values:
-        v = values[AXIAL_FORCE]["line"]
-        lim = max(float(np.abs(v).max()), 1e-300)
-        lc = LineCollection(Y[np.asarray(cells["line"]).reshape(-1, 2)], array=v, cmap="coolwarm",
-                            norm=TwoSlopeNorm(0.0, -lim, lim), linewidths=2.0, zorder=2, label=label)
+        lc = LineCollection(Y[np.asarray(cells["line"]).reshape(-1, 2)], linewidths=2.0, zorder=2, label=label)
         ax.add_collection(lc)
-        fig.colorbar(lc, ax=ax, shrink=0.8, label="bar axial force (tension > 0)")
+        fig.colorbar(_axial_colours(lc, values[AXIAL_FORCE]["line"]), ax=ax, shrink=0.8,
+                     label=AXIAL_LABEL)
+
+
+def _axial_colours(lc, v: np.ndarray):
+    """Colour the bars of `lc` by their axial forces v: diverging about 0, tension red."""
+    from matplotlib.colors import TwoSlopeNorm
+    lim = max(float(np.abs(v).max()), 1e-300)
+    lc.set_array(v)
+    lc.set_cmap("coolwarm")
+    lc.set_norm(TwoSlopeNorm(0.0, -lim, lim))
+    return lc
 
 
 # --------------------------------------------------------------------------- 3D
@@ -431,7 +439,6 @@ def _boundary(cells: dict) -> tuple[list, list, list]:
 
 def _body_3d(ax, d: dict) -> None:
     """The body in perspective: undeformed and deformed, C/G nodes, reactions, obstacle."""
-    from matplotlib.colors import TwoSlopeNorm
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     from .configuration import AXIAL_FORCE, VON_MISES
@@ -473,12 +480,8 @@ def _body_3d(ax, d: dict) -> None:
     if len(bars):
         lc = Line3DCollection([Y[b] for b in bars], linewidths=2.0, zorder=3, label=label)
         if AXIAL_FORCE in values:
-            v = values[AXIAL_FORCE]["line"]
-            lim = max(float(np.abs(v).max()), 1e-300)
-            lc.set_array(v)
-            lc.set_cmap("coolwarm")
-            lc.set_norm(TwoSlopeNorm(0.0, -lim, lim))
-            ax.figure.colorbar(lc, ax=ax, shrink=0.5, pad=0.1, label="bar axial force (tension > 0)")
+            ax.figure.colorbar(_axial_colours(lc, values[AXIAL_FORCE]["line"]), ax=ax, shrink=0.5, pad=0.1,
+                               label=AXIAL_LABEL)
         else:
             lc.set_color("tab:blue")
         ax.add_collection3d(lc)
