@@ -33,11 +33,12 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("result")
     s.add_argument("--json", action="store_true", help="one JSON object (SPEC §4)")
     s.add_argument("--no-rays", action="store_true", help="leave the ray vectors out of the JSON")
-    pl = sub.add_parser("plot", help="draw a wedged configuration and the cones' mu^c")
+    pl = sub.add_parser("plot", help="draw a wedged configuration and the cones' / patterns' mu^c")
     pl.add_argument("result")
     pl.add_argument("-o", "--output", required=True)
     pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
-    pl.add_argument("--ray", type=int, default=0, help="wedged ray to draw")
+    pl.add_argument("--ray", type=int, help="2D: wedged ray to draw (default 0)")
+    pl.add_argument("--pattern", type=int, help="3D: sign pattern to draw (default 0)")
     ex = sub.add_parser("export", help="write one configuration of the whole body as a VTU file (ParaView)",
                         description="Recover every node's displacement, the contact reactions and the "
                         "element stresses (von Mises / bar axial force) of one item of a result, on the "
@@ -211,7 +212,7 @@ def _plot(args) -> int:
     from .plot import plot_result
     _read(args.result, with_rays=False)
     try:
-        plot_result(args.result, args.output, run=args.run, ray=args.ray)
+        plot_result(args.result, args.output, run=args.run, ray=args.ray, pattern=args.pattern)
     except ValueError as e:
         raise _UserError(str(e)) from None
     return 0
