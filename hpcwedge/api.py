@@ -302,7 +302,8 @@ def solve(scene: Scene | str | os.PathLike | Mapping, *, progress: bool = False)
 
 
 def write_result(result: Result, path: str | os.PathLike) -> None:
-    """Write `result` as a result file (SPEC §4; atomic, checksummed: results.write_result)."""
+    """Write `result` as a result file (SPEC §4; atomic, checksummed: results.write_result),
+    which ``hpcwedge show``, ``plot`` and ``export`` read like one written by ``hpcwedge run``."""
     from .results import write_result as write
     write(os.fspath(path), result)
 
@@ -337,9 +338,23 @@ def _result_file(result: Result | str | os.PathLike) -> Iterator[str]:
 
 
 def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1, ray: int = 0) -> None:
-    """Draw wedged ray `ray` of run `run` and the cones' mu^c as a PNG (``hpcwedge plot``:
-    plot.plot_result); `result` is a Result or a result file. ValueError (one line) for a
-    3D result, a bad index or a bad file."""
+    """Draw a wedged configuration and the cones' mu^c as a PNG (``hpcwedge plot``:
+    plot.plot_result).
+
+    Parameters
+    ----------
+    result : Result or path
+        A solved Result or a result file.
+    output : path
+        The PNG to write (atomically).
+    run, ray : int
+        Which run (Python-style index, -1: the last) and which of its wedged rays.
+
+    Raises
+    ------
+    ValueError
+        One line: a 3D result, a bad index, a missing or damaged file.
+    """
     from .plot import plot_result
     with _result_file(result) as path:
         plot_result(path, os.fspath(output), run=run, ray=ray)
@@ -347,10 +362,31 @@ def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: 
 
 def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1,
                ray: int | None = None, cone: int | None = None, pattern: int | None = None):
-    """Write one configuration of the whole body (exactly one of ray, cone, pattern of run
-    `run`) as a VTU file (``hpcwedge export``) and return it (a configuration.Configuration:
-    displacement, reaction, element_values of every node and element). ConfigurationError
-    (one line) for a bad index or a result without a body (a stiffness scene).
+    """Write one configuration of the whole body as a VTU file (``hpcwedge export``) and
+    return it.
+
+    Parameters
+    ----------
+    result : Result or path
+        A solved Result or a result file.
+    output : path
+        The .vtu file to write (ParaView).
+    run : int
+        Which run (Python-style index, -1: the last).
+    ray, cone, pattern : int
+        Exactly one: a wedged ray (2D), a cone (2D: the mean of its wedged rays) or a sign
+        pattern (a feasible point at the run's mu).
+
+    Returns
+    -------
+    configuration.Configuration
+        ``displacement`` and ``reaction`` of every node, ``element_values`` (von Mises,
+        bar forces) of every element, ``model``, ``label``.
+
+    Raises
+    ------
+    configuration.ConfigurationError
+        One line: a bad index, a result without a body (a stiffness scene), a bad file.
 
     Examples
     --------

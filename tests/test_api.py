@@ -133,6 +133,30 @@ def test_file_scene_and_dict_scene_agree(tmp_path):
         assert abs(hw.solve(scene).mu_c - math.tan(math.radians(20))) <= 1e-12
 
 
+def test_relative_files_of_a_dict_scene(tmp_path, monkeypatch):
+    """model.file of a dict scene is relative to base_dir (default: the current folder at
+    the call), and its bytes are part of the scene's identity as for a scene file."""
+    np.savez(tmp_path / "k.npz", K=np.array(K2))
+    d = {"name": "k", "dim": 2, "model": {"kind": "stiffness", "file": "k.npz"}, "friction": {"mu": 5.0}}
+    a = hw.Scene.from_dict(d, base_dir=str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    b = hw.Scene.from_dict(d)
+    monkeypatch.chdir(tmp_path.parent)
+    for s in (a, b):
+        assert s.input_files == (str(tmp_path / "k.npz"),) and len(s.input_digests) == 1
+        assert abs(hw.solve(s).mu_c - 4.0) <= 1e-12
+    with pytest.raises(hw.SceneError, match="model.file: k.npz not found"):
+        hw.solve(hw.Scene.from_dict(d))
+
+
+def test_progress_goes_to_stderr_only_when_asked(capfd):
+    hw.solve(hw.Scene.builtin("plug2d", rows=2))
+    assert capfd.readouterr() == ("", "")
+    hw.solve(hw.Scene.builtin("plug2d", rows=2), progress=True)
+    out, err = capfd.readouterr()
+    assert out == "" and "rays" in err
+
+
 # --------------------------------------------------------------------------- errors
 
 K2 = [[2.0, 1.0], [1.0, 4.0]]
