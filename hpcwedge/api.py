@@ -337,7 +337,8 @@ def _result_file(result: Result | str | os.PathLike) -> Iterator[str]:
         yield path
 
 
-def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1, ray: int = 0) -> None:
+def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1,
+         ray: int | None = None, pattern: int | None = None) -> None:
     """Draw a wedged configuration and the cones' mu^c as a PNG (``hpcwedge plot``:
     plot.plot_result).
 
@@ -347,8 +348,11 @@ def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: 
         A solved Result or a result file.
     output : path
         The PNG to write (atomically).
-    run, ray : int
-        Which run (Python-style index, -1: the last) and which of its wedged rays.
+    run : int
+        Which run (Python-style index, -1: the last).
+    ray, pattern : int, optional
+        2D: the wedged ray to draw (default 0); 3D: the sign pattern (plot.plot_result's
+        choices and defaults; only the one given is passed on).
 
     Raises
     ------
@@ -357,7 +361,8 @@ def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: 
     """
     from .plot import plot_result
     with _result_file(result) as path:
-        plot_result(path, os.fspath(output), run=run, ray=ray)
+        item = {k: v for k, v in (("ray", ray), ("pattern", pattern)) if v is not None}
+        plot_result(path, os.fspath(output), run=run, **item)
 
 
 def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1,
