@@ -7,3 +7,19 @@ from .environment import set_thread_variables
 
 set_thread_variables()
 __version__ = "0.1.0"
+
+#: the public API (api.py), imported on first use so that `import hpcwedge` stays light
+#: (no numpy: the thread policy above must come before the libraries load)
+__all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
+           "plot", "export_vtu", "DEFAULT_MU", "__version__"]
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        from . import api
+        return getattr(api, name)
+    raise AttributeError(f"module 'hpcwedge' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

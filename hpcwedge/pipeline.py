@@ -77,6 +77,19 @@ class Result:
     model: Model | None = None
     problem: ContactProblem | None = None
 
+    def to_dict(self, with_rays: bool = True) -> dict:
+        """The `hpcwedge show --json` object of this result (SPEC §4): written to a temporary
+        result file and read back by results.read_result, the one JSON writer (so the two
+        never differ; it costs a write and a read of the file)."""
+        import os
+        import tempfile
+
+        from .results import read_result, write_result
+        with tempfile.TemporaryDirectory(prefix="hpcwedge-") as folder:
+            path = os.path.join(folder, "result.h5")
+            write_result(path, self)
+            return read_result(path, with_rays=with_rays)
+
 
 def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None,
               condensed: tuple[Model, ContactProblem, float] | None = None) -> Result:

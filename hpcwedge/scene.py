@@ -122,6 +122,36 @@ class Scene:
                     mu_c_cones=self.mu_c == "cones",
                     mu_c_global=self.mu_c in ("global", "cones"))
 
+    # the public API's constructors (api.py: a scene table, then parse_scene, the one validator)
+    @classmethod
+    def load(cls, path: str) -> Scene:
+        """The scene of a TOML file (load_scene)."""
+        return load_scene(path)
+
+    @classmethod
+    def from_dict(cls, data: dict, **options) -> Scene:
+        """The scene of a scene table given as a dict: api.scene_from_dict."""
+        from .api import scene_from_dict
+        return scene_from_dict(data, **options)
+
+    @classmethod
+    def builtin(cls, kind: str, **options) -> Scene:
+        """The scene of a built-in model: api.builtin_scene."""
+        from .api import builtin_scene
+        return builtin_scene(kind, **options)
+
+    @classmethod
+    def from_stiffness(cls, K, **options) -> Scene:
+        """The scene of a condensed stiffness array: api.stiffness_scene."""
+        from .api import stiffness_scene
+        return stiffness_scene(K, **options)
+
+    @classmethod
+    def from_truss(cls, nodes, bars, **options) -> Scene:
+        """The scene of a truss given as arrays: api.truss_scene."""
+        from .api import truss_scene
+        return truss_scene(nodes, bars, **options)
+
 
 def load_scene(path: str) -> Scene:
     """Read and validate a scene file."""

@@ -1,0 +1,411 @@
+"""The public Python API (``import hpcwedge as hw``): scenes, solving, result files, figures.
+
+A thin layer over the stages the command line runs: every scene, however it is made, is a
+scene table that goes through the one validator (scene.parse_scene), so every check,
+default and error message (a SceneError naming the key) is the parser's; `solve` is
+pipeline.run_scene; the result file, its JSON, the figure and the VTU export are
+results.py, plot.py and configuration.py.
+
+A scene made in Python (a dict, keyword arguments, arrays) keeps its table as TOML text
+(Scene.text): its hash identifies it, and a result file stores it, so that `show`, `plot`
+and `export` rebuild the body from the file alone, as for a scene file.
+
+Examples
+--------
+>>> import math
+>>> import hpcwedge as hw
+>>> r = hw.solve(hw.Scene.builtin("plug2d", rows=4))
+>>> abs(r.mu_c - math.tan(math.radians(10))) < 1e-12
+True
+>>> [(run.mu, run.n_wedged_rays, run.n_cones) for run in r.runs]
+[(0.65, 244, 3)]
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import re
+import tempfile
+import tomllib
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Any
+
+from .pipeline import Result, Run, run_scene
+from .results import FileError
+from .scene import COMPUTE_DEFAULTS, RUN_DEFAULTS, Scene, SceneError, array, load_scene, parse_scene
+
+__all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
+           "plot", "export_vtu", "DEFAULT_MU"]
+
+#: the friction coefficient at which the Python constructors enumerate when no `mu` is given
+#: (the SPEC's example). mu^c does not depend on it: with no wedged cone at mu, the global
+#: mu^c is searched below mu_max.
+DEFAULT_MU = 0.65
+
+
+# --------------------------------------------------------------------------- scenes
+
+def scene_from_dict(data: Mapping, *, base_dir: str | None = None) -> Scene:
+    """The Scene of a scene table given as a dict (the TOML file's structure, SPEC §3).
+
+    Parameters
+    ----------
+    data : Mapping
+        ``{"name", "dim", "model": {...}, "friction": {"mu": ...}, "compute": {...}, ...}``.
+        Values may be numpy arrays and scalars and tuples (stored as lists); a key whose
+        value is None is left out (its default applies).
+    base_dir : str, optional
+        The folder that relative file names (``model.file``) are relative to; default: the
+        current directory at the time of the call.
+
+    Returns
+    -------
+    Scene
+        Validated by scene.parse_scene; ``Scene.text`` is the table as TOML.
+
+    Raises
+    ------
+    SceneError
+        One line naming the key and the reason.
+
+    Examples
+    --------
+    >>> s = scene_from_dict({"name": "v", "dim": 2, "model": {"kind": "vgroove_bar"},
+    ...                      "friction": {"mu": [0.5, 1.0]}})
+    >>> s.mu, s.kind
+    ((0.5, 1.0), 'vgroove_bar')
+    >>> scene_from_dict({"name": "v", "dim": 2, "model": {"kind": "vgroove_bar"},
+    ...                  "friction": {"mu": -1}})
+    Traceback (most recent call last):
+    hpcwedge.scene.SceneError: friction.mu: every value must be a finite number > 0, got -1
+    """
+    if not isinstance(data, Mapping):
+        raise SceneError(f"scene: must be a table (a dict), got {type(data).__name__}")
+    text = _toml(_plain(data, ""))
+    return parse_scene(tomllib.loads(text), text=text, base_dir=os.path.abspath(base_dir or os.getcwd()))
+
+
+def builtin_scene(kind: str, *, mu: float | Sequence[float] = DEFAULT_MU, name: str | None = None,
+                  **params: Any) -> Scene:
+    """The scene of a built-in model (SPEC §6).
+
+    Parameters
+    ----------
+    kind : str
+        ``"plug2d"``, ``"plug3d"``, ``"block2d"`` or ``"vgroove_bar"``.
+    mu : float or sequence of float
+        The friction coefficient(s) to enumerate at (friction.mu).
+    name : str, optional
+        The scene's name (default: the kind).
+    **params
+        The model's parameters (``rows``, ``taper_deg``...) and any [compute] or [run]
+        option (``mu_c="global"``, ``enumerate=False``, ``symmetry=False``...).
+
+    Examples
+    --------
+    >>> s = builtin_scene("plug2d", rows=3, mu=[0.3, 0.65], mu_c="global")
+    >>> s.dim, s.model, s.mu, s.mu_c
+    (2, {'rows': 3}, (0.3, 0.65), 'global')
+    >>> builtin_scene("plug2d", row=3)
+    Traceback (most recent call last):
+    hpcwedge.scene.SceneError: model.row: unknown parameter of plug2d (allowed: rows, cols, taper_deg)
+    """
+    from .models.library import BUILTIN_DIM
+    if kind not in BUILTIN_DIM:
+        raise SceneError(f"model.kind: {kind!r} is not a built-in model (one of {', '.join(BUILTIN_DIM)}; "
+                         "Scene.from_stiffness, Scene.from_truss or Scene.load for the others)")
+    model = {k: v for k, v in params.items() if k not in COMPUTE_DEFAULTS and k not in RUN_DEFAULTS}
+    options = {k: v for k, v in params.items() if k not in model}
+    return scene_from_dict({"name": name or kind, "dim": BUILTIN_DIM[kind], "model": {"kind": kind, **model},
+                            "friction": {"mu": mu}, **_tables(options)})
+
+
+def stiffness_scene(K: Any, *, dim: int, null_space: Any = None, mu: float | Sequence[float] = DEFAULT_MU,
+                    name: str = "stiffness", **options: Any) -> Scene:
+    """The scene of a condensed stiffness given as an array (``kind = "stiffness"``).
+
+    Parameters
+    ----------
+    K : array_like, (dim*m, dim*m)
+        The condensed, block-ordered local stiffness of the m contact nodes (SPEC §1, §3).
+    dim : int
+        2 or 3.
+    null_space : array_like, optional
+        Its rigid modes as columns; without it a singular K must have an unambiguous null
+        space (the parser's rank test).
+    mu, name, **options
+        As for `builtin_scene` ([compute] and [run] options only).
+
+    The table is checked here; K itself (symmetric, semidefinite, its null space) when the
+    scene is solved, as for a scene file.
+
+    Examples
+    --------
+    One contact node: mu^c = K_tt / |K_nt| (SPEC §6).
+
+    >>> s = stiffness_scene([[2.0, 1.0], [1.0, 4.0]], dim=2, mu=5.0)
+    >>> round(solve(s).mu_c, 12)
+    4.0
+    >>> solve(stiffness_scene([[1.0, 2.0], [0.0, 1.0]], dim=2))
+    Traceback (most recent call last):
+    hpcwedge.scene.SceneError: model.K: not symmetric (max |K - K^T| = 2)
+    """
+    model = {"kind": "stiffness", "K": K, "null_space": null_space}
+    return scene_from_dict({"name": name, "dim": dim, "model": model, "friction": {"mu": mu},
+                            **_tables(options)})
+
+
+def truss_scene(nodes: Any, bars: Any, *, contact_nodes: Any, normals: Any, EA: Any = 1.0,
+                supports: Any = None, tangents: Any = None, mu: float | Sequence[float] = DEFAULT_MU,
+                name: str = "truss", **options: Any) -> Scene:
+    """The scene of a truss given as arrays (``kind = "truss"``); dim is the number of
+    coordinates per node.
+
+    Parameters
+    ----------
+    nodes : array_like, (n, dim)
+        Node coordinates.
+    bars : array_like of int, (b, 2)
+        0-based node pairs.
+    contact_nodes : array_like of int, (m,)
+        The nodes in contact, in the order of the contact list.
+    normals : array_like, (m, dim)
+        Their contact normals (into the body); 3D: optional `tangents` (m, dim).
+    EA : float or array_like, (b,)
+        Axial stiffness, one or per bar.
+    supports : array_like of int, (s, 2), optional
+        [node, dof] pairs held fixed.
+    mu, name, **options
+        As for `builtin_scene` ([compute] and [run] options only).
+
+    Examples
+    --------
+    A bar between two walls at 30 degrees from vertical (vgroove_bar): mu^c = tan 30.
+
+    >>> s = truss_scene([[-1.0, 0.0], [1.0, 0.0]], [[0, 1]], contact_nodes=[0, 1], EA=2.0,
+    ...                 normals=[[math.cos(math.pi / 6), math.sin(math.pi / 6)],
+    ...                          [-math.cos(math.pi / 6), math.sin(math.pi / 6)]])
+    >>> abs(solve(s).mu_c - math.tan(math.pi / 6)) < 1e-12
+    True
+    """
+    dim = array(nodes, "model.nodes", 2).shape[1]
+    model = {"kind": "truss", "nodes": nodes, "bars": bars, "EA": EA, "supports": supports}
+    contact = {"nodes": contact_nodes, "normals": normals, "tangents": tangents}
+    return scene_from_dict({"name": name, "dim": dim, "model": model, "contact": contact,
+                            "friction": {"mu": mu}, **_tables(options)})
+
+
+def _tables(options: Mapping) -> dict:
+    """{"compute": {...}, "run": {...}} of keyword options; SceneError for any other key."""
+    out: dict = {"compute": {}, "run": {}}
+    for k, v in options.items():
+        table = "compute" if k in COMPUTE_DEFAULTS else "run" if k in RUN_DEFAULTS else None
+        if table is None:
+            raise SceneError(f"{k}: unknown option (compute: {', '.join(COMPUTE_DEFAULTS)}; "
+                             f"run: {', '.join(RUN_DEFAULTS)})")
+        out[table][k] = v
+    return out
+
+
+def _plain(value: Any, key: str) -> Any:
+    """value with numpy arrays and scalars as Python lists and numbers, tuples as lists and
+    None entries of tables left out; SceneError naming the key for anything TOML cannot hold."""
+    if isinstance(value, Mapping):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise SceneError(f"{key + '.' if key else ''}{k!r}: keys must be strings")
+            if v is not None:
+                out[k] = _plain(v, f"{key}.{k}" if key else k)
+        return out
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):    # numpy array or scalar
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, key) for v in value]
+    if isinstance(value, (bool, int, float, str)):
+        return value
+    raise SceneError(f"{key or 'scene'}: a scene value is a number, string, boolean, list or table, "
+                     f"got {type(value).__name__}")
+
+
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _toml(table: dict) -> str:
+    """The scene table (plain values: _plain) as TOML text: top-level values first, then
+    one [section] per table, nested tables inline; tomllib.loads gives the table back."""
+    lines = [f"{_key(k)} = {_value(v)}" for k, v in table.items() if not isinstance(v, dict)]
+    for k, v in table.items():
+        if isinstance(v, dict):
+            lines += ["", f"[{_key(k)}]"] + [f"{_key(kk)} = {_value(vv)}" for kk, vv in v.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _key(k: str) -> str:
+    return k if _BARE_KEY.fullmatch(k) else _string(k)
+
+
+def _string(s: str) -> str:
+    return json.dumps(s, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf"))
+    if isinstance(v, str):
+        return _string(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
+
+
+# --------------------------------------------------------------------------- solving, files
+
+def solve(scene: Scene | str | os.PathLike | Mapping, *, progress: bool = False) -> Result:
+    """Every answer the scene asks for (pipeline.run_scene, in this process).
+
+    Parameters
+    ----------
+    scene : Scene, path or dict
+        A Scene, a scene file (Scene.load) or a scene table (Scene.from_dict).
+    progress : bool
+        Show progress on stderr.
+
+    Returns
+    -------
+    Result
+        ``mu_c`` (None: none found), ``mu_c_status``, ``runs`` (one Run per listed mu:
+        ``rays``, ``trivial_rays``, ``cones``, ``patterns`` and their counts ``n_*``; None
+        for what the scene did not ask for), ``stats``, ``timings``, ``to_dict()`` (the
+        ``show --json`` object).
+
+    Examples
+    --------
+    >>> r = solve(Scene.builtin("plug2d", rows=3))
+    >>> r.m, r.runs[0].n_wedged_rays, r.runs[0].rays.shape, sorted(r.timings)
+    (6, 44, (44, 24), ['condense', 'enumerate', 'mu_c', 'total'])
+    """
+    from .progress import Progress
+    if isinstance(scene, (str, os.PathLike)):
+        scene = load_scene(os.fspath(scene))
+    elif isinstance(scene, Mapping):
+        scene = scene_from_dict(scene)
+    elif not isinstance(scene, Scene):
+        raise SceneError(f"scene: a Scene, a scene file or a dict, got {type(scene).__name__}")
+    return run_scene(scene, Progress(quiet=not progress))
+
+
+def write_result(result: Result, path: str | os.PathLike) -> None:
+    """Write `result` as a result file (SPEC §4; atomic, checksummed: results.write_result),
+    which ``hpcwedge show``, ``plot`` and ``export`` read like one written by ``hpcwedge run``."""
+    from .results import write_result as write
+    write(os.fspath(path), result)
+
+
+def read_result(path: str | os.PathLike, *, with_rays: bool = True) -> dict:
+    """The ``show --json`` object of a result file (results.read_result); FileError (one
+    line) for a missing, damaged or malformed file.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> r = solve(Scene.builtin("vgroove_bar", mu=1.0))
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     write_result(r, os.path.join(d, "r.h5"))
+    ...     read_result(os.path.join(d, "r.h5")) == r.to_dict()
+    True
+    """
+    from .results import read_result as read
+    return read(os.fspath(path), with_rays=with_rays)
+
+
+@contextlib.contextmanager
+def _result_file(result: Result | str | os.PathLike) -> Iterator[str]:
+    """The path of a result file: `result` itself, or a Result written to a temporary file."""
+    if not isinstance(result, Result):
+        yield os.fspath(result)
+        return
+    with tempfile.TemporaryDirectory(prefix="hpcwedge-") as d:
+        path = os.path.join(d, "result.h5")
+        write_result(result, path)
+        yield path
+
+
+def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1,
+         ray: int | None = None, pattern: int | None = None) -> None:
+    """Draw a wedged configuration and the cones' mu^c as a PNG (``hpcwedge plot``:
+    plot.plot_result).
+
+    Parameters
+    ----------
+    result : Result or path
+        A solved Result or a result file.
+    output : path
+        The PNG to write (atomically).
+    run : int
+        Which run (Python-style index, -1: the last).
+    ray, pattern : int, optional
+        2D: the wedged ray to draw (default 0); 3D: the sign pattern (plot.plot_result's
+        choices and defaults; only the one given is passed on).
+
+    Raises
+    ------
+    ValueError
+        One line: a 3D result, a bad index, a missing or damaged file.
+    """
+    from .plot import plot_result
+    with _result_file(result) as path:
+        item = {k: v for k, v in (("ray", ray), ("pattern", pattern)) if v is not None}
+        plot_result(path, os.fspath(output), run=run, **item)
+
+
+def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1,
+               ray: int | None = None, cone: int | None = None, pattern: int | None = None):
+    """Write one configuration of the whole body as a VTU file (``hpcwedge export``) and
+    return it.
+
+    Parameters
+    ----------
+    result : Result or path
+        A solved Result or a result file.
+    output : path
+        The .vtu file to write (ParaView).
+    run : int
+        Which run (Python-style index, -1: the last).
+    ray, cone, pattern : int
+        Exactly one: a wedged ray (2D), a cone (2D: the mean of its wedged rays) or a sign
+        pattern (a feasible point at the run's mu).
+
+    Returns
+    -------
+    configuration.Configuration
+        ``displacement`` and ``reaction`` of every node, ``element_values`` (von Mises,
+        bar forces) of every element, ``model``, ``label``.
+
+    Raises
+    ------
+    configuration.ConfigurationError
+        One line: a bad index, a result without a body (a stiffness scene), a bad file.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> r = solve(Scene.builtin("plug2d", rows=2))
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     c = export_vtu(r, os.path.join(d, "ray0.vtu"), ray=0)
+    ...     os.path.getsize(os.path.join(d, "ray0.vtu")) > 0
+    True
+    >>> c.displacement.shape
+    (6, 2)
+    """
+    from .configuration import load_configuration, write_vtu
+    with _result_file(result) as path:
+        config = load_configuration(path, run=run, ray=ray, cone=cone, pattern=pattern)
+    write_vtu(config, os.fspath(output))
+    return config
