@@ -168,3 +168,134 @@ def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monk
     assert got == want and len(got["runs"][0]["rays"]) == got["runs"][0]["n_wedged_rays"] > 7
     assert main(["show", out, "--json", "--no-rays"]) == 0
     assert json.loads(capsys.readouterr().out) == results.read_result(out, with_rays=False)
+
+
+# ----------------------------------------------------------------------------- user faults (issue 11)
+
+from mpi_helpers import all_gone, command, env, launch, needs_mpirun, rank_pids  # noqa: E402
+
+TRUSS = ('name = "t"\ndim = 2\n[model]\nkind = "truss"\nnodes = [[0.0, 0.0], [1.0, 0.0]]\nbars = [[0, 1]]\n'
+         'EA = 1.0\n{model}\n[contact]\nnodes = [0, 1]\nnormals = [[1.0, 1.0], [-1.0, 1.0]]\n{contact}\n'
+         '[friction]\nmu = [0.65]\n')
+PLUG = 'name = "p"\ndim = 2\n{top}\n[model]\nkind = "plug2d"\nrows = 2\n{model}\n[friction]\nmu = [0.65]\n{tail}\n'
+STIFF = 'name = "k"\ndim = 2\n[model]\nkind = "stiffness"\nK = [[2.0, 0.5], [0.5, 1.0]]\n{model}\n[friction]\nmu = [2.5]\n{tail}\n'
+MESH = ('name = "m"\ndim = 2\n[model]\nkind = "mesh"\nfile = "m.msh"\n{model}\n[contact]\ngroup = "walls"\n'
+        '{contact}\n[friction]\nmu = [0.65]\n{tail}\n')
+
+
+def _t(template, **parts):
+    return template.format(**{"top": "", "model": "", "contact": "", "tail": "", **parts})
+
+
+#: (scene text, the key the one-line error must name): for each table and model kind a typo,
+#: a wrong type, NaN/inf and a value out of range
+BAD_SCENES = [
+    (_t(PLUG, top="run = 5"), "run"),
+    (_t(PLUG).replace("dim = 2", "dim = 2.0"), "dim"),
+    (_t(PLUG, top="frction = 1"), "frction"),
+    (_t(PLUG).replace("mu = [0.65]", 'mu = "0.5"'), "friction.mu"),
+    (_t(PLUG).replace("mu = [0.65]", "mu = [nan]"), "friction.mu"),
+    (_t(PLUG).replace("mu = [0.65]", "mu = [0.65]\nmuu = 1"), "friction.muu"),
+    (_t(PLUG, tail="[compute]\nenumerate = 1"), "compute.enumerate"),
+    (_t(PLUG, tail="[compute]\nmu_max = inf"), "compute.mu_max"),
+    (_t(PLUG, tail="[compute]\nmu_c = true"), "compute.mu_c"),
+    (_t(PLUG, tail="[compute]\nmu_cc = 1"), "compute.mu_cc"),
+    (_t(PLUG, tail="[run]\ncheckpoint_every_s = nan"), "run.checkpoint_every_s"),
+    (_t(PLUG, tail="[run]\ncheckpoint_every_s = -inf"), "run.checkpoint_every_s"),
+    (_t(PLUG, tail="[run]\ntask_budget = true"), "run.task_budget"),
+    (_t(PLUG, tail="[run]\nface_split = 9"), "run.face_split"),
+    (_t(PLUG, tail="[run]\ncondense = 1"), "run.condense"),
+    (_t(PLUG, tail="[run]\nchekpoint_every_s = 1"), "run.chekpoint_every_s"),
+    (_t(PLUG, model="rows = true").replace("rows = 2\n", ""), "model.rows"),
+    (_t(PLUG, model="taper_deg = nan"), "model.taper_deg"),
+    (_t(PLUG, model="taper_deg = 95.0"), "model.taper_deg"),
+    (_t(PLUG, model="rowz = 3"), "model.rowz"),
+    (_t(PLUG, tail="[contact]\nnodes = [0]"), "contact.nodes"),
+    (_t(TRUSS, model="suports = [[0, 0]]"), "model.suports"),
+    (_t(TRUSS).replace("EA = 1.0", "EA = true"), "model.EA"),
+    (_t(TRUSS).replace("EA = 1.0", "EA = nan"), "model.EA"),
+    (_t(TRUSS).replace("EA = 1.0", "EA = -1.0"), "model.EA"),
+    (_t(TRUSS, contact="tangent = [[0.0, 1.0], [0.0, 1.0]]"), "contact.tangent"),
+    (_t(STIFF, model="null_spcae = [[1.0], [0.0]]"), "model.null_spcae"),
+    (_t(STIFF, model="file = 5").replace("K = [[2.0, 0.5], [0.5, 1.0]]\n", ""), "model.file"),
+    (_t(STIFF).replace("0.5, 1.0]]", "inf, 1.0]]"), "model.K"),
+    (_t(STIFF, tail="[contact]\nnormals = [[1.0, 0.0]]"), "contact.normals"),
+    (_t(MESH, model="Young = 1.0", contact="normals = [[1.0, 1.0]]"), "model.Young"),
+    (_t(MESH, model="E = true", contact="normals = [[1.0, 1.0]]"), "model.E"),
+    (_t(MESH, contact="normal = [[1.0, 1.0]]"), "contact.normal"),
+    (_t(MESH, tail='[[obstacle]]\ntype = "plane"\npoint = [0.0, 0.0]\nnormal = [0.0, 1.0]\nside = 1'),
+     "obstacle[0].side"),
+    (_t(MESH, tail='[[obstacle]]\ntype = "cone"\napex = [0.0, 0.0]\naxis = [0.0, 1.0]\nhalf_angle_deg = inf'),
+     "obstacle[0].half_angle_deg"),
+]
+
+
+@pytest.mark.parametrize("text,key", BAD_SCENES, ids=[k for _, k in BAD_SCENES])
+def test_bad_scene_catalogue_exit_2_one_line_nothing_left(tmp_path, capsys, text, key):
+    """Exit 2, exactly one line on stderr, `hpcwedge: error: <key>: ...`, and nothing left
+    beside the scene: no result, no checkpoint, no temp file, no lock file."""
+    scene = write(tmp_path, text)
+    assert main(["run", scene, "-o", str(tmp_path / "r.h5"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith(f"hpcwedge: error: {key}:"), err
+    assert os.listdir(tmp_path) == ["s.toml"]
+
+
+def test_usage_errors_one_line_exit_2(tmp_path, capsys):
+    assert main(["run", write(tmp_path, _t(PLUG))]) == 2                     # no -o
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("hpcwedge: error: hpcwedge run:") and "-o" in err
+
+
+def _result(tmp_path) -> str:
+    return _run_quiet(tmp_path, _t(PLUG), "res")
+
+
+_COMMON = ["empty", "directory", "missing-folder", "fifo"]
+
+
+@pytest.mark.parametrize("cmd,case", [("run", c) for c in _COMMON + ["scene", "hard-link", "symlink", "input-file"]]
+                         + [(cmd, c) for cmd in ("plot", "export") for c in _COMMON + ["result", "result-hard-link"]])
+def test_output_that_would_destroy_an_input_or_fail_is_refused_first(tmp_path, capsys, cmd, case):
+    """-o is checked before any work: an empty name, a directory, a missing folder, a pipe,
+    or the same file as an input (the scene, a file the scene names, the result being
+    plotted/exported; by path, hard link or symlink) -> one line, exit 2, inputs intact."""
+    import numpy as np
+    np.savez(tmp_path / "k.npz", K=np.array([[2.0, 0.5], [0.5, 1.0]]))
+    scene = write(tmp_path, _t(STIFF).replace("K = [[2.0, 0.5], [0.5, 1.0]]", 'file = "k.npz"'))
+    res = _run_quiet(tmp_path, _t(PLUG), "res") if cmd != "run" else None
+    victim = {"scene": scene, "hard-link": scene, "symlink": scene, "input-file": str(tmp_path / "k.npz"),
+              "result": res, "result-hard-link": res}.get(case)
+    out = {"empty": "", "directory": str(tmp_path), "missing-folder": str(tmp_path / "no" / "r.h5"),
+           "fifo": str(tmp_path / "pipe"), "scene": scene, "input-file": victim, "result": res,
+           "hard-link": str(tmp_path / "link"), "symlink": str(tmp_path / "link"),
+           "result-hard-link": str(tmp_path / "link")}[case]
+    if case in ("hard-link", "result-hard-link"):
+        os.link(victim, out)
+    elif case == "symlink":
+        os.symlink(victim, out)
+    elif case == "fifo":
+        os.mkfifo(out)
+    before = {p: open(os.path.join(tmp_path, p), "rb").read() for p in os.listdir(tmp_path)
+              if os.path.isfile(os.path.join(tmp_path, p))}
+    capsys.readouterr()
+    args = {"run": ["run", scene, "-q"], "plot": ["plot", str(res)], "export": ["export", str(res), "--ray", "0"]}
+    assert main([*args[cmd], "-o", out]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("hpcwedge: error: "), err
+    assert (out or "-o") in err
+    after = {p: open(os.path.join(tmp_path, p), "rb").read() for p in os.listdir(tmp_path)
+             if os.path.isfile(os.path.join(tmp_path, p))}
+    assert after == before and (case != "fifo" or os.path.exists(out) and not os.path.isfile(out))
+
+
+def test_device_output_refused():
+    """-o on a device node (as root, a run would have replaced it by a regular file)."""
+    import stat
+    from hpcwedge.cli import _UserError, check_output
+    devices = [d for d in ("/dev/full", "/dev/zero", "/dev/random")
+               if os.path.exists(d) and stat.S_ISCHR(os.stat(d).st_mode)]
+    if not devices:
+        pytest.skip("no character device found")
+    with pytest.raises(_UserError, match="not a regular file"):
+        check_output(devices[0])
