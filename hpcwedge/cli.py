@@ -186,7 +186,7 @@ def _run(args) -> int:
             result = run_scene(scene, progress, engine=engine, condensed=condensed)
             try:
                 write_result(args.output, result)
-            except OSError as e:
+            except (OSError, RuntimeError) as e:     # h5py: RuntimeError for some failed writes
                 raise _UserError(_output_lost(args.output, e, engine, ckpt)) from None
             engine.remove_checkpoint()
             engine.mark_done()
@@ -211,19 +211,29 @@ def _run(args) -> int:
     return 0
 
 
-def _output_lost(output: str, err: OSError, engine, ckpt: str) -> str:
+def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     """The message for a result that could not be written at the end of a run, after saving
     the engine's state as a checkpoint (if it can) so that --resume does not redo the work."""
-    why = err.strerror or str(err)
+    why = _reason(err)
     try:
         kept = engine.write_checkpoint("output failed")
     except Exception as e:                      # noqa: BLE001  (the disk that refused the result)
         return (f"{output}: cannot write the result ({why}); the checkpoint could not be written "
-                f"either ({getattr(e, 'strerror', None) or type(e).__name__}): the work is lost")
+                f"either ({_reason(e)}): the work is lost")
     if not kept:
         return f"{output}: cannot write the result ({why})"
     engine.mark_done()
     return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
+
+
+def _reason(e: Exception) -> str:
+    """A short reason for a failed write: the system's words for the errno (also the one HDF5
+    embeds in h5py's messages), else the message's first line."""
+    import re
+    m = re.search(r"errno = (\d+)", str(e))
+    if isinstance(e, OSError) and e.errno and e.strerror:
+        return e.strerror
+    return os.strerror(int(m.group(1))) if m else (str(e).splitlines() or [type(e).__name__])[0]
 
 
 def check_output(path: str, inputs=()) -> None:

@@ -3,8 +3,10 @@ nothing written, and the public reference scenes."""
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -172,7 +174,8 @@ def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monk
 
 # ----------------------------------------------------------------------------- user faults (issue 11)
 
-from mpi_helpers import all_gone, command, env, launch, needs_mpirun, rank_pids  # noqa: E402
+from mpi_helpers import (all_gone, answers, command, env, launch, needs_mpirun, rank_pids,  # noqa: E402
+                         show_json)
 
 TRUSS = ('name = "t"\ndim = 2\n[model]\nkind = "truss"\nnodes = [[0.0, 0.0], [1.0, 0.0]]\nbars = [[0, 1]]\n'
          'EA = 1.0\n{model}\n[contact]\nnodes = [0, 1]\nnormals = [[1.0, 1.0], [-1.0, 1.0]]\n{contact}\n'
@@ -299,3 +302,165 @@ def test_device_output_refused():
         pytest.skip("no character device found")
     with pytest.raises(_UserError, match="not a regular file"):
         check_output(devices[0])
+
+
+def _wait_for_lock(out: str, proc: subprocess.Popen, timeout: float = 120.0) -> bool:
+    """Wait until the run `proc` holds the lock of `out` (OUTPUT.lock names its pid): its
+    output checks are passed and its work begins. False if it ended first."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            return False
+        try:
+            with open(out + ".lock") as f:
+                if f.read().strip() == str(proc.pid):
+                    return True
+        except FileNotFoundError:
+            pass
+        time.sleep(0.01)
+    raise AssertionError("the run never took its output lock")
+
+
+def _finish(proc: subprocess.Popen, timeout: float = 120.0) -> tuple[int, str]:
+    _, err = proc.communicate(timeout=timeout)
+    return proc.returncode, err
+
+
+def test_second_run_on_the_same_output_is_refused_naming_the_holder(tmp_path):
+    """Two real runs on one -o: the second (while the first holds the lock; SIGSTOP keeps it
+    there) ends at once with one line naming the first's pid and touches nothing; the first
+    then finishes normally and leaves no lock file."""
+    scene = write(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"))
+    out = str(tmp_path / "r.h5")
+    for _ in range(3):                          # a first run that ends before it is stopped: again
+        first = launch(None, "run", scene, "-o", out, "-q")
+        if not _wait_for_lock(out, first):
+            assert _finish(first)[0] == 0
+            os.unlink(out)
+            continue
+        os.kill(first.pid, signal.SIGSTOP)
+        try:
+            held = os.path.exists(out + ".lock") and not os.path.exists(out)
+            second = subprocess.run(command(None, "run", scene, "-o", out, "-q"), env=env(),
+                                    capture_output=True, text=True, timeout=120)
+        finally:
+            os.kill(first.pid, signal.SIGCONT)
+        code, err = _finish(first)
+        assert code == 0, err
+        if not held:
+            os.unlink(out)
+            continue
+        assert second.returncode == 2, second.stderr
+        line = second.stderr.strip()
+        assert len(second.stderr.splitlines()) == 1 and line.startswith(f"hpcwedge: error: {out}: another")
+        assert f"pid {first.pid}" in line
+        assert sorted(os.listdir(tmp_path)) == ["r.h5", "s.toml"]       # no lock, no checkpoint left
+        assert main(["show", out]) == 0
+        return
+    pytest.fail("the first run always ended before it could be stopped")
+
+
+def test_lock_of_a_killed_run_does_not_block_the_next(tmp_path):
+    """kill -9 of a run holding the lock: the kernel releases it; the next run on the same
+    -o goes ahead (and replaces the stale lock file)."""
+    scene = write(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"))
+    out = str(tmp_path / "r.h5")
+    first = launch(None, "run", scene, "-o", out, "-q")
+    if _wait_for_lock(out, first):
+        first.kill()
+    first.communicate(timeout=60)
+    p = subprocess.run(command(None, "run", scene, "-o", out, "-q"), env=env(), capture_output=True,
+                       text=True, timeout=300)
+    assert p.returncode == 0 and p.stderr == "", p.stderr
+    assert sorted(os.listdir(tmp_path)) == ["r.h5", "s.toml"]
+
+
+def test_result_write_failing_at_the_end_keeps_the_work(tmp_path, capsys):
+    """The output path turns into a directory during the run (after the checks): the result
+    write fails at the end -> one line, exit 2, the state in RESULT.ckpt; --resume then
+    writes the result without redoing the work, with the answers of an uninterrupted run."""
+    scene = write(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"))
+    out = str(tmp_path / "r.h5")
+    p = launch(None, "run", scene, "-o", out, "-q")
+    assert _wait_for_lock(out, p), "the run ended before the fault could be made"
+    os.mkdir(out)
+    code, err = _finish(p)
+    assert code == 2, err
+    assert len(err.splitlines()) == 1 and err.startswith(f"hpcwedge: error: {out}: cannot write the result (")
+    assert err.rstrip().endswith(f"state kept in {out}.ckpt; rerun with --resume")
+    os.rmdir(out)
+    assert main(["run", scene, "-o", out, "-q", "--resume"]) == 0
+    resumed = show_json(out)
+    assert resumed["stats"]["parallel"]["resumes"] == 1
+    fresh = str(tmp_path / "fresh.h5")
+    assert main(["run", scene, "-o", fresh, "-q"]) == 0
+    got, want = answers(resumed), answers(show_json(fresh))
+    for d in (got, want):
+        for dd in d["stats"]["dd"]:
+            dd.pop("seconds")
+    assert got == want
+    assert sorted(os.listdir(tmp_path)) == ["fresh.h5", "r.h5", "s.toml"]
+
+
+@pytest.fixture
+def read_only_dir(tmp_path):
+    """A real read-only file system (a tmpfs mounted ro; mounting needs root)."""
+    d = tmp_path / "ro"
+    d.mkdir()
+    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)], capture_output=True,
+                       text=True)
+    if p.returncode != 0:
+        pytest.skip(f"cannot mount a read-only tmpfs: {p.stderr.strip() or p.returncode}")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=True)
+
+
+def test_read_only_output_refused_before_the_work(tmp_path, capsys, read_only_dir):
+    scene = write(tmp_path, _t(PLUG))
+    out = str(read_only_dir / "r.h5")
+    assert main(["run", scene, "-o", out, "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith(f"hpcwedge: error: {out}: cannot write in ")
+    assert "read-only" in err
+
+
+def test_show_into_a_closed_pipe_exits_quietly(tmp_path):
+    """`hpcwedge show R.h5 --json | head -c 100` through a real shell pipe: head exits long
+    before the ~160 kB of JSON are written; hpcwedge stops quietly (no BrokenPipeError) with
+    the status of a process ended by SIGPIPE, like a Unix tool."""
+    res = _run_quiet(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"), "big")
+    assert os.path.getsize(res) > 65536                   # the JSON is larger than a pipe's buffer
+    cmd = " ".join(f"'{a}'" for a in command(None, "show", res, "--json"))
+    p = subprocess.run(["bash", "-c", f"{cmd} | head -c 100; exit ${{PIPESTATUS[0]}}"], env=env(),
+                       capture_output=True, text=True, timeout=120)
+    assert p.stderr == "" and len(p.stdout) == 100
+    assert p.returncode == 128 + signal.SIGPIPE
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_mpirun_error_on_the_master_before_the_first_collective_ends_the_job(tmp_path):
+    """`run = 5` under mpirun -n 3: the master fails before the workers' first collective
+    call. The job ends in seconds with status 2 and one `hpcwedge: error:` line, no
+    traceback, no rank left behind, nothing written (before: the workers spun until the
+    wall-time limit)."""
+    scene = write(tmp_path, _t(PLUG, top="run = 5"))
+    t0 = time.monotonic()
+    p = launch(3, "run", scene, "-o", str(tmp_path / "r.h5"))
+    pids = rank_pids(p.pid, 3, proc=p)
+    try:
+        _, err = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        for pid in [p.pid, *pids.values()]:
+            os.kill(pid, signal.SIGKILL)
+        p.communicate()
+        pytest.fail("mpirun hangs after an error on the master")
+    took = time.monotonic() - t0
+    assert p.returncode == 2, err
+    assert err.count("hpcwedge: error:") == 1 and "hpcwedge: error: run: must be a table" in err, err
+    assert "Traceback" not in err
+    assert all_gone(pids.values())
+    assert os.listdir(tmp_path) == ["s.toml"]
+    assert took < 30, took
