@@ -100,7 +100,10 @@ def check_not_mechanism(problem: ContactProblem) -> None:
 
 def raw_stiffness(scene: Scene) -> ContactProblem:
     """Validate a raw block-ordered K (inline or file) and its null space (SPEC §3)."""
-    m = scene.model                 # its keys and model.file's type: checked by parse_scene
+    m = scene.model
+    for k in m:
+        if k not in ("K", "file", "null_space"):
+            raise SceneError(f"model.{k}: unknown key for kind stiffness (K, file, null_space)")
     if ("K" in m) == ("file" in m):
         raise SceneError("model.K / model.file: give exactly one")
     N = None
