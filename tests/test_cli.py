@@ -464,3 +464,38 @@ def test_mpirun_error_on_the_master_before_the_first_collective_ends_the_job(tmp
     assert all_gone(pids.values())
     assert os.listdir(tmp_path) == ["s.toml"]
     assert took < 30, took
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_mpirun_error_on_one_worker_only_ends_the_job(tmp_path):
+    """An error raised on worker rank 2 alone (its environment says SLURM_NTASKS=7, a
+    world of 3: parallel.world refuses) while the master and rank 1 wait for it in the
+    first collective call: the job ends in seconds with status 2 and that rank's one line
+    (before: the job hung until the wall-time limit)."""
+    scene = write(tmp_path, _t(PLUG))
+    wrapper = tmp_path / "rank2_env.sh"
+    wrapper.write_text('#!/bin/sh\nif [ "$OMPI_COMM_WORLD_RANK" = 2 ]; then export SLURM_NTASKS=7; fi\nexec "$@"\n')
+    wrapper.chmod(0o755)
+    cmd = command(3, "run", scene, "-o", str(tmp_path / "r.h5"), "-q")
+    py = cmd.index(sys.executable)
+    p = subprocess.Popen(cmd[:py] + [str(wrapper)] + cmd[py:], env=env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    pids = rank_pids(p.pid, 3, proc=p)
+    try:
+        _, err = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        for pid in [p.pid, *pids.values()]:
+            os.kill(pid, signal.SIGKILL)
+        p.communicate()
+        pytest.fail("mpirun hangs after an error on a worker")
+    assert p.returncode == 2, err
+    assert err.count("hpcwedge: error:") == 1 and "hpcwedge: error: SLURM_NTASKS=7 but this process is rank 2" in err
+    assert "Traceback" not in err
+    assert all_gone(pids.values())
+    left = set(os.listdir(tmp_path)) - {"rank2_env.sh", "s.toml"}
+    assert left <= {"r.h5.lock"}, left         # the master killed by the abort may leave its lock file:
+    if left:                                   # stale, never blocking (the kernel released the flock)
+        import fcntl
+        with open(tmp_path / "r.h5.lock") as f:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
