@@ -33,6 +33,8 @@ COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate
                     "exact_fallback_max_m": 10}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
                 "condense": "auto"}
+#: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
+MU_C_TOL_MIN = 1e-15
 #: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
 CONDENSE_MODES = ("auto", "serial", "distributed")
 
@@ -164,6 +166,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         v = compute[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise SceneError(f"compute.{key}: must be a finite number > 0, got {v!r}")
+    if not MU_C_TOL_MIN <= compute["mu_c_tol"] < 1:
+        raise SceneError(f"compute.mu_c_tol: a relative tolerance in [{MU_C_TOL_MIN:g}, 1), "
+                         f"got {compute['mu_c_tol']!r}")
     if not isinstance(compute["exact"], bool):
         raise SceneError(f"compute.exact: true or false, got {compute['exact']!r}")
     v = compute["exact_fallback_max_m"]

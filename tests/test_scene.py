@@ -86,6 +86,8 @@ NAN, INF = float("nan"), float("inf")
     ({"compute": {"mu_c_tol": NAN}}, "compute.mu_c_tol"),
     ({"compute": {"mu_max": True}}, "compute.mu_max"),
     ({"compute": {"exact_fallback_max_m": 2.0}}, "compute.exact_fallback_max_m"),
+    ({"compute": {"mu_c_tol": 1e-300, "mu_c_method": "bisection"}}, "compute.mu_c_tol"),   # bisected for ever
+    ({"compute": {"mu_c_tol": 2.0}}, "compute.mu_c_tol"),
     # [run]
     ({"run": {"checkpoint_every_s": NAN}}, "run.checkpoint_every_s"),
     ({"run": {"checkpoint_every_s": INF}}, "run.checkpoint_every_s"),
