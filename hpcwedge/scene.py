@@ -33,6 +33,9 @@ COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate
                     "exact_fallback_max_m": 10}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
                 "condense": "auto"}
+#: friction coefficients (friction.mu, compute.mu_max) outside this range overflow or
+#: underflow the cone constraints (mu = 1e300, 1e-300: NaN rays, "cone not pointed")
+MU_RANGE = (1e-6, 1e6)
 #: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
 MU_C_TOL_MIN = 1e-15
 #: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
@@ -150,6 +153,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     for v in mus:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise SceneError(f"friction.mu: every value must be a finite number > 0, got {v!r}")
+        if not MU_RANGE[0] <= v <= MU_RANGE[1]:
+            raise SceneError(f"friction.mu: every value must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {v!r}")
     compute = dict(COMPUTE_DEFAULTS)
     given = data.get("compute", {})
     _unknown(given, set(COMPUTE_DEFAULTS), "compute.")
@@ -166,6 +171,8 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         v = compute[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise SceneError(f"compute.{key}: must be a finite number > 0, got {v!r}")
+    if not MU_RANGE[0] <= compute["mu_max"] <= MU_RANGE[1]:
+        raise SceneError(f"compute.mu_max: must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {compute['mu_max']!r}")
     if not MU_C_TOL_MIN <= compute["mu_c_tol"] < 1:
         raise SceneError(f"compute.mu_c_tol: a relative tolerance in [{MU_C_TOL_MIN:g}, 1), "
                          f"got {compute['mu_c_tol']!r}")

@@ -79,6 +79,9 @@ NAN, INF = float("nan"), float("inf")
     ({"friction": {"mu": True}}, "friction.mu"),
     ({"friction": {"mu": INF}}, "friction.mu"),
     ({"friction": {"mu": 0.5, "muu": 1.0}}, "friction.muu"),
+    ({"friction": {"mu": [0.5, 1e300]}}, "friction.mu"),        # overflowed the cone constraints
+    ({"friction": {"mu": 5e-324}}, "friction.mu"),              # NaN rays
+    ({"compute": {"mu_max": 1e300}}, "compute.mu_max"),
     # [compute]
     ({"compute": {"enumerate": 1}}, "compute.enumerate"),
     ({"compute": {"enumerate": 0.0}}, "compute.enumerate"),
