@@ -33,13 +33,13 @@ COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate
                     "exact_fallback_max_m": 10}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
                 "condense": "auto"}
+#: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
+CONDENSE_MODES = ("auto", "serial", "distributed")
 #: friction coefficients (friction.mu, compute.mu_max) outside this range overflow or
 #: underflow the cone constraints (mu = 1e300, 1e-300: NaN rays, "cone not pointed")
 MU_RANGE = (1e-6, 1e6)
 #: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
 MU_C_TOL_MIN = 1e-15
-#: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
-CONDENSE_MODES = ("auto", "serial", "distributed")
 
 
 class SceneError(ValueError):
