@@ -1,4 +1,10 @@
-"""Command line (SPEC §4): hpcwedge run | show | plot | export."""
+"""Command line (SPEC §4): hpcwedge run | show | plot | export.
+
+Exit status: 0 done; 2 a failure the user can fix (one line `hpcwedge: error: ...` naming the
+key or file); 75 stopped by a signal with a checkpoint; 1 an internal error (a bug: one line
+naming the exception, HPCWEDGE_DEBUG=1 prints the traceback); 141 stdout closed by its reader.
+Under mpirun an error on any rank ends the whole job (MPI_Abort) with that status.
+"""
 from __future__ import annotations
 
 import argparse
