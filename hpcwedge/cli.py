@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     if main_thread:
         signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     p = _Parser(prog="hpcwedge", description="Wedged configurations and critical friction "
-                                "coefficients of elastic bodies in frictional contact.")
+                "coefficients of elastic bodies in frictional contact.")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="solve a scene and write RESULT.h5")
     r.add_argument("scene")
