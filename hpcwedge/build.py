@@ -174,11 +174,9 @@ def check_not_mechanism(problem: ContactProblem) -> None:
 
 
 def _raw_arrays(scene: Scene):
-    """(K, N or None) of a stiffness scene as given (inline or file), unvalidated."""
+    """(K, N or None) of a stiffness scene as given (inline or file), unvalidated (its keys
+    were checked by scene.parse_scene)."""
     m = scene.model
-    for k in m:
-        if k not in ("K", "file", "null_space"):
-            raise SceneError(f"model.{k}: unknown key for kind stiffness (K, file, null_space)")
     if ("K" in m) == ("file" in m):
         raise SceneError("model.K / model.file: give exactly one")
     N = None

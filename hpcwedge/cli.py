@@ -1,10 +1,16 @@
-"""Command line (SPEC §4): hpcwedge run | show | plot | export."""
+"""Command line (SPEC §4): hpcwedge run | show | plot | export.
+
+Exit status: 0 done; 2 a failure the user can fix (one line `hpcwedge: error: ...` naming the
+key or file); 75 stopped by a signal with a checkpoint; 1 an internal error (a bug: one line
+naming the exception, HPCWEDGE_DEBUG=1 prints the traceback); 141 stdout closed by its reader.
+Under mpirun an error on any rank ends the whole job (MPI_Abort) with that status.
+"""
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import signal
+import stat
 import sys
 
 
@@ -20,8 +26,8 @@ def main(argv: list[str] | None = None) -> int:
              } if main_thread and argv is not None else {}
     if main_thread:
         signal.signal(signal.SIGUSR1, signal.SIG_IGN)
-    p = argparse.ArgumentParser(prog="hpcwedge", description="Wedged configurations and critical friction "
-                                "coefficients of elastic bodies in frictional contact.")
+    p = _Parser(prog="hpcwedge", description="Wedged configurations and critical friction "
+                "coefficients of elastic bodies in frictional contact.")
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="solve a scene and write RESULT.h5")
     r.add_argument("scene")
@@ -52,27 +58,68 @@ def main(argv: list[str] | None = None) -> int:
     item.add_argument("--pattern", type=int, help="sign pattern J (a feasible point at the run's mu)")
     try:
         args = p.parse_args(argv)
-        return {"run": _run, "show": _show, "plot": _plot, "export": _export}[args.cmd](args)
+        code = {"run": _run, "show": _show, "plot": _plot, "export": _export}[args.cmd](args)
     except _UserError as e:
-        print(f"hpcwedge: error: {e}", file=sys.stderr)
-        return 2
+        code = _error(str(e), 2)
+    except BrokenPipeError:
+        code = _broken_pipe()
+    except Exception as e:                      # noqa: BLE001  (a bug: one line, the traceback on request)
+        if os.environ.get("HPCWEDGE_DEBUG"):
+            import traceback
+            traceback.print_exc()
+        what = (str(e).strip().splitlines() or [""])[0]
+        code = _error(f"internal error: {type(e).__name__}{': ' + what if what else ''} "
+                      "(set HPCWEDGE_DEBUG=1 for the traceback)", 1)
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
+    return code
 
 
 class _UserError(Exception):
-    pass
+    """A failure the user can fix: `hpcwedge: error: <message>` on stderr, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with its usage errors as one line and exit status 2 (the usage is in --help)."""
+
+    def error(self, message: str):
+        raise _UserError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
+def _error(message: str, code: int) -> int:
+    """Print `hpcwedge: error: message` (one line) and return `code`; under mpirun, end the
+    whole job with it (MPI_Abort): the other ranks may be waiting in a collective call that
+    this rank will never reach, and an error on any rank must not leave the job hanging."""
+    print(f"hpcwedge: error: {' '.join(message.split())}", file=sys.stderr, flush=True)
+    mpi = sys.modules.get("mpi4py.MPI")
+    if mpi is not None and mpi.Is_initialized() and not mpi.Is_finalized() and mpi.COMM_WORLD.size > 1:
+        sys.stdout.flush()
+        mpi.COMM_WORLD.Abort(code)
+    return code
+
+
+def _broken_pipe() -> int:
+    """stdout was closed by its reader (`hpcwedge show R.h5 | head`): stop quietly, as Unix
+    tools do, with the status of a process ended by SIGPIPE (128 + 13); stdout is pointed at
+    /dev/null so that the interpreter's final flush does not complain either."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
+    return 128 + signal.SIGPIPE
 
 
 #: run.condense = "auto" condenses collectively over all ranks from this many model DOFs on
 DISTRIBUTED_MIN_DOFS = 2_000_000
 
 
-def _condense_together(comm, path: str | None):
+def _condense_together(comm, scene=None):
     """The distributed condensation of an MPI run (run.condense, SCENE §run): collective over
-    `comm`, called by every rank before the task engine starts; the master passes the scene
-    path, workers None. Every rank builds the model from the scene the master broadcasts and
+    `comm`, called by every rank before the task engine starts; the master passes the loaded
+    scene, workers None. Every rank builds the model from the scene the master broadcasts and
     condenses it with condense.condense_distributed when run.condense = "distributed", or
     "auto" and the model has >= DISTRIBUTED_MIN_DOFS DOFs. Returns (model, problem, seconds)
     on the master if it did, else None (then the master condenses alone, as serially, and
@@ -84,15 +131,9 @@ def _condense_together(comm, path: str | None):
     from mpi4py import MPI
 
     from .build import build_model, contact_problem
-    from .scene import SceneError, load_scene
-    scene = None
-    if comm.rank == 0:
-        try:
-            scene = load_scene(path)
-        except SceneError:
-            scene = None                         # reported by the master's own run
-        if scene is not None and (not scene.plan().condense or scene.condense == "serial"):
-            scene = None
+    from .scene import SceneError
+    if comm.rank == 0 and (not scene.plan().condense or scene.condense == "serial"):
+        scene = None
     scene = comm.bcast(scene, root=0)
     if scene is None:
         return None
@@ -134,11 +175,15 @@ def _run(args) -> int:
     engine = Engine(comm, progress=None if args.quiet else progress)
     engine.install_signals()
     ckpt = checkpoint_path(args.output)
+    lock = None
     try:
         try:
-            # collective (under mpirun): after the signal handlers, before anything is written
-            condensed = _condense_together(comm, args.scene) if comm is not None else None
+            # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
             scene = load_scene(args.scene)
+            check_output(args.output, (args.scene, *scene.input_files))
+            lock = OutputLock(args.output)
+            # collective (under mpirun): after the signal handlers, before anything is written
+            condensed = _condense_together(comm, scene) if comm is not None else None
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
                                      inputs=scene.input_digests):
                 progress.note(f"resuming from {ckpt}")
@@ -147,7 +192,10 @@ def _run(args) -> int:
                       f"({'it is missing' if args.resume else 'use --resume to continue from it'})",
                       file=sys.stderr)
             result = run_scene(scene, progress, engine=engine, condensed=condensed)
-            write_result(args.output, result)
+            try:
+                write_result(args.output, result)
+            except (OSError, RuntimeError) as e:     # h5py: RuntimeError for some failed writes
+                raise _UserError(_output_lost(args.output, e, engine, ckpt)) from None
             engine.remove_checkpoint()
             engine.mark_done()
         except (SceneError, CheckpointError) as e:
@@ -155,18 +203,122 @@ def _run(args) -> int:
         except Interrupted as e:
             written = engine.write_checkpoint(str(e))
             engine.mark_done()
-            print(f"[hpcwedge] {e}: " + (f"checkpoint written to {ckpt}; rerun with --resume to continue"
-                                         if written else "stopped before any checkpointable work"),
-                  file=sys.stderr)
+            if written:
+                what = f"checkpoint written to {ckpt}; rerun with --resume to continue"
+            elif os.path.isfile(ckpt):
+                what = f"no new checkpoint; the previous one, {ckpt}, is kept: rerun with --resume"
+            else:
+                what = "stopped before any checkpointable work"
+            print(f"[hpcwedge] {e}: {what}", file=sys.stderr)
             engine.close(timeout=5.0)
             return EXIT_INTERRUPTED
     finally:
         engine.close(restore_signals=False)
+        if lock is not None:
+            lock.release()
     if not args.quiet:
         mu_c = "null" if result.mu_c is None else f"{result.mu_c:.12g}"
         print(f"[hpcwedge] {scene.name}: mu_c = {mu_c}; wrote {args.output} "
               f"({result.timings['total']:.2f} s)", file=sys.stderr)
     return 0
+
+
+def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
+    """The message for a result that could not be written at the end of a run, after saving
+    the engine's state as a checkpoint (if it can) so that --resume does not redo the work."""
+    from .results import error_reason
+    why = error_reason(err)
+    try:
+        kept = engine.write_checkpoint("output failed")
+    except Exception as e:                      # noqa: BLE001  (the disk that refused the result)
+        return (f"{output}: cannot write the result ({why}); the checkpoint could not be written "
+                f"either ({error_reason(e)}): the work is lost")
+    if not kept:
+        return f"{output}: cannot write the result ({why})"
+    engine.mark_done()
+    return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
+
+
+def check_output(path: str, inputs=()) -> None:
+    """Refuse an output path before any work (_UserError naming it): empty, a directory or
+    any other existing non-regular file (a device, a pipe), in a missing or read-only
+    folder, not writable, or the same file as one of `inputs` (hard and symbolic links
+    included). Used by run, plot and export."""
+    if not path:
+        raise _UserError("-o: empty file name")
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:
+        raise _UserError(f"{path}: cannot use as output ({e.strerror})") from None
+    if st is not None:
+        if stat.S_ISDIR(st.st_mode):
+            raise _UserError(f"{path}: is a directory (give a file name to -o)")
+        if not stat.S_ISREG(st.st_mode):
+            raise _UserError(f"{path}: exists and is not a regular file (a device, pipe or socket); "
+                             "refusing to replace it")
+        for inp in inputs:
+            try:
+                same = os.path.samefile(path, inp)
+            except OSError:
+                same = False
+            if same:
+                raise _UserError(f"{path}: is the input {inp}; writing the output would destroy it")
+        if not os.access(path, os.W_OK):
+            raise _UserError(f"{path}: not writable")
+    elif os.path.islink(path):
+        raise _UserError(f"{path}: a dangling symbolic link; refusing to write through it")
+    if not os.path.isdir(folder):
+        raise _UserError(f"{path}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise _UserError(f"{path}: cannot write in {folder} (read-only file system or no permission)")
+
+
+class OutputLock:
+    """An exclusive lock on a run's output: flock on OUTPUT.lock, held by the master for the
+    whole run (the kernel releases it when the process dies, even by kill -9). A second run on
+    the same output gets _UserError naming the holder's pid. release() removes the file while
+    still holding the lock; a run that opened the file before the removal notices that the
+    path no longer names what it locked, and tries again."""
+
+    def __init__(self, output: str):
+        import fcntl
+        self.path = output + ".lock"
+        while True:
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as e:
+                raise _UserError(f"{self.path}: cannot create the output's lock file ({e.strerror})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+                os.close(fd)
+                raise _UserError(f"{output}: another hpcwedge run (pid {holder}) is writing this output "
+                                 f"(lock {self.path}); wait for it to end or choose another -o") from None
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)                        # removed by the run that held it: lock the new file
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self.fd = fd
+
+    def release(self) -> None:
+        """Remove the lock file and release the lock (idempotent)."""
+        if self.fd is None:
+            return
+        try:
+            os.unlink(self.path)
+        except OSError:
+            pass
+        os.close(self.fd)
+        self.fd = None
 
 
 def _read(path: str, with_rays: bool = True) -> dict:
@@ -211,6 +363,7 @@ def _show(args) -> int:
 def _plot(args) -> int:
     from .plot import plot_result
     _read(args.result, with_rays=False)
+    check_output(args.output, (args.result,))
     try:
         plot_result(args.result, args.output, run=args.run, ray=args.ray, pattern=args.pattern)
     except ValueError as e:
@@ -220,6 +373,7 @@ def _plot(args) -> int:
 
 def _export(args) -> int:
     from .configuration import ConfigurationError, load_configuration, write_vtu
+    check_output(args.output, (args.result,))
     try:
         config = load_configuration(args.result, run=args.run, ray=args.ray, cone=args.cone,
                                     pattern=args.pattern)

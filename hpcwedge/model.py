@@ -164,13 +164,12 @@ def as_index_array(x, key: str, n: int, what: str = "node", ndim: int | None = N
     if a.size and not np.all(a == np.round(a)):
         bad = np.argwhere(a != np.round(a))[0]
         raise ValueError(f"{key}: non-integer {what} id at index {tuple(int(i) for i in bad)}")
-    a = a.astype(np.int64)
-    if a.size:
+    if a.size:                                   # before the cast (a 1e300 id must not wrap around)
         lo, hi = int(a.min()), int(a.max())
         if lo < 0 or hi >= n:
             v = lo if lo < 0 else hi
             raise ValueError(f"{key}: {what} {v} does not exist, only {n} {what}s (0-based)")
-    return a
+    return a.astype(np.int64)
 
 
 def check_contact_nodes(contact_nodes, n_nodes: int, key: str = "contact.nodes") -> np.ndarray:

@@ -248,7 +248,7 @@ def dump_result_json(path: str, out, with_rays: bool = True) -> None:
     ray arrays streamed RAY_CHUNK rows at a time: a result with millions of rays (plug2d
     m = 20: 2e6 x 80) never exists as Python lists or as one string. FileError as read_result
     (found before anything is written, as the checksum covers the whole file)."""
-    with open_result(path) as f:
+    with open_result(path, passthrough=(BrokenPipeError,)) as f:
         _dump(_result_object(f, _Rows if with_rays else None), out)
         out.write("\n")
 

@@ -24,6 +24,11 @@ TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact", "ob
 MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs",
                    "contact_patch", "contact_patch_kind"}
 MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
+#: the keys of the other kinds' [model] and [contact] tables (a built-in's model keys are its
+#: generator's parameters; stiffness and built-in scenes have no [contact] keys)
+STIFFNESS_MODEL_KEYS = {"K", "file", "null_space"}
+TRUSS_MODEL_KEYS = {"nodes", "bars", "EA", "supports"}
+TRUSS_CONTACT_KEYS = {"nodes", "normals", "tangents"}
 COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
                     "exact_fallback_max_m": 10}
@@ -31,6 +36,11 @@ RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True,
                 "condense": "auto", "max_memory_gb": "auto"}
 #: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
 CONDENSE_MODES = ("auto", "serial", "distributed")
+#: friction coefficients (friction.mu, compute.mu_max) outside this range overflow or
+#: underflow the cone constraints (mu = 1e300, 1e-300: NaN rays, "cone not pointed")
+MU_RANGE = (1e-6, 1e6)
+#: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
+MU_C_TOL_MIN = 1e-15
 
 
 class SceneError(ValueError):
@@ -174,10 +184,12 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     if not isinstance(name, str) or not name:
         raise SceneError("name: required, a non-empty string")
     dim = data.get("dim")
-    if dim not in (2, 3) or isinstance(dim, bool):
+    if isinstance(dim, bool) or not isinstance(dim, int) or dim not in (2, 3):
         raise SceneError(f"dim: must be 2 or 3, got {dim!r}")
     model = data.get("model")
-    if not isinstance(model, dict) or "kind" not in model:
+    if model is not None and not isinstance(model, dict):
+        raise SceneError(f"model: must be a table, got {model!r}")
+    if model is None or "kind" not in model:
         raise SceneError("model.kind: required")
     kind = model["kind"]
     if kind not in KINDS:
@@ -185,7 +197,9 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     if kind in BUILTIN_DIM and BUILTIN_DIM[kind] != dim:
         raise SceneError(f"dim: {kind} is a {BUILTIN_DIM[kind]}D model, scene says dim = {dim}")
     friction = data.get("friction")
-    if not isinstance(friction, dict) or "mu" not in friction:
+    if friction is not None and not isinstance(friction, dict):
+        raise SceneError(f"friction: must be a table, got {friction!r}")
+    if friction is None or "mu" not in friction:
         raise SceneError("friction.mu: required (one value or a list)")
     _unknown(friction, {"mu"}, "friction.")
     mus = friction["mu"] if isinstance(friction["mu"], list) else [friction["mu"]]
@@ -194,11 +208,14 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     for v in mus:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise SceneError(f"friction.mu: every value must be a finite number > 0, got {v!r}")
+        if not MU_RANGE[0] <= v <= MU_RANGE[1]:
+            raise SceneError(f"friction.mu: every value must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {v!r}")
     compute = dict(COMPUTE_DEFAULTS)
     given = data.get("compute", {})
     _unknown(given, set(COMPUTE_DEFAULTS), "compute.")
     compute.update(given)
-    if compute["enumerate"] not in (True, False, "rays", "patterns"):
+    if not isinstance(compute["enumerate"], (bool, str)) or compute["enumerate"] not in (True, False, "rays",
+                                                                                       "patterns"):
         raise SceneError(f"compute.enumerate: true, false, \"rays\" or \"patterns\", "
                          f"got {compute['enumerate']!r}")
     if compute["mu_c"] not in ("none", "global", "cones"):
@@ -209,6 +226,11 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         v = compute[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise SceneError(f"compute.{key}: must be a finite number > 0, got {v!r}")
+    if not MU_RANGE[0] <= compute["mu_max"] <= MU_RANGE[1]:
+        raise SceneError(f"compute.mu_max: must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {compute['mu_max']!r}")
+    if not MU_C_TOL_MIN <= compute["mu_c_tol"] < 1:
+        raise SceneError(f"compute.mu_c_tol: a relative tolerance in [{MU_C_TOL_MIN:g}, 1), "
+                         f"got {compute['mu_c_tol']!r}")
     if not isinstance(compute["exact"], bool):
         raise SceneError(f"compute.exact: true or false, got {compute['exact']!r}")
     v = compute["exact_fallback_max_m"]
@@ -216,12 +238,13 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         raise SceneError(f"compute.exact_fallback_max_m: must be a whole number >= 0, got {v!r}")
     if compute["exact"] and dim == 3:
         raise SceneError("compute.exact: exact arithmetic is for 2D scenes (3D problems are conic)")
+    given = data.get("run", {})
+    _unknown(given, set(RUN_DEFAULTS), "run.")
     run = dict(RUN_DEFAULTS)
-    run.update(data.get("run", {}))
-    _unknown(run, set(RUN_DEFAULTS), "run.")
+    run.update(given)
     v = run["checkpoint_every_s"]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or v <= 0:
-        raise SceneError(f"run.checkpoint_every_s: must be a number > 0, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise SceneError(f"run.checkpoint_every_s: must be a finite number > 0, got {v!r}")
     v = run["task_budget"]
     if isinstance(v, bool) or not isinstance(v, int) or v < 1:
         raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
@@ -237,10 +260,21 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
         raise SceneError(f"run.condense: one of {', '.join(CONDENSE_MODES)}, got {run['condense']!r}")
     contact = data.get("contact", {})
     if not isinstance(contact, dict):
-        raise SceneError("contact: must be a table")
+        raise SceneError(f"contact: must be a table, got {contact!r}")
     params = {k: v for k, v in model.items() if k != "kind"}
+    _no_booleans(params, "model.")
+    _no_booleans(contact, "contact.")
     if kind in BUILTINS:
         _check_builtin(kind, params)
+        _unknown(contact, set(), "contact.")
+    elif kind == "stiffness":
+        _unknown(params, STIFFNESS_MODEL_KEYS, "model.")
+        _unknown(contact, set(), "contact.")
+        if "file" in params and (not isinstance(params["file"], str) or not params["file"]):
+            raise SceneError(f"model.file: a file name (relative to the scene file), got {params['file']!r}")
+    elif kind == "truss":
+        _unknown(params, TRUSS_MODEL_KEYS, "model.")
+        _unknown(contact, TRUSS_CONTACT_KEYS, "contact.")
     obstacles, obstacle_key = None, "obstacle"
     if "obstacle" in data or (kind == "mesh" and "obstacle" in contact):
         if kind != "mesh":
@@ -272,7 +306,21 @@ def _unknown(table, allowed, prefix):
         raise SceneError(f"{prefix.rstrip('.') or 'scene'}: must be a table")
     for k in table:
         if k not in allowed:
-            raise SceneError(f"{prefix}{k}: unknown key (allowed: {', '.join(sorted(allowed))})")
+            raise SceneError(f"{prefix}{k}: unknown key (allowed: {', '.join(sorted(allowed))})" if allowed
+                             else f"{prefix}{k}: unknown key (this table takes no keys here)")
+
+
+def _no_booleans(value, key: str) -> None:
+    """SceneError naming the key of the first true/false inside `value` (a model or contact
+    table: none of their keys takes a boolean, and numpy would read one as 1.0 or 0.0)."""
+    if isinstance(value, bool):
+        raise SceneError(f"{key}: a number or a name expected, got {str(value).lower()}")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _no_booleans(v, f"{key}{k}" if key.endswith(".") else f"{key}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _no_booleans(v, f"{key}[{i}]")
 
 
 def _check_builtin(kind: str, params: dict) -> None:

@@ -3,8 +3,10 @@ nothing written, and the public reference scenes."""
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -168,3 +170,332 @@ def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monk
     assert got == want and len(got["runs"][0]["rays"]) == got["runs"][0]["n_wedged_rays"] > 7
     assert main(["show", out, "--json", "--no-rays"]) == 0
     assert json.loads(capsys.readouterr().out) == results.read_result(out, with_rays=False)
+
+
+# ----------------------------------------------------------------------------- user faults (issue 11)
+
+from mpi_helpers import (all_gone, answers, command, env, launch, needs_mpirun, rank_pids,  # noqa: E402
+                         show_json)
+
+TRUSS = ('name = "t"\ndim = 2\n[model]\nkind = "truss"\nnodes = [[0.0, 0.0], [1.0, 0.0]]\nbars = [[0, 1]]\n'
+         'EA = 1.0\n{model}\n[contact]\nnodes = [0, 1]\nnormals = [[1.0, 1.0], [-1.0, 1.0]]\n{contact}\n'
+         '[friction]\nmu = [0.65]\n')
+PLUG = 'name = "p"\ndim = 2\n{top}\n[model]\nkind = "plug2d"\nrows = 2\n{model}\n[friction]\nmu = [0.65]\n{tail}\n'
+STIFF = 'name = "k"\ndim = 2\n[model]\nkind = "stiffness"\nK = [[2.0, 0.5], [0.5, 1.0]]\n{model}\n[friction]\nmu = [2.5]\n{tail}\n'
+MESH = ('name = "m"\ndim = 2\n[model]\nkind = "mesh"\nfile = "m.msh"\n{model}\n[contact]\ngroup = "walls"\n'
+        '{contact}\n[friction]\nmu = [0.65]\n{tail}\n')
+
+
+def _t(template, **parts):
+    return template.format(**{"top": "", "model": "", "contact": "", "tail": "", **parts})
+
+
+#: (scene text, the key the one-line error must name): for each table and model kind a typo,
+#: a wrong type, NaN/inf and a value out of range
+BAD_SCENES = [
+    (_t(PLUG, top="run = 5"), "run"),
+    (_t(PLUG).replace("dim = 2", "dim = 2.0"), "dim"),
+    (_t(PLUG, top="frction = 1"), "frction"),
+    (_t(PLUG).replace("mu = [0.65]", 'mu = "0.5"'), "friction.mu"),
+    (_t(PLUG).replace("mu = [0.65]", "mu = [nan]"), "friction.mu"),
+    (_t(PLUG).replace("mu = [0.65]", "mu = [0.65]\nmuu = 1"), "friction.muu"),
+    (_t(PLUG, tail="[compute]\nenumerate = 1"), "compute.enumerate"),
+    (_t(PLUG, tail="[compute]\nmu_max = inf"), "compute.mu_max"),
+    (_t(PLUG, tail="[compute]\nmu_c = true"), "compute.mu_c"),
+    (_t(PLUG, tail="[compute]\nmu_cc = 1"), "compute.mu_cc"),
+    (_t(PLUG, tail="[run]\ncheckpoint_every_s = nan"), "run.checkpoint_every_s"),
+    (_t(PLUG, tail="[run]\ncheckpoint_every_s = -inf"), "run.checkpoint_every_s"),
+    (_t(PLUG, tail="[run]\ntask_budget = true"), "run.task_budget"),
+    (_t(PLUG, tail="[run]\nface_split = 9"), "run.face_split"),
+    (_t(PLUG, tail="[run]\ncondense = 1"), "run.condense"),
+    (_t(PLUG, tail="[run]\nchekpoint_every_s = 1"), "run.chekpoint_every_s"),
+    (_t(PLUG, model="rows = true").replace("rows = 2\n", ""), "model.rows"),
+    (_t(PLUG, model="taper_deg = nan"), "model.taper_deg"),
+    (_t(PLUG, model="taper_deg = 95.0"), "model.taper_deg"),
+    (_t(PLUG, model="rowz = 3"), "model.rowz"),
+    (_t(PLUG, tail="[contact]\nnodes = [0]"), "contact.nodes"),
+    (_t(TRUSS, model="suports = [[0, 0]]"), "model.suports"),
+    (_t(TRUSS).replace("EA = 1.0", "EA = true"), "model.EA"),
+    (_t(TRUSS).replace("EA = 1.0", "EA = nan"), "model.EA"),
+    (_t(TRUSS).replace("EA = 1.0", "EA = -1.0"), "model.EA"),
+    (_t(TRUSS, contact="tangent = [[0.0, 1.0], [0.0, 1.0]]"), "contact.tangent"),
+    (_t(STIFF, model="null_spcae = [[1.0], [0.0]]"), "model.null_spcae"),
+    (_t(STIFF, model="file = 5").replace("K = [[2.0, 0.5], [0.5, 1.0]]\n", ""), "model.file"),
+    (_t(STIFF).replace("0.5, 1.0]]", "inf, 1.0]]"), "model.K"),
+    (_t(STIFF, tail="[contact]\nnormals = [[1.0, 0.0]]"), "contact.normals"),
+    (_t(MESH, model="Young = 1.0", contact="normals = [[1.0, 1.0]]"), "model.Young"),
+    (_t(MESH, model="E = true", contact="normals = [[1.0, 1.0]]"), "model.E"),
+    (_t(MESH, contact="normal = [[1.0, 1.0]]"), "contact.normal"),
+    (_t(MESH, tail='[[obstacle]]\ntype = "plane"\npoint = [0.0, 0.0]\nnormal = [0.0, 1.0]\nside = 1'),
+     "obstacle[0].side"),
+    (_t(MESH, tail='[[obstacle]]\ntype = "cone"\napex = [0.0, 0.0]\naxis = [0.0, 1.0]\nhalf_angle_deg = inf'),
+     "obstacle[0].half_angle_deg"),
+]
+
+
+@pytest.mark.parametrize("text,key", BAD_SCENES, ids=[k for _, k in BAD_SCENES])
+def test_bad_scene_catalogue_exit_2_one_line_nothing_left(tmp_path, capsys, text, key):
+    """Exit 2, exactly one line on stderr, `hpcwedge: error: <key>: ...`, and nothing left
+    beside the scene: no result, no checkpoint, no temp file, no lock file."""
+    scene = write(tmp_path, text)
+    assert main(["run", scene, "-o", str(tmp_path / "r.h5"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith(f"hpcwedge: error: {key}:"), err
+    assert os.listdir(tmp_path) == ["s.toml"]
+
+
+def test_usage_errors_one_line_exit_2(tmp_path, capsys):
+    assert main(["run", write(tmp_path, _t(PLUG))]) == 2                     # no -o
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("hpcwedge: error: hpcwedge run:") and "-o" in err
+
+
+def _result(tmp_path) -> str:
+    return _run_quiet(tmp_path, _t(PLUG), "res")
+
+
+_COMMON = ["empty", "directory", "missing-folder", "fifo"]
+
+
+@pytest.mark.parametrize("cmd,case", [("run", c) for c in _COMMON + ["scene", "hard-link", "symlink", "input-file"]]
+                         + [(cmd, c) for cmd in ("plot", "export") for c in _COMMON + ["result", "result-hard-link"]])
+def test_output_that_would_destroy_an_input_or_fail_is_refused_first(tmp_path, capsys, cmd, case):
+    """-o is checked before any work: an empty name, a directory, a missing folder, a pipe,
+    or the same file as an input (the scene, a file the scene names, the result being
+    plotted/exported; by path, hard link or symlink) -> one line, exit 2, inputs intact."""
+    import numpy as np
+    np.savez(tmp_path / "k.npz", K=np.array([[2.0, 0.5], [0.5, 1.0]]))
+    scene = write(tmp_path, _t(STIFF).replace("K = [[2.0, 0.5], [0.5, 1.0]]", 'file = "k.npz"'))
+    res = _run_quiet(tmp_path, _t(PLUG), "res") if cmd != "run" else None
+    victim = {"scene": scene, "hard-link": scene, "symlink": scene, "input-file": str(tmp_path / "k.npz"),
+              "result": res, "result-hard-link": res}.get(case)
+    out = {"empty": "", "directory": str(tmp_path), "missing-folder": str(tmp_path / "no" / "r.h5"),
+           "fifo": str(tmp_path / "pipe"), "scene": scene, "input-file": victim, "result": res,
+           "hard-link": str(tmp_path / "link"), "symlink": str(tmp_path / "link"),
+           "result-hard-link": str(tmp_path / "link")}[case]
+    if case in ("hard-link", "result-hard-link"):
+        os.link(victim, out)
+    elif case == "symlink":
+        os.symlink(victim, out)
+    elif case == "fifo":
+        os.mkfifo(out)
+    before = {p: open(os.path.join(tmp_path, p), "rb").read() for p in os.listdir(tmp_path)
+              if os.path.isfile(os.path.join(tmp_path, p))}
+    capsys.readouterr()
+    args = {"run": ["run", scene, "-q"], "plot": ["plot", str(res)], "export": ["export", str(res), "--ray", "0"]}
+    assert main([*args[cmd], "-o", out]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("hpcwedge: error: "), err
+    assert (out or "-o") in err
+    after = {p: open(os.path.join(tmp_path, p), "rb").read() for p in os.listdir(tmp_path)
+             if os.path.isfile(os.path.join(tmp_path, p))}
+    assert after == before and (case != "fifo" or os.path.exists(out) and not os.path.isfile(out))
+
+
+def test_device_output_refused():
+    """-o on a device node (as root, a run would have replaced it by a regular file)."""
+    import stat
+    from hpcwedge.cli import _UserError, check_output
+    devices = [d for d in ("/dev/full", "/dev/zero", "/dev/random")
+               if os.path.exists(d) and stat.S_ISCHR(os.stat(d).st_mode)]
+    if not devices:
+        pytest.skip("no character device found")
+    with pytest.raises(_UserError, match="not a regular file"):
+        check_output(devices[0])
+
+
+def _wait_for_lock(out: str, proc: subprocess.Popen, timeout: float = 120.0) -> bool:
+    """Wait until the run `proc` holds the lock of `out` (OUTPUT.lock names its pid): its
+    output checks are passed and its work begins. False if it ended first."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            return False
+        try:
+            with open(out + ".lock") as f:
+                if f.read().strip() == str(proc.pid):
+                    return True
+        except FileNotFoundError:
+            pass
+        time.sleep(0.01)
+    raise AssertionError("the run never took its output lock")
+
+
+def _finish(proc: subprocess.Popen, timeout: float = 120.0) -> tuple[int, str]:
+    _, err = proc.communicate(timeout=timeout)
+    return proc.returncode, err
+
+
+def test_second_run_on_the_same_output_is_refused_naming_the_holder(tmp_path):
+    """Two real runs on one -o: the second (while the first holds the lock; SIGSTOP keeps it
+    there) ends at once with one line naming the first's pid and touches nothing; the first
+    then finishes normally and leaves no lock file."""
+    scene = write(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"))
+    out = str(tmp_path / "r.h5")
+    for _ in range(3):                          # a first run that ends before it is stopped: again
+        first = launch(None, "run", scene, "-o", out, "-q")
+        if not _wait_for_lock(out, first):
+            assert _finish(first)[0] == 0
+            os.unlink(out)
+            continue
+        os.kill(first.pid, signal.SIGSTOP)
+        try:
+            held = os.path.exists(out + ".lock") and not os.path.exists(out)
+            second = subprocess.run(command(None, "run", scene, "-o", out, "-q"), env=env(),
+                                    capture_output=True, text=True, timeout=120)
+        finally:
+            os.kill(first.pid, signal.SIGCONT)
+        code, err = _finish(first)
+        assert code == 0, err
+        if not held:
+            os.unlink(out)
+            continue
+        assert second.returncode == 2, second.stderr
+        line = second.stderr.strip()
+        assert len(second.stderr.splitlines()) == 1 and line.startswith(f"hpcwedge: error: {out}: another")
+        assert f"pid {first.pid}" in line
+        assert sorted(os.listdir(tmp_path)) == ["r.h5", "s.toml"]       # no lock, no checkpoint left
+        assert main(["show", out]) == 0
+        return
+    pytest.fail("the first run always ended before it could be stopped")
+
+
+def test_lock_of_a_killed_run_does_not_block_the_next(tmp_path):
+    """kill -9 of a run holding the lock: the kernel releases it; the next run on the same
+    -o goes ahead (and replaces the stale lock file)."""
+    scene = write(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"))
+    out = str(tmp_path / "r.h5")
+    first = launch(None, "run", scene, "-o", out, "-q")
+    if _wait_for_lock(out, first):
+        first.kill()
+    first.communicate(timeout=60)
+    p = subprocess.run(command(None, "run", scene, "-o", out, "-q"), env=env(), capture_output=True,
+                       text=True, timeout=300)
+    assert p.returncode == 0 and p.stderr == "", p.stderr
+    assert sorted(os.listdir(tmp_path)) == ["r.h5", "s.toml"]
+
+
+def test_result_write_failing_at_the_end_keeps_the_work(tmp_path, capsys):
+    """The output path turns into a directory during the run (after the checks): the result
+    write fails at the end -> one line, exit 2, the state in RESULT.ckpt; --resume then
+    writes the result without redoing the work, with the answers of an uninterrupted run."""
+    scene = write(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"))
+    out = str(tmp_path / "r.h5")
+    p = launch(None, "run", scene, "-o", out, "-q")
+    assert _wait_for_lock(out, p), "the run ended before the fault could be made"
+    os.mkdir(out)
+    code, err = _finish(p)
+    assert code == 2, err
+    assert len(err.splitlines()) == 1 and err.startswith(f"hpcwedge: error: {out}: cannot write the result (")
+    assert err.rstrip().endswith(f"state kept in {out}.ckpt; rerun with --resume")
+    os.rmdir(out)
+    assert main(["run", scene, "-o", out, "-q", "--resume"]) == 0
+    resumed = show_json(out)
+    assert resumed["stats"]["parallel"]["resumes"] == 1
+    fresh = str(tmp_path / "fresh.h5")
+    assert main(["run", scene, "-o", fresh, "-q"]) == 0
+    got, want = answers(resumed), answers(show_json(fresh))
+    for d in (got, want):
+        for dd in d["stats"]["dd"]:
+            dd.pop("seconds")
+    assert got == want
+    assert sorted(os.listdir(tmp_path)) == ["fresh.h5", "r.h5", "s.toml"]
+
+
+@pytest.fixture
+def read_only_dir(tmp_path):
+    """A real read-only file system (a tmpfs mounted ro; mounting needs root)."""
+    d = tmp_path / "ro"
+    d.mkdir()
+    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)], capture_output=True,
+                       text=True)
+    if p.returncode != 0:
+        pytest.skip(f"cannot mount a read-only tmpfs: {p.stderr.strip() or p.returncode}")
+    try:
+        yield d
+    finally:
+        subprocess.run(["umount", str(d)], check=True)
+
+
+def test_read_only_output_refused_before_the_work(tmp_path, capsys, read_only_dir):
+    scene = write(tmp_path, _t(PLUG))
+    out = str(read_only_dir / "r.h5")
+    assert main(["run", scene, "-o", out, "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith(f"hpcwedge: error: {out}: cannot write in ")
+    assert "read-only" in err
+
+
+def test_show_into_a_closed_pipe_exits_quietly(tmp_path):
+    """`hpcwedge show R.h5 --json | head -c 100` through a real shell pipe: head exits long
+    before the ~160 kB of JSON are written; hpcwedge stops quietly (no BrokenPipeError) with
+    the status of a process ended by SIGPIPE, like a Unix tool."""
+    res = _run_quiet(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"), "big")
+    assert os.path.getsize(res) > 65536                   # the JSON is larger than a pipe's buffer
+    cmd = " ".join(f"'{a}'" for a in command(None, "show", res, "--json"))
+    p = subprocess.run(["bash", "-c", f"{cmd} | head -c 100; exit ${{PIPESTATUS[0]}}"], env=env(),
+                       capture_output=True, text=True, timeout=120)
+    assert p.stderr == "" and len(p.stdout) == 100
+    assert p.returncode == 128 + signal.SIGPIPE
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_mpirun_error_on_the_master_before_the_first_collective_ends_the_job(tmp_path):
+    """`run = 5` under mpirun -n 3: the master fails before the workers' first collective
+    call. The job ends in seconds with status 2 and one `hpcwedge: error:` line, no
+    traceback, no rank left behind, nothing written (before: the workers spun until the
+    wall-time limit)."""
+    scene = write(tmp_path, _t(PLUG, top="run = 5"))
+    t0 = time.monotonic()
+    p = launch(3, "run", scene, "-o", str(tmp_path / "r.h5"))
+    pids = rank_pids(p.pid, 3, proc=p)
+    try:
+        _, err = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        for pid in [p.pid, *pids.values()]:
+            os.kill(pid, signal.SIGKILL)
+        p.communicate()
+        pytest.fail("mpirun hangs after an error on the master")
+    took = time.monotonic() - t0
+    assert p.returncode == 2, err
+    assert err.count("hpcwedge: error:") == 1 and "hpcwedge: error: run: must be a table" in err, err
+    assert "Traceback" not in err
+    assert all_gone(pids.values())
+    assert os.listdir(tmp_path) == ["s.toml"]
+    assert took < 30, took
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_mpirun_error_on_one_worker_only_ends_the_job(tmp_path):
+    """An error raised on worker rank 2 alone (its environment says SLURM_NTASKS=7, a
+    world of 3: parallel.world refuses) while the master and rank 1 wait for it in the
+    first collective call: the job ends in seconds with status 2 and that rank's one line
+    (before: the job hung until the wall-time limit)."""
+    scene = write(tmp_path, _t(PLUG))
+    wrapper = tmp_path / "rank2_env.sh"
+    wrapper.write_text('#!/bin/sh\nif [ "$OMPI_COMM_WORLD_RANK" = 2 ]; then export SLURM_NTASKS=7; fi\nexec "$@"\n')
+    wrapper.chmod(0o755)
+    cmd = command(3, "run", scene, "-o", str(tmp_path / "r.h5"), "-q")
+    py = cmd.index(sys.executable)
+    p = subprocess.Popen(cmd[:py] + [str(wrapper)] + cmd[py:], env=env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    pids = rank_pids(p.pid, 3, proc=p)
+    try:
+        _, err = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        for pid in [p.pid, *pids.values()]:
+            os.kill(pid, signal.SIGKILL)
+        p.communicate()
+        pytest.fail("mpirun hangs after an error on a worker")
+    assert p.returncode == 2, err
+    assert err.count("hpcwedge: error:") == 1 and "hpcwedge: error: SLURM_NTASKS=7 but this process is rank 2" in err
+    assert "Traceback" not in err
+    assert all_gone(pids.values())
+    left = set(os.listdir(tmp_path)) - {"rank2_env.sh", "s.toml"}
+    assert left <= {"r.h5.lock"}, left         # the master killed by the abort may leave its lock file:
+    if left:                                   # stale, never blocking (the kernel released the flock)
+        import fcntl
+        with open(tmp_path / "r.h5.lock") as f:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -218,6 +218,8 @@ N2 = [[0, 1], [0, 1]]
 
 @pytest.mark.parametrize("kw,msg", [
     ({"bars": [[0, 1], [1, 12]]}, r"model.bars: bar 1 refers to node 12, only 4 nodes"),
+    ({"bars": [[0, 1], [1, 1e300]]}, r"model.bars: bar 1 refers to node 1000000000000000052504760255204420248704"),
+    ({"contact_nodes": [2, -1e300]}, r"contact.nodes: node -1000000000000000052504760255204420248704\d* does not"),
     ({"bars": [[0, 1], [1, 1]]}, r"model.bars: bar 1 \(1-1\) has zero length"),
     ({"bars": [[0, 1, 2]]}, r"model.bars: expected \(n_bars, 2\)"),
     ({"nodes": [[0, 0], [1, float("nan")], [1, 1], [0, 1]]}, r"model.nodes: NaN"),

@@ -56,3 +56,89 @@ def test_errors_name_the_key(over, key):
         parse_scene(scene(**over))
     msg = str(e.value)
     assert msg.startswith(key) and "\n" not in msg
+
+
+TRUSS = {"kind": "truss", "nodes": [[0.0, 0.0], [1.0, 0.0]], "bars": [[0, 1]], "EA": 1.0}
+TRUSS_CONTACT = {"nodes": [0, 1], "normals": [[1.0, 1.0], [-1.0, 1.0]]}
+MESH = {"kind": "mesh", "file": "m.msh"}
+MESH_CONTACT = {"group": "walls", "normals": [[1.0, 1.0]]}
+NAN, INF = float("nan"), float("inf")
+
+
+@pytest.mark.parametrize("over,key", [
+    # top level: a table given as a value, a number of the wrong type
+    ({"run": 5}, "run"),
+    ({"compute": 5}, "compute"),
+    ({"friction": 0.5}, "friction"),
+    ({"model": "plug2d"}, "model"),
+    ({"contact": [1]}, "contact"),
+    ({"dim": 2.0}, "dim"),
+    ({"dim": True}, "dim"),
+    # [friction]
+    ({"friction": {"mu": "0.5"}}, "friction.mu"),
+    ({"friction": {"mu": True}}, "friction.mu"),
+    ({"friction": {"mu": INF}}, "friction.mu"),
+    ({"friction": {"mu": 0.5, "muu": 1.0}}, "friction.muu"),
+    ({"friction": {"mu": [0.5, 1e300]}}, "friction.mu"),        # overflowed the cone constraints
+    ({"friction": {"mu": 5e-324}}, "friction.mu"),              # NaN rays
+    ({"compute": {"mu_max": 1e300}}, "compute.mu_max"),
+    # [compute]
+    ({"compute": {"enumerate": 1}}, "compute.enumerate"),
+    ({"compute": {"enumerate": 0.0}}, "compute.enumerate"),
+    ({"compute": {"mu_max": INF}}, "compute.mu_max"),
+    ({"compute": {"mu_c_tol": NAN}}, "compute.mu_c_tol"),
+    ({"compute": {"mu_max": True}}, "compute.mu_max"),
+    ({"compute": {"exact_fallback_max_m": 2.0}}, "compute.exact_fallback_max_m"),
+    ({"compute": {"mu_c_tol": 1e-300, "mu_c_method": "bisection"}}, "compute.mu_c_tol"),   # bisected for ever
+    ({"compute": {"mu_c_tol": 2.0}}, "compute.mu_c_tol"),
+    # [run]
+    ({"run": {"checkpoint_every_s": NAN}}, "run.checkpoint_every_s"),
+    ({"run": {"checkpoint_every_s": INF}}, "run.checkpoint_every_s"),
+    ({"run": {"checkpoint_every_s": "60"}}, "run.checkpoint_every_s"),
+    ({"run": {"task_budget": True}}, "run.task_budget"),
+    ({"run": {"face_split": 2.0}}, "run.face_split"),
+    ({"run": {"symmetry": 1}}, "run.symmetry"),
+    ({"run": {"checkpoint_every": 1}}, "run.checkpoint_every"),
+    # stiffness: [model] and [contact]
+    ({"model": {**BASE["model"], "null_spcae": [[1.0], [0.0]]}}, "model.null_spcae"),
+    ({"model": {"kind": "stiffness", "file": 5}}, "model.file"),
+    ({"model": {"kind": "stiffness", "K": [[2.0, True], [True, 1.0]]}}, "model.K[0][1]"),
+    ({"contact": {"nodes": [0]}}, "contact.nodes"),
+    # built-ins: [model] and [contact]
+    ({"model": {"kind": "plug2d", "rows": True}}, "model.rows"),
+    ({"model": {"kind": "plug2d", "taper_deg": NAN}}, "model.taper_deg"),
+    ({"model": {"kind": "plug2d"}, "contact": {"normals": [[1.0, 0.0]]}}, "contact.normals"),
+    # truss: [model] and [contact]
+    ({"model": {**TRUSS, "suports": [[0, 0]]}, "contact": TRUSS_CONTACT}, "model.suports"),
+    ({"model": {**TRUSS, "EA": True}, "contact": TRUSS_CONTACT}, "model.EA"),
+    ({"model": TRUSS, "contact": {**TRUSS_CONTACT, "tangent": [[1.0, 0.0]]}}, "contact.tangent"),
+    ({"model": TRUSS, "contact": {**TRUSS_CONTACT, "normals": [[1.0, False], [-1.0, 1.0]]}},
+     "contact.normals[0][1]"),
+    # mesh: [model], [contact] and [[obstacle]]
+    ({"model": {**MESH, "Young": 1.0}, "contact": MESH_CONTACT}, "model.Young"),
+    ({"model": {**MESH, "E": True}, "contact": MESH_CONTACT}, "model.E"),
+    ({"model": {**MESH, "nu": NAN}, "contact": MESH_CONTACT}, "model.nu"),
+    ({"model": MESH, "contact": {**MESH_CONTACT, "normal": [[1.0, 1.0]]}}, "contact.normal"),
+    ({"model": MESH, "contact": {**MESH_CONTACT, "tolerance": INF}}, "contact.tolerance"),
+    ({"model": MESH, "contact": {"group": "walls"},
+      "obstacle": [{"type": "plane", "point": [0.0, 0.0], "normall": [0.0, 1.0]}]}, "obstacle[0].normall"),
+    ({"model": MESH, "contact": {"group": "walls"},
+      "obstacle": [{"type": "cone", "apex": [0.0, 0.0], "axis": [0.0, 1.0], "half_angle_deg": NAN}]},
+     "obstacle[0].half_angle_deg"),
+])
+def test_type_slips_typos_nan_name_the_key(over, key):
+    """Every table of every model kind: an unknown key, a value of the wrong type (a boolean
+    for a number included), NaN/inf or a value out of range is a one-line SceneError that
+    starts with the key."""
+    with pytest.raises(SceneError) as e:
+        parse_scene(scene(**over))
+    msg = str(e.value)
+    assert msg.startswith(key + ":") and "\n" not in msg, msg
+
+
+def test_valid_tables_of_every_kind_still_parse():
+    """The catalogue's base tables are valid: each error above is the one slip it makes."""
+    assert parse_scene(scene(model=TRUSS, contact=TRUSS_CONTACT)).kind == "truss"
+    assert parse_scene(scene(model=MESH, contact=MESH_CONTACT)).kind == "mesh"
+    assert parse_scene(scene(model={"kind": "plug2d", "rows": 3, "taper_deg": 5})).kind == "plug2d"
+    assert parse_scene(scene(run={"checkpoint_every_s": 1e9}, compute={"enumerate": "rays"})).checkpoint_every_s == 1e9

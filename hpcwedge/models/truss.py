@@ -78,12 +78,12 @@ def truss_model(nodes, bars, EA, supports, contact_nodes, normals, tangents=None
     bad = np.flatnonzero(np.any(Bf != np.round(Bf), axis=1))
     if bad.size:
         raise ValueError(f"model.bars: bar {int(bad[0])} has a non-integer node id")
-    B = Bf.astype(np.int64)
-    bad = np.flatnonzero((B.min(axis=1) < 0) | (B.max(axis=1) >= n))
+    bad = np.flatnonzero((Bf.min(axis=1) < 0) | (Bf.max(axis=1) >= n))    # before the cast: 1e300 too
     if bad.size:
         b = int(bad[0])
-        v = int(B[b].min()) if B[b].min() < 0 else int(B[b].max())
+        v = int(Bf[b].min()) if Bf[b].min() < 0 else int(Bf[b].max())
         raise ValueError(f"model.bars: bar {b} refers to node {v}, only {n} nodes (0-based)")
+    B = Bf.astype(np.int64)
     ea = as_float_array(EA, "model.EA")
     if ea.ndim > 1 or (ea.ndim == 1 and ea.shape[0] != B.shape[0]):
         raise ValueError(f"model.EA: expected a scalar or one value per bar ({B.shape[0]}), got shape {ea.shape}")
