@@ -344,18 +344,15 @@ def long_scene(folder: str, every: float = 0.2, raw: str | None = None) -> str:
     return path
 
 
-def write_raw(folder: str, rows: int, name: str, scale: float = 1.0, perturb: bool = False) -> str:
+def write_raw(folder: str, rows: int, name: str, scale: float = 1.0, taper_deg: float = 10.0) -> str:
     import numpy as np
 
     from hpcwedge.build import contact_problem
     from hpcwedge.scene import parse_scene
-    sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": rows},
+    sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": rows, "taper_deg": taper_deg},
                       "friction": {"mu": 1.0}})
     prob = contact_problem(sc)
     K = prob.K * scale
-    if perturb:
-        K = K.copy()
-        K[0, 0] *= 1.5
     path = os.path.join(folder, name)
     np.savez(path, K=K, null_space=prob.N)
     return path
@@ -804,7 +801,7 @@ def checkpoint_cases() -> list[Case]:
             if o.code != 75:
                 return False, "setup: " + describe(o)
             if what == "replaced":
-                write_raw(ctx.folder, LONG_ROWS, "k.npz", perturb=True)
+                write_raw(ctx.folder, LONG_ROWS, "k.npz", taper_deg=12.0)
             else:
                 write_raw(ctx.folder, LONG_ROWS, "k.npz", scale=2.0)
             before = read_bytes(out + ".ckpt")
