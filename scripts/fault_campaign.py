@@ -370,8 +370,8 @@ def reference_answers(ctx: Context, key: str, scene_path: str) -> dict:
 
 def interrupted(ctx: Context, scene_path: str, out: str, sig: int, ranks: int | None = None,
                 need_checkpoint: bool = True) -> Outcome:
-    """Start a run, wait for its first checkpoint (or 1.5 s), send `sig` to the launcher (the
-    master when serial; mpirun forwards it), and collect the outcome."""
+    """Start a run, wait for its first checkpoint (or 1.5 s), send `sig` to the serial process
+    or to every rank of an mpirun job (kill -9: to mpirun), and collect the outcome."""
     t0 = time.perf_counter()
     p = launch(["run", scene_path, "-o", out], ranks)
     ckpt = out + ".ckpt"
@@ -381,8 +381,30 @@ def interrupted(ctx: Context, scene_path: str, out: str, sig: int, ranks: int | 
             break
         time.sleep(0.05)
     if p.poll() is None:
-        p.send_signal(sig)
+        if ranks is None or sig == signal.SIGKILL:
+            p.send_signal(sig)
+        else:                           # as SLURM at the time limit: every process of the job
+            for pid in descendants(p.pid):
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, sig)
     return finish(p, ctx.timeout, t0)
+
+
+def descendants(pid: int) -> list[int]:
+    """The processes below pid (the ranks under an mpirun), from /proc."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                with open(f"/proc/{entry}/stat") as f:
+                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+                children.setdefault(ppid, []).append(int(entry))
+    out, todo = [], [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            out.append(c)
+            todo.append(c)
+    return out
 
 
 def stopped_checkpoint(ctx: Context) -> str:
