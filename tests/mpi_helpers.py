@@ -3,6 +3,7 @@ parallel and checkpoint tests: launch, find the ranks' pids, kill at chosen
 moments, compare results."""
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -302,3 +303,30 @@ def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float 
         codes.append(code)
         done += 1
     return scene, out, done, codes
+
+
+def damaged(data: bytes, rng, i: int) -> bytes:
+    """Damage number i of a file's bytes, drawn from rng: every 4th a truncation at a random
+    offset, the others 1 or 16 bytes flipped at random offsets (anywhere in the file)."""
+    data = bytearray(data)
+    if i % 4 == 3:
+        del data[rng.randrange(len(data)):]
+    else:
+        for k in rng.sample(range(len(data)), rng.choice((1, 16))):
+            data[k] ^= rng.randrange(1, 256)
+    return bytes(data)
+
+
+@contextlib.contextmanager
+def tmpfs(path, options: str):
+    """A real tmpfs mounted at `path` (an empty folder) with mount `options` ("size=4M",
+    "ro,size=64k"); mounting needs root, so the test is skipped where it is refused.
+    Unmounted afterwards."""
+    p = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True,
+                       text=True)
+    if p.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs ({options}): {p.stderr.strip() or p.returncode}")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", str(path)], check=True)

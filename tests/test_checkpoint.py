@@ -17,9 +17,9 @@ import pytest
 
 from hpcwedge.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
 from hpcwedge.parallel import EXIT_INTERRUPTED
-from mpi_helpers import (all_gone, answers, command, env, interrupt_cycles, launch, needs_mpirun, rank_pids, ray_arrays,
+from mpi_helpers import (all_gone, answers, command, damaged, env, interrupt_cycles, launch, needs_mpirun, rank_pids, ray_arrays,
                          rays_answers, run, scene_text, show, show_json, usr1_handled, wait_for_checkpoint,
-                         write_rays_scene, write_scene)
+                         tmpfs, write_rays_scene, write_scene)
 
 
 @pytest.fixture(scope="module")
@@ -386,13 +386,7 @@ def test_random_damage_of_a_real_checkpoint_refused_and_kept(tmp_path, reference
     good = open(ckpt, "rb").read()
     rng = random.Random(11)
     for i in range(20):
-        data = bytearray(good)
-        if i % 4 == 3:
-            del data[rng.randrange(len(data)):]
-        else:
-            for k in rng.sample(range(len(data)), rng.choice((1, 16))):
-                data[k] ^= rng.randrange(1, 256)
-        open(ckpt, "wb").write(data)
+        open(ckpt, "wb").write(damaged(good, rng, i))
         _refused(scene, out, "unreadable checkpoint")
     open(ckpt, "wb").write(good)
     assert answers(_finish(scene, out)) == reference
@@ -462,13 +456,8 @@ def small_fs(tmp_path):
     """A real 4 MB file system (tmpfs; mounting needs root), unmounted afterwards."""
     d = tmp_path / "fs"
     d.mkdir()
-    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4M", "tmpfs", str(d)], capture_output=True, text=True)
-    if p.returncode != 0:
-        pytest.skip(f"cannot mount a small tmpfs: {p.stderr.strip() or p.returncode}")
-    try:
+    with tmpfs(d, "size=4M"):
         yield d
-    finally:
-        subprocess.run(["umount", str(d)], check=True)
 
 
 def _fill(path) -> None:

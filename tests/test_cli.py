@@ -175,7 +175,7 @@ def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monk
 # ----------------------------------------------------------------------------- user faults (issue 11)
 
 from mpi_helpers import (all_gone, answers, command, env, launch, needs_mpirun, rank_pids,  # noqa: E402
-                         show_json)
+                         show_json, tmpfs)
 
 TRUSS = ('name = "t"\ndim = 2\n[model]\nkind = "truss"\nnodes = [[0.0, 0.0], [1.0, 0.0]]\nbars = [[0, 1]]\n'
          'EA = 1.0\n{model}\n[contact]\nnodes = [0, 1]\nnormals = [[1.0, 1.0], [-1.0, 1.0]]\n{contact}\n'
@@ -407,14 +407,8 @@ def read_only_dir(tmp_path):
     """A real read-only file system (a tmpfs mounted ro; mounting needs root)."""
     d = tmp_path / "ro"
     d.mkdir()
-    p = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=64k", "tmpfs", str(d)], capture_output=True,
-                       text=True)
-    if p.returncode != 0:
-        pytest.skip(f"cannot mount a read-only tmpfs: {p.stderr.strip() or p.returncode}")
-    try:
+    with tmpfs(d, "ro,size=64k"):
         yield d
-    finally:
-        subprocess.run(["umount", str(d)], check=True)
 
 
 def test_read_only_output_refused_before_the_work(tmp_path, capsys, read_only_dir):
@@ -439,6 +433,18 @@ def test_show_into_a_closed_pipe_exits_quietly(tmp_path):
     assert p.returncode == 128 + signal.SIGPIPE
 
 
+def _stderr_of_ending(p, pids, where: str) -> str:
+    """The stderr of an mpirun job that must end by itself within 60 s; a job still running
+    then is killed (launcher and ranks) and the test fails."""
+    try:
+        return p.communicate(timeout=60)[1]
+    except subprocess.TimeoutExpired:
+        for pid in [p.pid, *pids.values()]:
+            os.kill(pid, signal.SIGKILL)
+        p.communicate()
+        pytest.fail(f"mpirun hangs after an error on {where}")
+
+
 @pytest.mark.mpi
 @needs_mpirun
 def test_mpirun_error_on_the_master_before_the_first_collective_ends_the_job(tmp_path):
@@ -450,13 +456,7 @@ def test_mpirun_error_on_the_master_before_the_first_collective_ends_the_job(tmp
     t0 = time.monotonic()
     p = launch(3, "run", scene, "-o", str(tmp_path / "r.h5"))
     pids = rank_pids(p.pid, 3, proc=p)
-    try:
-        _, err = p.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        for pid in [p.pid, *pids.values()]:
-            os.kill(pid, signal.SIGKILL)
-        p.communicate()
-        pytest.fail("mpirun hangs after an error on the master")
+    err = _stderr_of_ending(p, pids, "the master")
     took = time.monotonic() - t0
     assert p.returncode == 2, err
     assert err.count("hpcwedge: error:") == 1 and "hpcwedge: error: run: must be a table" in err, err
@@ -482,13 +482,7 @@ def test_mpirun_error_on_one_worker_only_ends_the_job(tmp_path):
     p = subprocess.Popen(cmd[:py] + [str(wrapper)] + cmd[py:], env=env(), stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     pids = rank_pids(p.pid, 3, proc=p)
-    try:
-        _, err = p.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        for pid in [p.pid, *pids.values()]:
-            os.kill(pid, signal.SIGKILL)
-        p.communicate()
-        pytest.fail("mpirun hangs after an error on a worker")
+    err = _stderr_of_ending(p, pids, "a worker")
     assert p.returncode == 2, err
     assert err.count("hpcwedge: error:") == 1 and "hpcwedge: error: SLURM_NTASKS=7 but this process is rank 2" in err
     assert "Traceback" not in err

@@ -14,7 +14,7 @@ import pytest
 from hpcwedge.cli import main
 from hpcwedge.results import (CHECKSUM_MAGIC, USERBLOCK_SIZE, FileError, read_result, seal, verify_checksum,
                               write_atomic)
-from mpi_helpers import ROOT, run, show_json, write_scene
+from mpi_helpers import ROOT, damaged, run, show_json, write_scene
 
 SCENE = 'name = "plug"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 2\n[friction]\nmu = [0.65]\n'
 #: a result written before checksums (kept in the repository)
@@ -67,14 +67,8 @@ def test_random_damage_refused_everywhere(result, tmp_path, capsys):
     good = open(result, "rb").read()
     rng = random.Random(7)
     for i in range(20):
-        data = bytearray(good)
-        if i % 4 == 3:
-            del data[rng.randrange(len(data)):]
-        else:
-            for k in rng.sample(range(len(data)), rng.choice((1, 16))):
-                data[k] ^= rng.randrange(1, 256)
         path = str(tmp_path / f"r{i}.h5")
-        open(path, "wb").write(data)
+        open(path, "wb").write(damaged(good, rng, i))
         _refused(path, capsys)
 
 
