@@ -4,6 +4,7 @@ import csv
 import importlib.util
 import json
 import os
+import sys
 
 import pytest
 
@@ -14,6 +15,7 @@ SCRIPT = os.path.join(os.path.dirname(__file__), "..", "scripts", "fault_campaig
 def campaign():
     spec = importlib.util.spec_from_file_location("fault_campaign", SCRIPT)
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod           # dataclasses look their module up there
     spec.loader.exec_module(mod)
     return mod
 
