@@ -23,7 +23,7 @@ test: setup setup-docs
 # the site into site/ (warnings are errors); the scene reference and benchmark pages are
 # generated at build time (scripts/mkdocs_hooks.py, scripts/docs_pages.py)
 docs: setup-docs
-	$(PY) -m mkdocs build --strict
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict
 
 bench: setup-bench
 	$(PY) scripts/bench_2d.py --budget 300

@@ -156,3 +156,16 @@ def test_benchmark_markers():
         assert docs_pages.render_markers(f"<!-- bench: {n} -->").startswith("|")
     with pytest.raises(KeyError, match="no_such_table"):
         docs_pages.render_markers("<!-- bench: no_such_table -->")
+
+
+def test_readme_is_short_and_its_links_resolve():
+    """README.md stays short (the rest is in docs/) and every relative link or image in it
+    names a file of the repository (GitHub renders them; mkdocs does not check the README)."""
+    text = open(os.path.join(ROOT, "README.md")).read()
+    assert len(text.splitlines()) <= 200
+    assert "    make demo " in text and "    make test " in text
+    links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    assert len(links) >= 10
+    for link in links:
+        if "://" not in link:
+            assert os.path.exists(os.path.join(ROOT, link)), link
