@@ -262,12 +262,260 @@ def table(header: list[str], rows: list[list[object]]) -> str:
     return "\n".join(out)
 
 
-#: benchmark name -> function rendering its Markdown table from results/*.json
-BENCHMARKS: dict = {}
+def _s(v: float | None, digits: int = 3) -> str:
+    """Seconds (or any positive quantity) to `digits` significant digits, thousands separated."""
+    if v is None:
+        return "–"
+    if v >= 10 ** digits:
+        return f"{v:,.0f}"
+    txt = f"{float(f'{v:.{digits}g}'):f}".rstrip("0").rstrip(".")
+    return txt
+
+
+def _x(v: float) -> str:
+    """A ratio: 4,595× / 1.8×."""
+    return f"{v:,.0f}×" if v >= 100 else f"{float(f'{v:.2g}'):g}×"
+
+
+def bench_2d() -> str:
+    """results/bench_2d.json: plug2d rows 2..10, our engines against cddlib (scripts/bench_2d.py)."""
+    d = _load("bench_2d.json")
+    by = {}
+    for r in d["records"]:
+        by.setdefault(r["m"], {})[r["engine"]] = r
+
+    def cell(r):
+        if r is None or r["status"] == "not_run":
+            return "–"
+        if r["status"] == "timeout":
+            return f"> {r['seconds_lower_bound']:.0f} (limit)"
+        return _s(r["seconds"])
+
+    rows = []
+    for m in sorted(by):
+        e = by[m]
+        ours, cdd = e["ours_enumerate"], e.get("cdd_exact")
+        if cdd and cdd["status"] == "ok":
+            ratio = _x(cdd["seconds"] / ours["seconds"])
+        elif cdd and cdd["status"] == "timeout":
+            ratio = "> " + _x(cdd["seconds_lower_bound"] / ours["seconds"])
+        else:
+            ratio = "–"
+        rows.append([str(m), f"{ours['n_wedged_rays']:,}", str(ours["n_cones"]), cell(ours),
+                     cell(e.get("ours_run_scene")), cell(e.get("ours_mpirun")), cell(e.get("ours_exact")),
+                     cell(cdd), ratio])
+    return table(["m", "wedged rays", "cones", "ours enum", "run_scene", "mpirun, 2 workers", "ours (exact)",
+                  "cddlib exact + filter + cliques", "peer / ours enum"], rows)
+
+
+def bench_parallel() -> str:
+    """results/bench_parallel.json: plug3d 3 x 6 serially and with 1-3 workers (scripts/bench_parallel.py)."""
+    d = _load("bench_parallel.json")
+    rows = [[("serial (no mpirun)" if r["config"] == "serial" else r["config"]), f"{r['seconds']:.1f}",
+             f"{r['speedup_vs_1_worker']:.2f}", f"{r['program_seconds']:.1f}", f"{r['program_speedup_vs_1_worker']:.2f}",
+             f"{r['patterns']:,}", "yes" if r["same_answers"] else "**no**"] for r in d["rows"]]
+    return table(["", "wall s", "speedup vs 1 worker", "program s", "speedup", "patterns", "same answers"], rows)
+
+
+def bench_socp_count() -> str:
+    """results/bench_socp_count.json: SOCPs of the branch and bound on plug3d (scripts/bench_socp_count.py)."""
+    runs = _load("bench_socp_count.json")["runs"]
+    by = {}
+    for r in runs:
+        by.setdefault((r["m"], r["mu"]), {})[r["branching"]] = r
+    rows = []
+    for (m, mu), e in sorted(by.items()):
+        st, dy, sy = e["static"], e["dynamic"], e["symmetric"]
+        rows.append([str(m), f"{mu:g}", f"{sy['patterns']} ({sy['leaves_found']})",
+                     f"{st['socps']:,} → {dy['socps']:,} → {sy['socps']:,}", f"{sy['partitions'] / sy['socps']:.1f}",
+                     str(dy["pruned"]), f"{st['bnb_seconds']:.2f} → {dy['bnb_seconds']:.2f} → {sy['bnb_seconds']:.2f}",
+                     _equal([x.get("brute_equal") for x in (st, dy, sy)])])
+    return table(["m", "mu", "patterns (orbit representatives)", "SOCPs static → dynamic → symmetric",
+                  "2^m / SOCPs (symmetric)", "nodes pruned by cores (dynamic)", "B&B s static → dynamic → symmetric",
+                  "= brute force"], rows)
+
+
+def _equal(flags: list) -> str:
+    """yes / **no** / – (not checked) for a list of agreement flags (None: not checked)."""
+    if any(f is False for f in flags):
+        return "**no**"
+    return "yes" if any(f for f in flags) else "–"
+
+
+def bench_condense() -> str:
+    """results/bench_condense.json (10^6 DOFs) and bench_condense_quick.json (10^5): serial
+    against distributed condensation of block2d (scripts/bench_condense.py)."""
+    rows = []
+    for name in ("bench_condense_quick.json", "bench_condense.json"):
+        for r in _load(name)["rows"]:
+            rows.append([f"{r['n_dofs']:,}", str(r["ranks"]), _s(r["condense_s"]), _s(r["build_s"], 2),
+                         ", ".join(f"{v:,.0f}" for v in r["maxrss_mb_per_rank"]),
+                         f"{r['rel_diff_vs_first']:.1e}" if r["rel_diff_vs_first"] else "(reference)"])
+    return table(["DOFs", "ranks", "condense (s)", "model build (s)", "peak RSS per rank (MB)",
+                  "condensed K against 1 rank"], rows)
+
+
+GROWTH = [("2d/ours", "2D ours, whole run_scene"), ("2d/ours_split", "2D ours, enumerate only (parametrize + DD + cliques)"),
+          ("2d/cdd_exact", "2D peer: cddlib exact DD + filter + cliques"), ("3d/bnb_sym", "3D ours, B&B with symmetry"),
+          ("3d/bnb", "3D ours, B&B without symmetry"), ("3d/brute", "3D peer: brute force, one SOCP per partition")]
+
+
+def bench_growth() -> str:
+    """results/bench_growth.json: fitted growth of time and memory per contact node (scripts/bench_growth.py)."""
+    d = _load("bench_growth.json")
+    rows = []
+    for key, label in GROWTH:
+        dim, engine = key.split("/")
+        f = d["fits"][key]
+        pts = [p for p in d["points"] if f"{p['dim']}d" == dim and p["engine"] == engine and p["status"] == "ok"]
+        last = max(pts, key=lambda p: p["m"])
+        t, mem = f["time"], f["memory"]
+        rows.append([label, "{}–{}".format(*t["m_range"]), f"{t['b']:.2f}", f"{t['nodes_per_doubling']:.1f}",
+                     f"{_s(last['seconds'], 2)} s (m = {last['m']})", f"{last['maxrss_mb']:,.0f} MB",
+                     f"{mem['b']:.2f} (m {mem['m_range'][0]}–{mem['m_range'][1]})" if mem else "flat"])
+    return table(["engine", "m", "time ×b per node", "nodes per doubling", "time at largest m",
+                  "peak RSS at largest m", "memory ×b per node"], rows)
+
+
+PEER_ENGINES_2D = [("ours_exact", "ours exact"), ("cdd_exact", "cddlib exact + filter + cliques"),
+                   ("cdd_float", "cddlib float + filter + cliques"), ("brute_lp", "brute force, 2^m LPs")]
+
+
+def _peer_cell(r: dict, ours: dict, extra: str = "") -> str:
+    """`seconds (ratio×)` of a peer record against ours, or why there is no time."""
+    if r["status"] == "timeout":
+        return f"> {r['wall']:.0f}, cut (> {_x(r['wall'] / ours['seconds'])})"
+    if r["status"] == "error":
+        return "**aborted**"
+    if r["status"] != "ok":
+        return r["status"]
+    return f"{_s(r['seconds'], 2)}{extra} ({_x(r['seconds'] / ours['seconds'])})"
+
+
+def bench_peers_2d() -> str:
+    """results/bench_peers.json, section 2d: every 2D engine on the same scenes (scripts/bench_peers.py)."""
+    recs = [r for r in _load("bench_peers.json")["records"] if r["section"] == "2d"]
+    rows = []
+    for ours in (r for r in recs if r["engine"] == "ours_float"):
+        same = {r["engine"]: r for r in recs if r["scene"] == ours["scene"]}
+        rows.append([ours["scene"], str(ours["m"]), _s(ours["seconds"], 2),
+                     *[_peer_cell(same[e], ours) if e in same else "–" for e, _ in PEER_ENGINES_2D],
+                     _equal([None if r.get("agree", "-") in ("-", "") or r["agree"].startswith("aborted")
+                             else r["agree"].startswith("yes") for r in same.values()])])
+    return table(["scene", "m", "ours float", *[t for _, t in PEER_ENGINES_2D], "all agree"], rows)
+
+
+def bench_peers_3d() -> str:
+    """results/bench_peers.json, section 3d: plug3d, branch and bound against the brute force."""
+    recs = [r for r in _load("bench_peers.json")["records"] if r["section"] == "3d"]
+    rows = []
+    for ours in (r for r in recs if r["engine"] == "bnb_sym"):
+        same = {r["engine"]: r for r in recs if r["scene"] == ours["scene"]}
+        cells = []
+        for e in ("bnb", "brute"):
+            r = same[e]
+            cells.append(f"{_s(r['seconds'], 2)} s ({_x(r['seconds'] / ours['seconds'])}), "
+                         f"{r['socps']:,} SOCPs ({_x(r['socps'] / ours['socps'])})" if r["status"] == "ok" else r["status"])
+        rows.append([ours["scene"], str(ours["m"]), f"{_s(ours['seconds'], 2)} s, {ours['socps']:,} SOCPs", *cells,
+                     f"{ours['patterns']:,}", _equal([r.get("patterns_digest") == ours["patterns_digest"] for r in same.values()])])
+    return table(["scene", "m", "ours, B&B + symmetry", "ours, B&B without symmetry", "brute force, 2^m SOCPs",
+                  "patterns", "same pattern sets"], rows)
+
+
+def _gmean(v: list[float]) -> float:
+    return math.exp(sum(math.log(x) for x in v) / len(v))
+
+
+def bench_peers_mu_c() -> str:
+    """results/bench_peers.json, section mu_c: plain bisection against our accurate mu^c."""
+    recs = [r for r in _load("bench_peers.json")["records"] if r["section"] == "mu_c" and r["status"] == "ok"]
+    methods = ["bisection 1e-6", "bisection 1e-9", "accurate"]
+    rows = []
+    for dim in (2, 3):
+        rs = [r for r in recs if r["dim"] == dim]
+        acc = {r["scene"]: r for r in rs if r["engine"] == "accurate"}
+        err, tim = [f"{dim}D ({'LP' if dim == 2 else 'SOCP'}), worst error"], [f"{dim}D, time / ours"]
+        for e in methods:
+            sel = [r for r in rs if r["engine"] == e]
+            worst = max(r["rel_error"] for r in sel)
+            tol = {"bisection 1e-6": 1e-6, "bisection 1e-9": 1e-9}.get(e, 1e-9)
+            above = sum(r["rel_error"] > tol for r in sel) if e == "bisection 1e-9" else 0
+            err.append(f"{worst:.1e}" + (f" ({above} of {len(sel)} scenes above 1e-9)" if above else "")
+                       if e != "accurate" else f"**{worst:.1e}**")
+            if e == "accurate":
+                tim.append(f"{_s(min(r['seconds'] for r in sel), 2)}–{_s(max(r['seconds'] for r in sel), 2)} s")
+            else:
+                ratios = [r["seconds"] / acc[r["scene"]]["seconds"] for r in sel]
+                tim.append(f"{_x(min(ratios))[:-1]}–{_x(max(ratios))} (geometric mean {_x(_gmean(ratios))})")
+        rows += [err, tim]
+    return table(["", "plain bisection 1e-6", "plain bisection 1e-9", "ours, accurate"], rows)
+
+
+def bench_mu_c() -> str:
+    """results/bench_mu_c.json: mu^c by plain bisection against the accurate method (scripts/bench_mu_c.py)."""
+    d = _load("bench_mu_c.json")
+    cols = [("bisection tol=1e-06", "plain bisection 1e-6"), ("bisection tol=1e-12", "plain bisection 1e-12"),
+            ("tight bisection tol=1e-12", "tight solver, 1e-12"), ("accurate", "accurate")]
+    rows = []
+    for dim, label in (("2d", "2D (LP, HiGHS)"), ("3d", "3D (SOCP, Clarabel)")):
+        sm = d["summary"][dim]
+        row = [label]
+        for key, _ in cols:
+            m = sm["methods"][key]
+            cell = f"{m['worst_error']:.1e}, {m['mean_seconds'] * 1e3:.{2 if m['mean_seconds'] < 0.01 else 0}f} ms"
+            row.append(f"**{cell.split(',')[0]}**,{cell.split(',')[1]}" if key == "accurate" else cell)
+        row.append(f"{_x(sm['accurate_over_bisection_1e-6'])} (worst scene {_x(sm['worst_ratio'])})")
+        rows.append(row)
+    return table(["", *[t for _, t in cols], "accurate / bisection 1e-6"], rows)
+
+
+def examples() -> str:
+    """scripts/examples/examples.json: the Gmsh example bodies and the counts of a run of
+    each (scripts/make_examples.py; tests/test_examples.py checks them)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("make_examples", os.path.join(ROOT, "scripts", "make_examples.py"))
+    mk = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mk)                 # its constants (the tapers); gmsh is imported lazily
+    with open(os.path.join(ROOT, "scripts", "examples", "examples.json")) as f:
+        d = json.load(f)
+    taper = {"cork2d": mk.TAPER_2D_DEG, "plug3d": mk.TAPER_3D_DEG}
+    rows = []
+    for name, e in d.items():
+        runs = e["result"]["runs"]
+        col = lambda k: " / ".join("-" if r[k] is None else f"{r[k]:,}" for r in runs)  # noqa: E731
+        cells = ", ".join(f"{n} {k}" for k, n in e["cells"].items())
+        rows.append([name, str(e["m"]), cells, " / ".join(f"{r['mu']:g}" for r in runs), col("n_wedged_rays"),
+                     col("n_cones"), col("n_patterns"), f"{e['result']['mu_c']:.12f}",
+                     f"{math.tan(math.radians(taper[name])):.12f}"])
+    return table(["scene", "m", "cells", "mu", "wedged rays", "cones", "patterns", "global mu^c", "tan(taper)"], rows)
+
+
+#: benchmark name -> (function rendering its Markdown table from results/*.json, the files,
+#: the command that writes them: `make bench` runs each)
+BENCHMARKS: dict = {
+    "bench_2d": (bench_2d, "results/bench_2d.json", "OMP_NUM_THREADS=1 .venv/bin/python scripts/bench_2d.py --budget 300"),
+    "bench_parallel": (bench_parallel, "results/bench_parallel.json", ".venv/bin/python scripts/bench_parallel.py --repeat 3"),
+    "bench_socp_count": (bench_socp_count, "results/bench_socp_count.json",
+                         "PYTHONPATH=. .venv/bin/python scripts/bench_socp_count.py --brute-max 14"),
+    "bench_condense": (bench_condense, "results/bench_condense.json, results/bench_condense_quick.json",
+                       ".venv/bin/python scripts/bench_condense.py [--quick]"),
+    "bench_peers_2d": (bench_peers_2d, "results/bench_peers.json", "PYTHONPATH=. .venv/bin/python scripts/bench_peers.py"),
+    "bench_peers_3d": (bench_peers_3d, "results/bench_peers.json", "PYTHONPATH=. .venv/bin/python scripts/bench_peers.py"),
+    "bench_peers_mu_c": (bench_peers_mu_c, "results/bench_peers.json", "PYTHONPATH=. .venv/bin/python scripts/bench_peers.py"),
+    "bench_mu_c": (bench_mu_c, "results/bench_mu_c.json", "PYTHONPATH=. .venv/bin/python scripts/bench_mu_c.py"),
+    "examples": (examples, "scripts/examples/examples.json", "PYTHONPATH=. .venv/bin/python scripts/make_examples.py"),
+    "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
+}
+
+
+def render(name: str) -> str:
+    """The table of one benchmark, with a caption naming its file and command."""
+    fn, files, command = BENCHMARKS[name]
+    return f"{fn()}\n\n*Rendered from `{files}`, written by `{command}`.*\n"
 
 
 def render_markers(markdown: str) -> str:
-    """Replace every `<!-- bench: NAME -->` line by BENCHMARKS[NAME]() (KeyError if unknown)."""
+    """Replace every `<!-- bench: NAME -->` line by render(NAME) (KeyError if unknown)."""
     out = []
     for line in markdown.split("\n"):
         s = line.strip()
@@ -275,7 +523,7 @@ def render_markers(markdown: str) -> str:
             name = s[len("<!-- bench:"):-3].strip()
             if name not in BENCHMARKS:
                 raise KeyError(f"<!-- bench: {name} -->: no such table in scripts/docs_pages.py BENCHMARKS")
-            out.append(BENCHMARKS[name]())
+            out.append(render(name))
         else:
             out.append(line)
     return "\n".join(out)
@@ -285,3 +533,5 @@ if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else "scene"
     if what == "scene":
         print(scene_reference())
+    else:
+        print(render(what))
