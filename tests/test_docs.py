@@ -185,3 +185,20 @@ def test_toml_scenes_parse(page):
             parse_scene(data, text=text, base_dir=os.path.join(ROOT, "scripts", "examples"))
         except SceneError as e:
             pytest.fail(f"{page}, toml block {i}: {e}")
+
+
+def test_tutorial_table_is_what_show_prints(tmp_path):
+    """The tutorial's first scene, run through the command line, gives the table the
+    tutorial shows (all but the timings line)."""
+    text = open(os.path.join(ROOT, "docs", "tutorial.md")).read()
+    (tmp_path / "plug.toml").write_text(TOML.findall(text)[0])
+    shown = text.split("    $ hpcwedge show plug.h5\n", 1)[1].split("\n\n", 1)[0]
+    expected = [ln[4:] for ln in shown.splitlines() if not ln.strip().startswith("timings:")]
+    run = lambda *a: subprocess.run([sys.executable, "-m", "hpcwedge", *a], cwd=tmp_path,  # noqa: E731
+                                    capture_output=True, text=True, timeout=300)
+    p = run("run", "plug.toml", "-o", "plug.h5")
+    assert p.returncode == 0, p.stderr
+    p = run("show", "plug.h5")
+    assert p.returncode == 0, p.stderr
+    got = [ln for ln in p.stdout.splitlines() if not ln.strip().startswith("timings:")]
+    assert got == expected
