@@ -53,8 +53,8 @@ MEANINGS: dict[str, dict[str, tuple[str, str, str]]] = {
                  "mu^c of every cone / pattern and the global one."),
         "mu_c_method": ('"accurate" or "bisection"', "",
                         "accurate: bracket then a verified polish to ~1e-12; bisection: plain, to `mu_c_tol` (benchmarks)."),
-        "mu_c_tol": ("number", "relative", "Tolerance of the plain bisection (`mu_c_method = \"bisection\"`)."),
-        "mu_max": ("number", "1", "Largest mu searched for mu^c; beyond it mu^c is null (`none_up_to_mu_max`)."),
+        "mu_c_tol": ("number in [1e-15, 1)", "relative", "Tolerance of the plain bisection (`mu_c_method = \"bisection\"`)."),
+        "mu_max": ("number in [1e-6, 1e6]", "1", "Largest mu searched for mu^c; beyond it mu^c is null (`none_up_to_mu_max`)."),
         "exact": ("boolean", "", "2D: exact rational arithmetic throughout (verification; small problems)."),
         "exact_fallback_max_m": ("integer ≥ 0", "contact nodes",
                                  "2D: a float run with decisions too close to call is redone exactly up to this m (0: never)."),
@@ -490,6 +490,19 @@ def examples() -> str:
     return table(["scene", "m", "cells", "mu", "wedged rays", "cones", "patterns", "global mu^c", "tan(taper)"], rows)
 
 
+def faults() -> str:
+    """results/faults.json: the fault campaign's verdicts per category (scripts/fault_campaign.py);
+    a note instead of a table while no campaign result is committed."""
+    if not os.path.exists(os.path.join(ROOT, "results", "faults.json")):
+        return "| campaign |\n|---|\n| no `results/faults.json` in this checkout yet: run the command below |"
+    d = _load("faults.json")
+    cats = d["by_category"]
+    rows = [[c, str(v["pass"]), str(v["FAIL"]), str(v["skip"])] for c, v in cats.items()]
+    rows.append(["**all**", *(f"**{sum(v[k] for v in cats.values())}**" for k in ("pass", "FAIL", "skip"))])
+    return table(["category", "pass", "fail", "skipped"], rows) + \
+        f"\n\n{d['cases']} cases in {d['seconds']:.0f} s (`{d['command']}`)."
+
+
 #: benchmark name -> (function rendering its Markdown table from results/*.json, the files,
 #: the command that writes them: `make bench` runs each)
 BENCHMARKS: dict = {
@@ -504,6 +517,7 @@ BENCHMARKS: dict = {
     "bench_peers_mu_c": (bench_peers_mu_c, "results/bench_peers.json", "PYTHONPATH=. .venv/bin/python scripts/bench_peers.py"),
     "bench_mu_c": (bench_mu_c, "results/bench_mu_c.json", "PYTHONPATH=. .venv/bin/python scripts/bench_mu_c.py"),
     "examples": (examples, "scripts/examples/examples.json", "PYTHONPATH=. .venv/bin/python scripts/make_examples.py"),
+    "faults": (faults, "results/faults.json", "python scripts/fault_campaign.py"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
 }
 

@@ -202,3 +202,18 @@ def test_tutorial_table_is_what_show_prints(tmp_path):
     assert p.returncode == 0, p.stderr
     got = [ln for ln in p.stdout.splitlines() if not ln.strip().startswith("timings:")]
     assert got == expected
+
+
+def test_faults_table_from_a_campaign_file(tmp_path, monkeypatch):
+    """The fault campaign's table counts its verdicts per category (the layout
+    scripts/fault_campaign.py writes), and says so when no campaign result is there."""
+    monkeypatch.setattr(docs_pages, "ROOT", str(tmp_path))
+    assert "no `results/faults.json`" in docs_pages.faults()
+    (tmp_path / "results").mkdir()
+    doc = {"command": "python scripts/fault_campaign.py", "cases": 3, "seconds": 12.3,
+           "by_category": {"scene": {"pass": 2, "FAIL": 0, "skip": 0}, "signal": {"pass": 0, "FAIL": 1, "skip": 0}},
+           "rows": []}
+    (tmp_path / "results" / "faults.json").write_text(__import__("json").dumps(doc))
+    out = docs_pages.faults()
+    assert "| scene | 2 | 0 | 0 |" in out and "| signal | 0 | 1 | 0 |" in out
+    assert "| **all** | **2** | **1** | **0** |" in out and "3 cases in 12 s" in out
