@@ -2,7 +2,7 @@
 # Both install what is missing first (scripts/setup.sh; quick when done).
 PY := .venv/bin/python
 
-.PHONY: setup setup-bench demo test bench bench-quick check clean
+.PHONY: setup setup-bench setup-docs demo test docs bench bench-quick check clean
 
 setup:
 	@bash scripts/setup.sh
@@ -10,11 +10,20 @@ setup:
 setup-bench:
 	@bash scripts/setup.sh bench
 
+setup-docs: setup
+	@bash scripts/setup.sh docs
+
 demo: setup
 	$(PY) scripts/demo.py
 
-test: setup
+# the docs tools too: tests/test_docs.py builds the site and runs its examples
+test: setup setup-docs
 	$(PY) -m pytest -q
+
+# the site into site/ (warnings are errors); the scene reference and benchmark pages are
+# generated at build time (scripts/mkdocs_hooks.py, scripts/docs_pages.py)
+docs: setup-docs
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict
 
 bench: setup-bench
 	$(PY) scripts/bench_2d.py --budget 300

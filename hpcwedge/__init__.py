@@ -3,6 +3,9 @@
 Importing it sets the thread policy (environment.py): one BLAS/OpenMP thread, whatever the
 caller's settings, so that the float bits of a result do not depend on them (SPEC §5).
 """
+import sys
+import types
+
 from .environment import set_thread_variables
 
 set_thread_variables()
@@ -23,3 +26,18 @@ def __getattr__(name: str):
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
+
+
+
+class _Package(types.ModuleType):
+    """This package: importing a submodule that shares a public name (hpcwedge.plot) must
+    not rebind that name, or `hw.plot` would turn from api.plot into the module once the
+    module is imported (api.plot itself imports it)."""
+
+    def __setattr__(self, name: str, value) -> None:
+        if name in __all__ and isinstance(value, types.ModuleType):
+            return              # the submodule is in sys.modules; hw.<name> stays the API's
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

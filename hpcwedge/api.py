@@ -138,6 +138,8 @@ def stiffness_scene(K: Any, *, dim: int, null_space: Any = None, mu: float | Seq
     mu, name, **options
         As for `builtin_scene` ([compute] and [run] options only).
 
+    Notes
+    -----
     The table is checked here; K itself (symmetric, semidefinite, its null space) when the
     scene is solved, as for a scene file.
 

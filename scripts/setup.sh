@@ -3,6 +3,7 @@
 #
 #   scripts/setup.sh            core: Open MPI, PETSc (system), SLURM (for the job tests), .venv, petsc4py, package
 #   scripts/setup.sh bench      also the benchmark peers (pycddlib on libcdd/libgmp)
+#   scripts/setup.sh docs       also the documentation tools (MkDocs, Material, mkdocstrings)
 #
 # Versions: pip installs the tested versions of constraints.txt (pip install -c). For the
 # newest versions setup.cfg allows instead: HPCWEDGE_CONSTRAINTS=none scripts/setup.sh
@@ -87,6 +88,8 @@ fi
 
 if [ "$EXTRA" = bench ]; then
   "$VPY" -m pip install -q "${PIN[@]}" -e ".[test,bench]"
+elif [ "$EXTRA" = docs ]; then
+  "$VPY" -m pip install -q "${PIN[@]}" -e ".[test,docs]"
 else
   "$VPY" -m pip install -q "${PIN[@]}" -e ".[test]"
 fi

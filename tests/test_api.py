@@ -213,3 +213,11 @@ def test_import_is_light_and_exports_resolve():
 def test_doctests():
     res = doctest.testmod(hpcwedge.api)
     assert res.attempted >= 20 and res.failed == 0
+
+
+def test_plot_stays_the_function_after_the_plot_module_is_imported():
+    """hw.plot is api.plot even after hpcwedge.plot (the module, which api.plot imports on
+    its first call) is loaded: a notebook calls it twice (docs/examples/cork.md)."""
+    out = python("import hpcwedge as hw\nimport hpcwedge.plot\nfrom hpcwedge.plot import plot_result\n"
+                 "from hpcwedge import plot\nprint(hw.plot is hw.api.plot, plot is hw.plot, callable(plot_result))")
+    assert out.split() == ["True", "True", "True"]

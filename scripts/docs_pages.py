@@ -1,0 +1,551 @@
+"""Generated documentation pages: the scene reference and the benchmark tables.
+
+The scene reference is built from the parser's own key sets and defaults (hpcwedge/scene.py:
+TOP_KEYS, COMPUTE_DEFAULTS, RUN_DEFAULTS, MESH_MODEL_KEYS, ...; models/obstacle.py:
+OBSTACLE_KEYS; the built-ins' signatures in models/library.py), so it cannot drift from what
+a scene may say: only the meaning of each key is written here, in MEANINGS (one table, key ->
+(type, unit, meaning)). A key the parser accepts without a meaning is an error (KeyError), and
+so is a meaning for a key the parser no longer accepts (tests/test_docs.py).
+
+The benchmark tables are rendered from results/*.json (never copied by hand); see BENCHMARKS.
+
+Used by scripts/mkdocs_hooks.py at build time; `python scripts/docs_pages.py scene` prints the
+reference page.
+"""
+from __future__ import annotations
+
+import inspect
+import json
+import math
+import os
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REQUIRED = "required"
+NONE = "—"
+
+#: key -> (type, unit, meaning), per table. Tables: "scene" (top level), "friction",
+#: "compute", "run", "model.<kind>", "contact.<kind>", "obstacle.<type>", and "builtin" for
+#: the parameters of the built-in models (shared by name across them).
+MEANINGS: dict[str, dict[str, tuple[str, str, str]]] = {
+    "scene": {
+        "name": ("string", "", "Name of the scene, copied into the result."),
+        "dim": ("2 or 3", "", "Dimension. 2: rays and cones; 3: sign patterns."),
+        "model": ("table", "", "The body: `kind` and the kind's keys (below)."),
+        "friction": ("table", "", "Friction coefficients (`mu`)."),
+        "compute": ("table", "", "What to compute."),
+        "run": ("table", "", "How to run it (checkpoints, tasks, memory)."),
+        "contact": ("table", "", "Contact nodes and their frames (truss and mesh)."),
+        "obstacle": ("array of tables", "", "Rigid obstacle surfaces (mesh): normals from the nearest one."),
+    },
+    "model": {
+        "kind": ("string", "", "The kind of body: {kinds}. The other keys of [model] depend on it (below)."),
+    },
+    "friction": {
+        "mu": ("number or list of numbers", "1", "Coulomb friction coefficients to enumerate at, each in [1e-6, 1e6]."),
+    },
+    "compute": {
+        "enumerate": ('true, false, "rays" or "patterns"', "",
+                      "2D: rays and cones (true), rays only (\"rays\"), sign patterns (\"patterns\"); "
+                      "3D always sign patterns; false: nothing is enumerated."),
+        "mu_c": ('"none", "global" or "cones"', "",
+                 "Critical friction coefficient: none, only the global mu^c (cheapest route), or "
+                 "mu^c of every cone / pattern and the global one."),
+        "mu_c_method": ('"accurate" or "bisection"', "",
+                        "accurate: bracket then a verified polish to ~1e-12; bisection: plain, to `mu_c_tol` (benchmarks)."),
+        "mu_c_tol": ("number in [1e-15, 1)", "relative", "Tolerance of the plain bisection (`mu_c_method = \"bisection\"`)."),
+        "mu_max": ("number in [1e-6, 1e6]", "1", "Largest mu searched for mu^c; beyond it mu^c is null (`none_up_to_mu_max`)."),
+        "exact": ("boolean", "", "2D: exact rational arithmetic throughout (verification; small problems)."),
+        "exact_fallback_max_m": ("integer ≥ 0", "contact nodes",
+                                 "2D: a float run with decisions too close to call is redone exactly up to this m (0: never)."),
+    },
+    "run": {
+        "checkpoint_every_s": ("number > 0", "s", "Period of the master's checkpoint `RESULT.h5.ckpt`."),
+        "task_budget": ("integer ≥ 1", "tree nodes", "Sign-pattern tree nodes per task before a subtree is handed back."),
+        "symmetry": ("boolean", "", "Use the node symmetries of K (orbits of patterns, mu^c once per orbit)."),
+        "face_split": ('"auto" or integer ≥ 0', "nodes",
+                       "2D: branching nodes of the double-description split over faces (\"auto\": 3 from m = 16 on)."),
+        "condense": ('"auto", "serial" or "distributed"', "",
+                     "Under mpirun: where the static condensation runs (\"auto\": distributed from 2·10^6 DOFs)."),
+        "max_memory_gb": ('"auto" or number > 0', "GB",
+                          "Memory a run may use, shared by the ranks on a host (\"auto\": 80 % of what is "
+                          "available at start). A run about to exceed it stops early, naming this key."),
+    },
+    "model.stiffness": {
+        "K": ("2D array", "force/length", "Condensed, block-ordered stiffness [n.., t..] (3D: [n.., t1.., t2..]), inline."),
+        "file": ("path", "", "K (and optionally `null_space`) in a .npy, .npz or .h5 file, relative to the scene file."),
+        "null_space": ("2D array", "", "Rigid modes (columns) of a free body; none: a supported body."),
+    },
+    "model.truss": {
+        "nodes": ("array (n, dim)", "length", "Node coordinates."),
+        "bars": ("array (b, 2)", "", "Bars as pairs of 0-based node ids."),
+        "EA": ("number or array (b,)", "force", "Axial stiffness of every bar (default 1)."),
+        "supports": ("array of [node, dof]", "", "Fixed DOFs; none: a free body (rigid modes from the geometry)."),
+    },
+    "contact.truss": {
+        "nodes": ("array of integers", "", "Contact nodes (0-based node ids)."),
+        "normals": ("array (m, dim)", "", "Obstacle normal at each contact node, into the body."),
+        "tangents": ("array (m, dim)", "", "3D: t1 per contact node (t2 = n × t1); default: the axis least aligned with n."),
+    },
+    "model.mesh": {
+        "file": ("path", "", "Mesh file meshio reads (Gmsh .msh, .vtu, .inp, ...), relative to the scene file."),
+        "E": ("number > 0", "force/length²", "Young's modulus (default 1)."),
+        "nu": ("number in (-1, 0.5)", "1", "Poisson's ratio (default 0.3)."),
+        "thickness": ("number > 0", "length", "2D plane stress: thickness (default 1)."),
+        "supports": ("array of [node, dof]", "", "Fixed DOFs by node id; none of the support keys: a free body."),
+        "support_group": ("string or list", "", "Mesh group(s) whose nodes are supported."),
+        "support_dofs": ("array of integers", "", "Only these components of `support_group` nodes (default all)."),
+        "contact_patch": ("number ≥ 0", "length", "Half-width a of a contact patch under every contact node (0: point contacts)."),
+        "contact_patch_kind": ('"rigid" or "hat"', "", "rigid foot, or hat-weighted mean displacement of the patch."),
+    },
+    "contact.mesh": {
+        "group": ("string or list", "", "Mesh group(s) holding the contact nodes (or `nodes`)."),
+        "nodes": ("array of integers", "", "Contact node ids (0-based, in meshio's node order)."),
+        "normals": ("array (m, dim)", "", "Normals per contact node instead of obstacles."),
+        "tangents": ("array (m, dim)", "", "3D: t1 per contact node, with `normals`."),
+        "obstacle": ("array of tables", "", "Obstacles given inside [contact] instead of [[obstacle]]."),
+        "tolerance": ("number > 0", "× median element size", "Contact nodes must lie this close to an obstacle (default 1e-4)."),
+    },
+    "obstacle.plane": {
+        "type": ('"plane"', "", "A plane (a line in 2D)."),
+        "point": ("array (dim,)", "length", "A point of the plane."),
+        "normal": ("array (dim,)", "", "Its normal (either sign)."),
+    },
+    "obstacle.cone": {
+        "type": ('"cone"', "", "A cone's nappe (a V in 2D)."),
+        "apex": ("array (dim,)", "length", "Apex."),
+        "axis": ("array (dim,)", "", "Axis direction (the nappe opens along it)."),
+        "half_angle_deg": ("number", "degree", "Half-angle between the axis and the surface."),
+    },
+    "builtin": {
+        "theta_deg": ("number in (0, 90]", "degree", "vgroove_bar: angle of the groove's walls from the vertical."),
+        "eps": ("number ≥ 0", "force/length", "vgroove_bar: isotropic ground springs at both nodes (0: a free bar); mu^c = tan θ + eps/(k sin 2θ), k = EA/2."),
+        "EA": ("number", "force", "Axial stiffness of the bars."),
+        "rows": ("integer ≥ 1", "", "Rows of nodes (plug2d: m = 2 rows contact nodes) or of elements (block2d: m = 2 (rows + 1))."),
+        "cols": ("integer ≥ 1", "", "Columns of nodes (plug2d) or of elements (block2d)."),
+        "taper_deg": ("number in [0, 90)", "degree", "Taper of the walls from the vertical (from the axis in 3D); these free plugs have global mu^c = tan(taper)."),
+        "levels": ("integer ≥ 1", "", "plug3d: levels of nodes, each a ring plus a centre node."),
+        "ring": ("integer ≥ 3", "", "plug3d: contact nodes per ring (m = levels × ring)."),
+        "refine": ("integer ≥ 1", "", "block2d: each coarse element split refine × refine (mesh refinement)."),
+        "E": ("number > 0", "force/length²", "Young's modulus."),
+        "nu": ("number", "1", "Poisson's ratio."),
+        "thickness": ("number > 0", "length", "Plane-stress thickness."),
+        "contact_patch": ("number ≥ 0", "length", "Half-width of the contact patches (0: point contacts)."),
+        "contact_patch_kind": ('"rigid" or "hat"', "", "Patch model (see model.mesh)."),
+    },
+}
+
+
+def accepted_keys() -> dict[str, dict[str, object]]:
+    """{table: {key: default}} as the parser has them (REQUIRED where there is no default,
+    NONE where absence has a meaning of its own). Tables as in MEANINGS, plus
+    "model.<builtin>" for each built-in; read from hpcwedge.scene, models.obstacle and
+    models.library, never written here."""
+    from hpcwedge import scene
+    from hpcwedge.models.library import BUILTINS
+    from hpcwedge.models.mesh import DEFAULT_TOLERANCE
+    from hpcwedge.models.obstacle import OBSTACLE_KEYS
+    req = {"name", "dim", "model", "friction"}
+    out: dict[str, dict[str, object]] = {
+        "scene": {k: (REQUIRED if k in req else NONE) for k in sorted(scene.TOP_KEYS)},
+        "model": {"kind": REQUIRED},
+        "friction": {"mu": REQUIRED},
+        "compute": dict(scene.COMPUTE_DEFAULTS),
+        "run": dict(scene.RUN_DEFAULTS),
+    }
+    # issue 11 gives stiffness and truss tables explicit key sets in scene.py; before that the
+    # stiffness keys lived in build.py and a truss took any key (tests/test_docs.py probes the parser)
+    stiffness = getattr(scene, "STIFFNESS_MODEL_KEYS", {"K", "file", "null_space"})
+    truss = getattr(scene, "TRUSS_MODEL_KEYS", set(MEANINGS["model.truss"]))
+    truss_contact = getattr(scene, "TRUSS_CONTACT_KEYS", set(MEANINGS["contact.truss"]))
+    defaults = {"EA": 1.0, "E": 1.0, "nu": 0.3, "thickness": 1.0, "contact_patch": 0.0,
+                "contact_patch_kind": "rigid", "tolerance": DEFAULT_TOLERANCE}
+    for table, keys in (("model.stiffness", stiffness), ("model.truss", truss),
+                        ("contact.truss", truss_contact), ("model.mesh", scene.MESH_MODEL_KEYS),
+                        ("contact.mesh", scene.MESH_CONTACT_KEYS)):
+        out[table] = {k: defaults.get(k, NONE) for k in sorted(keys)}
+    for kind, fields in OBSTACLE_KEYS.items():
+        out[f"obstacle.{kind}"] = {"type": REQUIRED, **{f: REQUIRED for f in fields}}
+    for kind, fn in BUILTINS.items():
+        out[f"model.{kind}"] = {p.name: p.default for p in inspect.signature(fn).parameters.values()}
+    return out
+
+
+def meaning(table: str, key: str) -> tuple[str, str, str]:
+    """(type, unit, meaning) of a key; KeyError naming it when MEANINGS lacks it."""
+    t = "builtin" if table.startswith("model.") and table[6:] not in ("stiffness", "truss", "mesh") else table
+    try:
+        return MEANINGS[t][key]
+    except KeyError:
+        raise KeyError(f"scripts/docs_pages.py MEANINGS: no meaning for {table}.{key}") from None
+
+
+def stale_meanings() -> list[str]:
+    """Keys with a meaning that the parser no longer accepts."""
+    acc = accepted_keys()
+    used_builtin = {k for t, keys in acc.items() if t.startswith("model.")
+                    and t[6:] not in ("stiffness", "truss", "mesh") for k in keys}
+    out = []
+    for t, keys in MEANINGS.items():
+        have = used_builtin if t == "builtin" else set(acc.get(t, {}))
+        out += [f"{t}.{k}" for k in keys if k not in have]
+    return out
+
+
+def _fmt(v: object) -> str:
+    if v in (REQUIRED, NONE) and isinstance(v, str):
+        return v
+    if isinstance(v, bool):
+        return "`true`" if v else "`false`"
+    if isinstance(v, str):
+        return f'`"{v}"`'
+    return f"`{v!r}`"
+
+
+TITLES = {
+    "scene": "Top level", "model": "[model]", "friction": "[friction]", "compute": "[compute]", "run": "[run]",
+    "model.stiffness": '[model] kind = "stiffness"', "model.truss": '[model] kind = "truss"',
+    "contact.truss": "[contact] of a truss", "model.mesh": '[model] kind = "mesh"',
+    "contact.mesh": "[contact] of a mesh", "obstacle.plane": '[[obstacle]] type = "plane"',
+    "obstacle.cone": '[[obstacle]] type = "cone"',
+}
+
+
+def scene_reference() -> str:
+    """The Markdown page of every scene key: table, type, default, unit, meaning."""
+    from hpcwedge import scene
+    lines = ["# Scene reference", "",
+             "Every key a scene file may hold, generated at build time from the parser's own key",
+             "sets and defaults (`hpcwedge/scene.py`, `models/obstacle.py`, the built-ins'",
+             "signatures in `models/library.py`; meanings: `scripts/docs_pages.py`). Any other",
+             "key is an error naming it. A built-in `model.kind` takes only its generator's",
+             "parameters; its `[contact]` is fixed by the model.", "",
+             "*required*: no default. *—*: optional, no default (absent has its own meaning,",
+             "given in the text). Units: the scene's own consistent units (mu^c does not depend on",
+             "them: stiffnesses are rescaled internally).", ""]
+    for table, keys in accepted_keys().items():
+        title = TITLES.get(table) or f'[model] kind = "{table[6:]}" (built-in)'
+        lines += [f"## {title}", "", "| key | type | default | unit | meaning |",
+                  "|---|---|---|---|---|"]
+        for k, default in keys.items():
+            typ, unit, text = meaning(table, k)
+            text = text.replace("{kinds}", ", ".join(f"`{k}`" for k in scene.KINDS))
+            lines.append(f"| `{k}` | {typ} | {_fmt(default)} | {unit} | {text} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# benchmarks: tables rendered from results/*.json
+
+def _load(name: str) -> dict:
+    with open(os.path.join(ROOT, "results", name)) as f:
+        return json.load(f)
+
+
+def _num(v: object, digits: int = 3) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, bool) or isinstance(v, str):
+        return str(v)
+    if isinstance(v, int):
+        return f"{v:,}"
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)
+    return f"{v:.{digits}g}"
+
+
+def table(header: list[str], rows: list[list[object]]) -> str:
+    """A Markdown table; numbers formatted by _num."""
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(_num(c) if not isinstance(c, str) else c for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def _s(v: float | None, digits: int = 3) -> str:
+    """Seconds (or any positive quantity) to `digits` significant digits, thousands separated."""
+    if v is None:
+        return "–"
+    if v >= 10 ** digits:
+        return f"{v:,.0f}"
+    txt = f"{float(f'{v:.{digits}g}'):f}".rstrip("0").rstrip(".")
+    return txt
+
+
+def _x(v: float) -> str:
+    """A ratio: 4,595× / 1.8×."""
+    return f"{v:,.0f}×" if v >= 100 else f"{float(f'{v:.2g}'):g}×"
+
+
+def bench_2d() -> str:
+    """results/bench_2d.json: plug2d rows 2..10, our engines against cddlib (scripts/bench_2d.py)."""
+    d = _load("bench_2d.json")
+    by = {}
+    for r in d["records"]:
+        by.setdefault(r["m"], {})[r["engine"]] = r
+
+    def cell(r):
+        if r is None or r["status"] == "not_run":
+            return "–"
+        if r["status"] == "timeout":
+            return f"> {r['seconds_lower_bound']:.0f} (limit)"
+        return _s(r["seconds"])
+
+    rows = []
+    for m in sorted(by):
+        e = by[m]
+        ours, cdd = e["ours_enumerate"], e.get("cdd_exact")
+        if cdd and cdd["status"] == "ok":
+            ratio = _x(cdd["seconds"] / ours["seconds"])
+        elif cdd and cdd["status"] == "timeout":
+            ratio = "> " + _x(cdd["seconds_lower_bound"] / ours["seconds"])
+        else:
+            ratio = "–"
+        rows.append([str(m), f"{ours['n_wedged_rays']:,}", str(ours["n_cones"]), cell(ours),
+                     cell(e.get("ours_run_scene")), cell(e.get("ours_mpirun")), cell(e.get("ours_exact")),
+                     cell(cdd), ratio])
+    return table(["m", "wedged rays", "cones", "ours enum", "run_scene", "mpirun, 2 workers", "ours (exact)",
+                  "cddlib exact + filter + cliques", "peer / ours enum"], rows)
+
+
+def bench_parallel() -> str:
+    """results/bench_parallel.json: plug3d 3 x 6 serially and with 1-3 workers (scripts/bench_parallel.py)."""
+    d = _load("bench_parallel.json")
+    rows = [[("serial (no mpirun)" if r["config"] == "serial" else r["config"]), f"{r['seconds']:.1f}",
+             f"{r['speedup_vs_1_worker']:.2f}", f"{r['program_seconds']:.1f}", f"{r['program_speedup_vs_1_worker']:.2f}",
+             f"{r['patterns']:,}", "yes" if r["same_answers"] else "**no**"] for r in d["rows"]]
+    return table(["", "wall s", "speedup vs 1 worker", "program s", "speedup", "patterns", "same answers"], rows)
+
+
+def bench_socp_count() -> str:
+    """results/bench_socp_count.json: SOCPs of the branch and bound on plug3d (scripts/bench_socp_count.py)."""
+    runs = _load("bench_socp_count.json")["runs"]
+    by = {}
+    for r in runs:
+        by.setdefault((r["m"], r["mu"]), {})[r["branching"]] = r
+    rows = []
+    for (m, mu), e in sorted(by.items()):
+        st, dy, sy = e["static"], e["dynamic"], e["symmetric"]
+        rows.append([str(m), f"{mu:g}", f"{sy['patterns']} ({sy['leaves_found']})",
+                     f"{st['socps']:,} → {dy['socps']:,} → {sy['socps']:,}", f"{sy['partitions'] / sy['socps']:.1f}",
+                     str(dy["pruned"]), f"{st['bnb_seconds']:.2f} → {dy['bnb_seconds']:.2f} → {sy['bnb_seconds']:.2f}",
+                     _equal([x.get("brute_equal") for x in (st, dy, sy)])])
+    return table(["m", "mu", "patterns (orbit representatives)", "SOCPs static → dynamic → symmetric",
+                  "2^m / SOCPs (symmetric)", "nodes pruned by cores (dynamic)", "B&B s static → dynamic → symmetric",
+                  "= brute force"], rows)
+
+
+def _equal(flags: list) -> str:
+    """yes / **no** / – (not checked) for a list of agreement flags (None: not checked)."""
+    if any(f is False for f in flags):
+        return "**no**"
+    return "yes" if any(f for f in flags) else "–"
+
+
+def bench_condense() -> str:
+    """results/bench_condense.json (10^6 DOFs) and bench_condense_quick.json (10^5): serial
+    against distributed condensation of block2d (scripts/bench_condense.py)."""
+    rows = []
+    for name in ("bench_condense_quick.json", "bench_condense.json"):
+        for r in _load(name)["rows"]:
+            rows.append([f"{r['n_dofs']:,}", str(r["ranks"]), _s(r["condense_s"]), _s(r["build_s"], 2),
+                         ", ".join(f"{v:,.0f}" for v in r["maxrss_mb_per_rank"]),
+                         f"{r['rel_diff_vs_first']:.1e}" if r["rel_diff_vs_first"] else "(reference)"])
+    return table(["DOFs", "ranks", "condense (s)", "model build (s)", "peak RSS per rank (MB)",
+                  "condensed K against 1 rank"], rows)
+
+
+GROWTH = [("2d/ours", "2D ours, whole run_scene"), ("2d/ours_split", "2D ours, enumerate only (parametrize + DD + cliques)"),
+          ("2d/cdd_exact", "2D peer: cddlib exact DD + filter + cliques"), ("3d/bnb_sym", "3D ours, B&B with symmetry"),
+          ("3d/bnb", "3D ours, B&B without symmetry"), ("3d/brute", "3D peer: brute force, one SOCP per partition")]
+
+
+def bench_growth() -> str:
+    """results/bench_growth.json: fitted growth of time and memory per contact node (scripts/bench_growth.py)."""
+    d = _load("bench_growth.json")
+    rows = []
+    for key, label in GROWTH:
+        dim, engine = key.split("/")
+        f = d["fits"][key]
+        pts = [p for p in d["points"] if f"{p['dim']}d" == dim and p["engine"] == engine and p["status"] == "ok"]
+        last = max(pts, key=lambda p: p["m"])
+        t, mem = f["time"], f["memory"]
+        rows.append([label, "{}–{}".format(*t["m_range"]), f"{t['b']:.2f}", f"{t['nodes_per_doubling']:.1f}",
+                     f"{_s(last['seconds'], 2)} s (m = {last['m']})", f"{last['maxrss_mb']:,.0f} MB",
+                     f"{mem['b']:.2f} (m {mem['m_range'][0]}–{mem['m_range'][1]})" if mem else "flat"])
+    return table(["engine", "m", "time ×b per node", "nodes per doubling", "time at largest m",
+                  "peak RSS at largest m", "memory ×b per node"], rows)
+
+
+PEER_ENGINES_2D = [("ours_exact", "ours exact"), ("cdd_exact", "cddlib exact + filter + cliques"),
+                   ("cdd_float", "cddlib float + filter + cliques"), ("brute_lp", "brute force, 2^m LPs")]
+
+
+def _peer_cell(r: dict, ours: dict, extra: str = "") -> str:
+    """`seconds (ratio×)` of a peer record against ours, or why there is no time."""
+    if r["status"] == "timeout":
+        return f"> {r['wall']:.0f}, cut (> {_x(r['wall'] / ours['seconds'])})"
+    if r["status"] == "error":
+        return "**aborted**"
+    if r["status"] != "ok":
+        return r["status"]
+    return f"{_s(r['seconds'], 2)}{extra} ({_x(r['seconds'] / ours['seconds'])})"
+
+
+def bench_peers_2d() -> str:
+    """results/bench_peers.json, section 2d: every 2D engine on the same scenes (scripts/bench_peers.py)."""
+    recs = [r for r in _load("bench_peers.json")["records"] if r["section"] == "2d"]
+    rows = []
+    for ours in (r for r in recs if r["engine"] == "ours_float"):
+        same = {r["engine"]: r for r in recs if r["scene"] == ours["scene"]}
+        rows.append([ours["scene"], str(ours["m"]), _s(ours["seconds"], 2),
+                     *[_peer_cell(same[e], ours) if e in same else "–" for e, _ in PEER_ENGINES_2D],
+                     _equal([None if r.get("agree", "-") in ("-", "") or r["agree"].startswith("aborted")
+                             else r["agree"].startswith("yes") for r in same.values()])])
+    return table(["scene", "m", "ours float", *[t for _, t in PEER_ENGINES_2D], "all agree"], rows)
+
+
+def bench_peers_3d() -> str:
+    """results/bench_peers.json, section 3d: plug3d, branch and bound against the brute force."""
+    recs = [r for r in _load("bench_peers.json")["records"] if r["section"] == "3d"]
+    rows = []
+    for ours in (r for r in recs if r["engine"] == "bnb_sym"):
+        same = {r["engine"]: r for r in recs if r["scene"] == ours["scene"]}
+        cells = []
+        for e in ("bnb", "brute"):
+            r = same[e]
+            cells.append(f"{_s(r['seconds'], 2)} s ({_x(r['seconds'] / ours['seconds'])}), "
+                         f"{r['socps']:,} SOCPs ({_x(r['socps'] / ours['socps'])})" if r["status"] == "ok" else r["status"])
+        rows.append([ours["scene"], str(ours["m"]), f"{_s(ours['seconds'], 2)} s, {ours['socps']:,} SOCPs", *cells,
+                     f"{ours['patterns']:,}", _equal([r.get("patterns_digest") == ours["patterns_digest"] for r in same.values()])])
+    return table(["scene", "m", "ours, B&B + symmetry", "ours, B&B without symmetry", "brute force, 2^m SOCPs",
+                  "patterns", "same pattern sets"], rows)
+
+
+def _gmean(v: list[float]) -> float:
+    return math.exp(sum(math.log(x) for x in v) / len(v))
+
+
+def bench_peers_mu_c() -> str:
+    """results/bench_peers.json, section mu_c: plain bisection against our accurate mu^c."""
+    recs = [r for r in _load("bench_peers.json")["records"] if r["section"] == "mu_c" and r["status"] == "ok"]
+    methods = ["bisection 1e-6", "bisection 1e-9", "accurate"]
+    rows = []
+    for dim in (2, 3):
+        rs = [r for r in recs if r["dim"] == dim]
+        acc = {r["scene"]: r for r in rs if r["engine"] == "accurate"}
+        err, tim = [f"{dim}D ({'LP' if dim == 2 else 'SOCP'}), worst error"], [f"{dim}D, time / ours"]
+        for e in methods:
+            sel = [r for r in rs if r["engine"] == e]
+            worst = max(r["rel_error"] for r in sel)
+            tol = {"bisection 1e-6": 1e-6, "bisection 1e-9": 1e-9}.get(e, 1e-9)
+            above = sum(r["rel_error"] > tol for r in sel) if e == "bisection 1e-9" else 0
+            err.append(f"{worst:.1e}" + (f" ({above} of {len(sel)} scenes above 1e-9)" if above else "")
+                       if e != "accurate" else f"**{worst:.1e}**")
+            if e == "accurate":
+                tim.append(f"{_s(min(r['seconds'] for r in sel), 2)}–{_s(max(r['seconds'] for r in sel), 2)} s")
+            else:
+                ratios = [r["seconds"] / acc[r["scene"]]["seconds"] for r in sel]
+                tim.append(f"{_x(min(ratios))[:-1]}–{_x(max(ratios))} (geometric mean {_x(_gmean(ratios))})")
+        rows += [err, tim]
+    return table(["", "plain bisection 1e-6", "plain bisection 1e-9", "ours, accurate"], rows)
+
+
+def bench_mu_c() -> str:
+    """results/bench_mu_c.json: mu^c by plain bisection against the accurate method (scripts/bench_mu_c.py)."""
+    d = _load("bench_mu_c.json")
+    cols = [("bisection tol=1e-06", "plain bisection 1e-6"), ("bisection tol=1e-12", "plain bisection 1e-12"),
+            ("tight bisection tol=1e-12", "tight solver, 1e-12"), ("accurate", "accurate")]
+    rows = []
+    for dim, label in (("2d", "2D (LP, HiGHS)"), ("3d", "3D (SOCP, Clarabel)")):
+        sm = d["summary"][dim]
+        row = [label]
+        for key, _ in cols:
+            m = sm["methods"][key]
+            cell = f"{m['worst_error']:.1e}, {m['mean_seconds'] * 1e3:.{2 if m['mean_seconds'] < 0.01 else 0}f} ms"
+            row.append(f"**{cell.split(',')[0]}**,{cell.split(',')[1]}" if key == "accurate" else cell)
+        row.append(f"{_x(sm['accurate_over_bisection_1e-6'])} (worst scene {_x(sm['worst_ratio'])})")
+        rows.append(row)
+    return table(["", *[t for _, t in cols], "accurate / bisection 1e-6"], rows)
+
+
+def examples() -> str:
+    """scripts/examples/examples.json: the Gmsh example bodies and the counts of a run of
+    each (scripts/make_examples.py; tests/test_examples.py checks them)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("make_examples", os.path.join(ROOT, "scripts", "make_examples.py"))
+    mk = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mk)                 # its constants (the tapers); gmsh is imported lazily
+    with open(os.path.join(ROOT, "scripts", "examples", "examples.json")) as f:
+        d = json.load(f)
+    taper = {"cork2d": mk.TAPER_2D_DEG, "plug3d": mk.TAPER_3D_DEG}
+    rows = []
+    for name, e in d.items():
+        runs = e["result"]["runs"]
+        col = lambda k: " / ".join("-" if r[k] is None else f"{r[k]:,}" for r in runs)  # noqa: E731
+        cells = ", ".join(f"{n} {k}" for k, n in e["cells"].items())
+        rows.append([name, str(e["m"]), cells, " / ".join(f"{r['mu']:g}" for r in runs), col("n_wedged_rays"),
+                     col("n_cones"), col("n_patterns"), f"{e['result']['mu_c']:.12f}",
+                     f"{math.tan(math.radians(taper[name])):.12f}"])
+    return table(["scene", "m", "cells", "mu", "wedged rays", "cones", "patterns", "global mu^c", "tan(taper)"], rows)
+
+
+def faults() -> str:
+    """results/faults.json: the fault campaign's verdicts per category (scripts/fault_campaign.py);
+    a note instead of a table while no campaign result is committed."""
+    if not os.path.exists(os.path.join(ROOT, "results", "faults.json")):
+        return "| campaign |\n|---|\n| no `results/faults.json` in this checkout yet: run the command below |"
+    d = _load("faults.json")
+    cats = d["by_category"]
+    rows = [[c, str(v["pass"]), str(v["FAIL"]), str(v["skip"])] for c, v in cats.items()]
+    rows.append(["**all**", *(f"**{sum(v[k] for v in cats.values())}**" for k in ("pass", "FAIL", "skip"))])
+    return table(["category", "pass", "fail", "skipped"], rows) + \
+        f"\n\n{d['cases']} cases in {d['seconds']:.0f} s (`{d['command']}`)."
+
+
+#: benchmark name -> (function rendering its Markdown table from results/*.json, the files,
+#: the command that writes them: `make bench` runs each)
+BENCHMARKS: dict = {
+    "bench_2d": (bench_2d, "results/bench_2d.json", "OMP_NUM_THREADS=1 .venv/bin/python scripts/bench_2d.py --budget 300"),
+    "bench_parallel": (bench_parallel, "results/bench_parallel.json", ".venv/bin/python scripts/bench_parallel.py --repeat 3"),
+    "bench_socp_count": (bench_socp_count, "results/bench_socp_count.json",
+                         "PYTHONPATH=. .venv/bin/python scripts/bench_socp_count.py --brute-max 14"),
+    "bench_condense": (bench_condense, "results/bench_condense.json, results/bench_condense_quick.json",
+                       ".venv/bin/python scripts/bench_condense.py [--quick]"),
+    "bench_peers_2d": (bench_peers_2d, "results/bench_peers.json", "PYTHONPATH=. .venv/bin/python scripts/bench_peers.py"),
+    "bench_peers_3d": (bench_peers_3d, "results/bench_peers.json", "PYTHONPATH=. .venv/bin/python scripts/bench_peers.py"),
+    "bench_peers_mu_c": (bench_peers_mu_c, "results/bench_peers.json", "PYTHONPATH=. .venv/bin/python scripts/bench_peers.py"),
+    "bench_mu_c": (bench_mu_c, "results/bench_mu_c.json", "PYTHONPATH=. .venv/bin/python scripts/bench_mu_c.py"),
+    "examples": (examples, "scripts/examples/examples.json", "PYTHONPATH=. .venv/bin/python scripts/make_examples.py"),
+    "faults": (faults, "results/faults.json", "python scripts/fault_campaign.py"),
+    "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
+}
+
+
+def render(name: str) -> str:
+    """The table of one benchmark, with a caption naming its file and command."""
+    fn, files, command = BENCHMARKS[name]
+    return f"{fn()}\n\n*Rendered from `{files}`, written by `{command}`.*\n"
+
+
+def render_markers(markdown: str) -> str:
+    """Replace every `<!-- bench: NAME -->` line by render(NAME) (KeyError if unknown)."""
+    out = []
+    for line in markdown.split("\n"):
+        s = line.strip()
+        if s.startswith("<!-- bench:") and s.endswith("-->"):
+            name = s[len("<!-- bench:"):-3].strip()
+            if name not in BENCHMARKS:
+                raise KeyError(f"<!-- bench: {name} -->: no such table in scripts/docs_pages.py BENCHMARKS")
+            out.append(render(name))
+        else:
+            out.append(line)
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    what = sys.argv[1] if len(sys.argv) > 1 else "scene"
+    if what == "scene":
+        print(scene_reference())
+    else:
+        print(render(what))

@@ -1,0 +1,219 @@
+"""The documentation: the site builds with warnings as errors (mkdocs build --strict), every
+```python block of docs/ and README.md runs, and the generated scene reference lists exactly
+the keys the parser accepts (probed through the parser's own unknown-key errors)."""
+from __future__ import annotations
+
+import glob
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+
+from hpcwedge import scene as scene_mod
+from hpcwedge.scene import SceneError, parse_scene
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+import docs_pages  # noqa: E402
+
+DOCS_TOOLS = ("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers.python")
+MISSING = [m for m in DOCS_TOOLS if importlib.util.find_spec(m.split(".")[0]) is None
+           or importlib.util.find_spec(m) is None]
+needs_docs_tools = pytest.mark.skipif(
+    bool(MISSING), reason=f"docs tools not installed ({', '.join(MISSING)}): make setup-docs (make test does it)")
+
+PAGES = sorted(glob.glob(os.path.join(ROOT, "docs", "**", "*.md"), recursive=True)) + [os.path.join(ROOT, "README.md")]
+BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
+
+
+@needs_docs_tools
+def test_site_builds_strict(tmp_path):
+    """make docs: mkdocs build --strict succeeds (broken links, missing anchors, bad docstrings
+    and unknown benchmark tables are errors) and the generated pages are in the site."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [ROOT, os.environ.get("PYTHONPATH")])),
+           "NO_MKDOCS_2_WARNING": "1"}
+    p = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")],
+                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    ref = (tmp_path / "site" / "reference" / "scene" / "index.html").read_text()
+    assert "max_memory_gb" in ref and "half_angle_deg" in ref
+    api = (tmp_path / "site" / "reference" / "api" / "index.html").read_text()
+    assert "solve" in api and "Scene" in api
+    assert (tmp_path / "site" / "results" / "bench_2d.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("page", [os.path.relpath(p, ROOT) for p in PAGES if BLOCK.search(open(p).read())])
+def test_python_blocks_run(page, tmp_path, monkeypatch):
+    """The ```python blocks of a page run in order, in one namespace, in a fresh directory
+    that sees the repository's scripts/ (examples, meshes) as the repository root would."""
+    (tmp_path / "scripts").symlink_to(os.path.join(ROOT, "scripts"))
+    monkeypatch.chdir(tmp_path)
+    ns: dict = {"__name__": "__docs__"}
+    for i, code in enumerate(BLOCK.findall(open(os.path.join(ROOT, page)).read())):
+        try:
+            exec(compile(code, f"{page} block {i}", "exec"), ns)
+        except Exception as e:
+            pytest.fail(f"{page}, python block {i}: {type(e).__name__}: {e}")
+
+
+# ---- the scene reference against the parser -------------------------------------------------
+
+BASE = {"name": "s", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": 0.5}}
+MESH = {"name": "s", "dim": 2, "model": {"kind": "mesh", "file": "m.msh"}, "friction": {"mu": 0.5},
+        "contact": {"group": "contact"},
+        "obstacle": [{"type": "cone", "apex": [0.0, 0.0], "axis": [0.0, 1.0], "half_angle_deg": 10.0}]}
+TRUSS = {"name": "s", "dim": 2, "friction": {"mu": 0.5},
+         "model": {"kind": "truss", "nodes": [[0.0, 0.0], [1.0, 0.0], [0.5, 1.0]], "bars": [[0, 1], [1, 2], [0, 2]]},
+         "contact": {"nodes": [0, 1], "normals": [[0.0, 1.0], [0.0, 1.0]]}}
+STIFF = {"name": "s", "dim": 2, "friction": {"mu": 0.5}, "model": {"kind": "stiffness", "K": [[2.0, 1.0], [1.0, 4.0]]}}
+
+
+def _with(base: dict, path: str, key: str = "bogus_key") -> dict:
+    """A copy of base with an unknown key added at path ("" top level, "model", "obstacle[0]")."""
+    import copy
+    d = copy.deepcopy(base)
+    t = d
+    for part in filter(None, path.split(".")):
+        t = t["obstacle"][0] if part == "obstacle[0]" else t.setdefault(part, {})
+    t[key] = 1
+    return d
+
+
+def _probe(data: dict) -> set[str] | None:
+    """The allowed keys the parser names when refusing an unknown key; None if it accepts it."""
+    try:
+        parse_scene(data, base_dir=ROOT)
+    except SceneError as e:
+        msg = str(e)
+        assert "bogus_key" in msg, msg
+        m = re.search(r"\((?:allowed|accepted): ([^)]*)\)", msg)
+        assert m, msg
+        return {k.strip() for k in m.group(1).split(",")}
+    return None
+
+
+CASES = {"scene": (BASE, ""), "friction": (BASE, "friction"), "compute": (BASE, "compute"),
+         "run": (BASE, "run"), "model.mesh": (MESH, "model"), "contact.mesh": (MESH, "contact"),
+         "obstacle.cone": (MESH, "obstacle[0]"), "model.stiffness": (STIFF, "model"),
+         "model.truss": (TRUSS, "model"), "contact.truss": (TRUSS, "contact")}
+CASES["obstacle.plane"] = ({**MESH, "obstacle": [{"type": "plane", "point": [0.0, 0.0], "normal": [0.0, 1.0]}]},
+                           "obstacle[0]")
+for _kind in ("vgroove_bar", "plug2d", "plug3d", "block2d"):
+    CASES[f"model.{_kind}"] = ({**BASE, "dim": 3 if _kind == "plug3d" else 2, "model": {"kind": _kind}}, "model")
+
+
+def test_reference_covers_every_table():
+    """Every table of the reference is probed below (a new table needs a case), and the
+    reference lists the same tables."""
+    tables = set(docs_pages.accepted_keys()) - {"model"}
+    assert tables == set(CASES)
+
+
+@pytest.mark.parametrize("table", sorted(CASES))
+def test_reference_keys_are_the_parsers(table):
+    """The keys the generated reference lists for a table are the ones the parser names as
+    allowed when it refuses an unknown key there, and each has a row on the page."""
+    data, path = CASES[table]
+    allowed = _probe(_with(data, path))
+    if allowed is None:
+        if table in ("model.stiffness", "model.truss", "contact.truss") and not hasattr(scene_mod, "TRUSS_MODEL_KEYS"):
+            pytest.xfail(f"this parser does not refuse unknown keys in {table} yet (issue 11 adds it)")
+        pytest.fail(f"the parser accepted an unknown key in {table}")
+    if table.startswith("obstacle."):
+        allowed.add("type")
+    listed = set(docs_pages.accepted_keys()[table])
+    assert allowed == listed
+    page = docs_pages.scene_reference()
+    section = page.split(f"## {docs_pages.TITLES.get(table, '')}")[1] if table in docs_pages.TITLES else page
+    for k in listed:
+        assert f"| `{k}` |" in section
+
+
+def test_every_key_has_a_meaning_and_none_is_stale():
+    """MEANINGS (scripts/docs_pages.py) documents every accepted key and no other."""
+    page = docs_pages.scene_reference()          # KeyError naming a key without a meaning
+    assert "| `kind` |" in page
+    assert docs_pages.stale_meanings() == []
+
+
+def test_reference_defaults_are_the_parsers():
+    """The defaults shown for [compute] and [run] are what a scene without the key gets."""
+    s = parse_scene(BASE)
+    for table in ("compute", "run"):
+        for k, default in docs_pages.accepted_keys()[table].items():
+            assert getattr(s, k) == default, (table, k)
+
+
+def test_benchmark_markers():
+    """Every benchmark table named in docs/ renders from results/*.json; an unknown name is an error."""
+    names = set()
+    for p in PAGES:
+        names |= set(re.findall(r"<!-- bench: (\S+) -->", open(p).read()))
+    for n in names:
+        assert docs_pages.render_markers(f"<!-- bench: {n} -->").startswith("|")
+    with pytest.raises(KeyError, match="no_such_table"):
+        docs_pages.render_markers("<!-- bench: no_such_table -->")
+
+
+def test_readme_is_short_and_its_links_resolve():
+    """README.md stays short (the rest is in docs/) and every relative link or image in it
+    names a file of the repository (GitHub renders them; mkdocs does not check the README)."""
+    text = open(os.path.join(ROOT, "README.md")).read()
+    assert len(text.splitlines()) <= 200
+    assert "    make demo " in text and "    make test " in text
+    links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    assert len(links) >= 10
+    for link in links:
+        if "://" not in link:
+            assert os.path.exists(os.path.join(ROOT, link)), link
+
+
+TOML = re.compile(r"^```toml\n(.*?)^```", re.S | re.M)
+
+
+@pytest.mark.parametrize("page", [os.path.relpath(p, ROOT) for p in PAGES if TOML.search(open(p).read())])
+def test_toml_scenes_parse(page):
+    """Every ```toml scene shown in docs/ and README.md is accepted by the parser as it
+    stands (a renamed or removed key in an example is caught here)."""
+    import tomllib
+    for i, text in enumerate(TOML.findall(open(os.path.join(ROOT, page)).read())):
+        data = tomllib.loads(text)
+        try:
+            parse_scene(data, text=text, base_dir=os.path.join(ROOT, "scripts", "examples"))
+        except SceneError as e:
+            pytest.fail(f"{page}, toml block {i}: {e}")
+
+
+def test_tutorial_table_is_what_show_prints(tmp_path):
+    """The tutorial's first scene, run through the command line, gives the table the
+    tutorial shows (all but the timings line)."""
+    text = open(os.path.join(ROOT, "docs", "tutorial.md")).read()
+    (tmp_path / "plug.toml").write_text(TOML.findall(text)[0])
+    shown = text.split("    $ hpcwedge show plug.h5\n", 1)[1].split("\n\n", 1)[0]
+    expected = [ln[4:] for ln in shown.splitlines() if not ln.strip().startswith("timings:")]
+    run = lambda *a: subprocess.run([sys.executable, "-m", "hpcwedge", *a], cwd=tmp_path,  # noqa: E731
+                                    capture_output=True, text=True, timeout=300)
+    p = run("run", "plug.toml", "-o", "plug.h5")
+    assert p.returncode == 0, p.stderr
+    p = run("show", "plug.h5")
+    assert p.returncode == 0, p.stderr
+    got = [ln for ln in p.stdout.splitlines() if not ln.strip().startswith("timings:")]
+    assert got == expected
+
+
+def test_faults_table_from_a_campaign_file(tmp_path, monkeypatch):
+    """The fault campaign's table counts its verdicts per category (the layout
+    scripts/fault_campaign.py writes), and says so when no campaign result is there."""
+    monkeypatch.setattr(docs_pages, "ROOT", str(tmp_path))
+    assert "no `results/faults.json`" in docs_pages.faults()
+    (tmp_path / "results").mkdir()
+    doc = {"command": "python scripts/fault_campaign.py", "cases": 3, "seconds": 12.3,
+           "by_category": {"scene": {"pass": 2, "FAIL": 0, "skip": 0}, "signal": {"pass": 0, "FAIL": 1, "skip": 0}},
+           "rows": []}
+    (tmp_path / "results" / "faults.json").write_text(__import__("json").dumps(doc))
+    out = docs_pages.faults()
+    assert "| scene | 2 | 0 | 0 |" in out and "| signal | 0 | 1 | 0 |" in out
+    assert "| **all** | **2** | **1** | **0** |" in out and "3 cases in 12 s" in out
