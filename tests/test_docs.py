@@ -12,7 +12,6 @@ import sys
 
 import pytest
 
-from hpcwedge import scene as scene_mod
 from hpcwedge.scene import SceneError, parse_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -119,8 +118,6 @@ def test_reference_keys_are_the_parsers(table):
     data, path = CASES[table]
     allowed = _probe(_with(data, path))
     if allowed is None:
-        if table in ("model.stiffness", "model.truss", "contact.truss") and not hasattr(scene_mod, "TRUSS_MODEL_KEYS"):
-            pytest.xfail(f"this parser does not refuse unknown keys in {table} yet (issue 11 adds it)")
         pytest.fail(f"the parser accepted an unknown key in {table}")
     if table.startswith("obstacle."):
         allowed.add("type")
