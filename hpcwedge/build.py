@@ -196,23 +196,24 @@ def raw_stiffness(scene: Scene) -> ContactProblem:
     ContactProblem's K is scaled by 2**-stiffness_exponent(scene) (values in messages are
     in the scene's units)."""
     K, N = _raw_arrays(scene)
+    key = f"model.file {scene.model['file']}: K" if "file" in scene.model else "model.K"
     e = _exponent(K)
     K = np.ldexp(K, -e)
     units = lambda v: float(np.ldexp(v, e))     # noqa: E731  (a value of the scaled K in the scene's units)
     n = K.shape[0]
     if K.shape != (n, n) or n == 0:
-        raise SceneError(f"model.K: must be square, got shape {K.shape}")
+        raise SceneError(f"{key}: must be square, got shape {K.shape}")
     if n % scene.dim:
-        raise SceneError(f"model.K: size {n} is not a multiple of dim = {scene.dim}")
+        raise SceneError(f"{key}: size {n} is not a multiple of dim = {scene.dim}")
     scale = np.abs(K).max()
     if scale == 0:
-        raise SceneError("model.K: all zero")
+        raise SceneError(f"{key}: all zero")
     if np.abs(K - K.T).max() > SYM_RTOL * scale:
-        raise SceneError(f"model.K: not symmetric (max |K - K^T| = {units(np.abs(K - K.T).max()):.3g})")
+        raise SceneError(f"{key}: not symmetric (max |K - K^T| = {units(np.abs(K - K.T).max()):.3g})")
     K = 0.5 * (K + K.T)
     lam = np.linalg.eigvalsh(K)
     if lam[0] < -PSD_RTOL * lam[-1]:
-        raise SceneError(f"model.K: indefinite (eigenvalue {units(lam[0]):.3g} < 0)")
+        raise SceneError(f"{key}: indefinite (eigenvalue {units(lam[0]):.3g} < 0)")
     if N is not None:
         N = N.reshape(n, -1) if N.ndim == 1 else N
         if N.shape[0] != n:
@@ -237,7 +238,7 @@ def raw_stiffness(scene: Scene) -> ContactProblem:
     if rank < n:
         Z = xq.to_float(xq.nullspace(Kq))
         return ContactProblem(scene.dim, K, np.linalg.qr(Z)[0])
-    raise SceneError(f"model.K: numerically singular (eigenvalue ratio {lam[0] / lam[-1]:.2e} "
+    raise SceneError(f"{key}: numerically singular (eigenvalue ratio {lam[0] / lam[-1]:.2e} "
                      f"<= {SINGULAR_RTOL:g}) but of full rank in exact arithmetic: give model.null_space")
 
 

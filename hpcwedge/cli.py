@@ -305,9 +305,13 @@ class OutputLock:
             if same:
                 break
             os.close(fd)                        # removed by the run that held it: lock the new file
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         self.fd = fd
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError as e:                    # a full or failing disk: refuse before the work
+            self.release()
+            raise _UserError(f"{output}: cannot write in its folder ({e.strerror})") from None
 
     def release(self) -> None:
         """Remove the lock file and release the lock (idempotent)."""

@@ -607,7 +607,7 @@ def output_cases() -> list[Case]:
             return bad is None, describe(o) + ("" if bad is None else f" [{bad}]")
         cases.append(Case(name, "output", f"error naming {token}, inputs untouched", run))
 
-    run_to(lambda c, s: "", "output", "run -o empty string")
+    run_to(lambda c, s: "", "-o", "run -o empty string")
     run_to(lambda c, s: c.folder, "directory", "run -o a directory")
     run_to(lambda c, s: os.path.join(c.folder, "no", "such", "r.h5"), "no/such", "run -o missing parent")
     run_to(lambda c, s: s, "s.toml", "run -o the scene itself")

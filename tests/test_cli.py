@@ -420,6 +420,29 @@ def test_read_only_output_refused_before_the_work(tmp_path, capsys, read_only_di
     assert "read-only" in err
 
 
+def test_full_output_disk_refused_before_the_work(tmp_path, capsys):
+    """-o on a real, full file system (a 64 kB tmpfs filled up): one line naming the output,
+    exit 2, before any work, and no lock file left (before: an internal OSError, exit 1)."""
+    d = tmp_path / "full"
+    d.mkdir()
+    scene = write(tmp_path, _t(PLUG))
+    with tmpfs(d, "size=64k"):
+        fd = os.open(d / "filler", os.O_WRONLY | os.O_CREAT)
+        try:
+            while True:
+                os.write(fd, b"\0" * 4096)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+        out = str(d / "r.h5")
+        assert main(["run", scene, "-o", out, "-q"]) == 2
+        err = capsys.readouterr().err
+        assert len(err.splitlines()) == 1, err
+        assert err.startswith(f"hpcwedge: error: {out}: cannot write in its folder (No space left"), err
+        assert sorted(os.listdir(d)) == ["filler"]
+
+
 def test_show_into_a_closed_pipe_exits_quietly(tmp_path):
     """`hpcwedge show R.h5 --json | head -c 100` through a real shell pipe: head exits long
     before the ~160 kB of JSON are written; hpcwedge stops quietly (no BrokenPipeError) with
