@@ -630,8 +630,7 @@ class WedgeMilp:
 
 
 def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
-               time_limit: float | None = None, options: dict | None = None,
-               row_scale: float = 1.0) -> WedgeMilp:
+               time_limit: float | None = None) -> WedgeMilp:
     """Is there a 2D wedged configuration at mu (mu = inf: r_t free)? One MILP, solved by
     HiGHS (scipy.optimize.milp), over x in R^d and binaries z (z_i = 1: node i may carry
     r_n, u_n,i = 0):
@@ -654,8 +653,8 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
         fr = Rn
     else:
         fr = np.vstack([mu * Rn + Rt, mu * Rn - Rt])
-    fr = row_scale * fr / np.maximum(np.linalg.norm(fr, axis=1, keepdims=True), 1e-300)
-    un = row_scale * Un / np.maximum(np.linalg.norm(Un, axis=1, keepdims=True), 1e-300)
+    fr = fr / np.maximum(np.linalg.norm(fr, axis=1, keepdims=True), 1e-300)
+    un = Un / np.maximum(np.linalg.norm(Un, axis=1, keepdims=True), 1e-300)
     A = np.vstack([np.hstack([un, zero]), np.hstack([fr, np.zeros((len(fr), m))]),
                    np.hstack([Rn.sum(0) + scale * Un.sum(0), np.zeros(m)])[None, :],
                    np.hstack([Rn, -eye]), np.hstack([scale * Un, eye])])
@@ -666,7 +665,7 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
     integrality = np.concatenate([np.zeros(d), np.ones(m)])
     bounds = Bounds(np.concatenate([np.full(d, -np.inf), np.zeros(m)]),
                     np.concatenate([np.full(d, np.inf), np.ones(m)]))
-    options = dict(MILP_OPTIONS if options is None else options)
+    options = dict(MILP_OPTIONS)
     if time_limit is not None:
         options["time_limit"] = time_limit
     res = milp(c, constraints=LinearConstraint(A, lo, hi), integrality=integrality, bounds=bounds,
