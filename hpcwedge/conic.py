@@ -41,8 +41,11 @@ mu_critical.py call only it.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
+import os
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -668,8 +671,9 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
     options = dict(MILP_OPTIONS)
     if time_limit is not None:
         options["time_limit"] = time_limit
-    res = milp(c, constraints=LinearConstraint(A, lo, hi), integrality=integrality, bounds=bounds,
-               options=options)
+    with _stdout_silenced():
+        res = milp(c, constraints=LinearConstraint(A, lo, hi), integrality=integrality, bounds=bounds,
+                   options=options)
     nodes = int(getattr(res, "mip_node_count", 0) or 0)
     if res.status == 2:                 # P(mu) = {0} (a supported body below mu^c): no wedge
         return WedgeMilp(INFEASIBLE, 0.0, nodes)
@@ -680,3 +684,25 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
         return WedgeMilp(INFEASIBLE, value, nodes)
     zu = res.x[d:] > 0.5
     return WedgeMilp(FEASIBLE, value, nodes, zu, ~zu)
+
+
+@contextlib.contextmanager
+def _stdout_silenced():
+    """File descriptor 1 to /dev/null for the block: HiGHS's MIP solver prints some debug lines
+    ("HighsMipSolverData::transformNewIntegerFeasibleSolution ...") with printf, past its
+    output_flag, and stdout carries `hpcwedge run --json`. C's stdio buffer is flushed
+    before fd 1 comes back, so nothing of it reaches the real stdout later."""
+    import ctypes
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+        yield
+    finally:
+        try:
+            ctypes.CDLL(None).fflush(None)
+        except (OSError, AttributeError):
+            pass
+        os.dup2(saved, 1)
+        os.close(saved)

@@ -12,6 +12,7 @@ the subtree (never pruned on doubt); an undecided full pattern is reported in
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -35,6 +36,8 @@ NEAR_TOL = 1e-6
 #: 2D MILP route (global_bracket_milp): the relative steps below the best mu^c found at
 #: which the MILP is asked again; the last is HiGHS's MIP feasibility tolerance
 MILP_STEPS = (1e-2, 1e-4, 1e-6)
+#: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
+DIVE_NODES = 2
 
 
 @dataclass
@@ -422,7 +425,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
 
 
 def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, stats: BnBStats,
-                        scale: float | None = None) -> float | None:
+                        scale: float | None = None, dive: int = DIVE_NODES) -> float | None:
     """2D global mu^c by MILPs (conic.wedge_milp, valid big-M): the least certified
     pattern mu^c `best` found; None when in doubt (the caller runs the tree instead).
     solve(zero_u, zero_r, mu_hi): the certified mu^c of one pattern (mu_critical).
@@ -432,11 +435,26 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     each step asks at best (1 - delta) with delta = MILP_STEPS in turn: a pattern returned
     of lower certified mu^c replaces best (same delta again); none, or one no better
     (blurred), moves to the next delta. The first pattern is the MILP's at mu = inf (r_t
-    free), whose mu^c, when finite, saves the MILP at mu_max (the slowest)."""
+    free), whose mu^c, when finite, saves the MILP at mu_max (the slowest). Before each
+    MILP the tree dives for dive * m + 1 nodes (0: no dive), see `milp` below."""
     s = 1.0 if scale is None else float(scale)
     stats.extra["route"] = "milp"
 
     def milp(mu: float) -> WedgeMilp:
+        # a short dive of the tree first: it settles most steps with a few LPs (a relaxed
+        # vertex that is complementary descends without a solve; an infeasible root proves
+        # none); the MILP only where the dive's budget runs out
+        if dive:
+            tree = PatternTree(param, m, 0.0 if np.isinf(mu) else mu, friction=not np.isinf(mu))
+            out = tree.explore(Subtree(0), budget=dive * m + 1, first_only=True)
+            stats.add(out.stats)
+            if out.found and not out.undecided:
+                _bump(stats.statuses, "dive_feasible")
+                zu, zr = out.found[0].masks(m)
+                return WedgeMilp(FEASIBLE, math.nan, 0, zu, zr)
+            if not (out.found or out.open or out.stopped or out.stats.undecided):
+                _bump(stats.statuses, "dive_infeasible")
+                return WedgeMilp(INFEASIBLE, 0.0, 0)
         ans = wedge_milp(param, m, mu, s)
         stats.extra["milp_solves"] = stats.extra.get("milp_solves", 0) + 1
         stats.extra["milp_nodes"] = stats.extra.get("milp_nodes", 0) + ans.nodes
