@@ -461,7 +461,17 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
         _bump(stats.statuses, "milp_" + ans.status)
         return ans
 
+    seen: dict = {}
+
     def certified(ans: WedgeMilp, bound: float) -> float | None:
+        key = (ans.zero_u.tobytes(), ans.zero_r.tobytes())
+        if key in seen:                   # a pattern met again (blurred): its value is known
+            _bump(stats.statuses, "milp_pattern_again")
+            return seen[key]
+        seen[key] = _certified(ans, bound)
+        return seen[key]
+
+    def _certified(ans: WedgeMilp, bound: float) -> float | None:
         rows = pattern_rows(param, m, ans.zero_u, ans.zero_r)
         stats.lps += 1
         ok = np.isfinite(bound) and feasible(rows, bound, stats.statuses)[0] == FEASIBLE

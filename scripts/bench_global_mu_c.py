@@ -10,6 +10,8 @@ Engines, each in its own process with a time limit (bench_2d.run_script):
   ours         `hpcwedge run`'s route (pipeline.run_scene): in 2D the MILP bracket
                (patterns.global_bracket_milp: conic.wedge_milp by HiGHS, each pattern's
                mu^c certified by mu_critical), tree fallback on doubt
+  ours_milp    the same MILP bracket without the tree's dive (global_bracket_milp(dive=0)):
+               every step a MILP
   ours_tree    patterns.global_mu_critical(route="tree"): the sign-pattern branch and bound
                with an incumbent (the route before issue 13)
   highs_bisect the MILP of conic.wedge_milp at fixed mu (valid big-M from the
@@ -36,7 +38,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import bench_2d  # noqa: E402
 
-ENGINES = ("ours", "ours_tree", "highs_bisect", "scip_bisect")
+ENGINES = ("ours", "ours_milp", "ours_tree", "highs_bisect", "scip_bisect")
 TAPER = 10.0
 MU_MAX = 100.0
 BISECT_RTOL = 1e-6
@@ -126,6 +128,16 @@ def worker(engine: str, rows: int) -> dict:
         mu, _ = global_mu_critical(param, m, MU_MAX, stats=st, scale=s, route="tree")
         return {"mu_c": mu, "seconds": time.perf_counter() - t, "route": "tree", "lps": st.solves,
                 "tree_nodes": st.nodes, "undecided": st.undecided}
+    if engine == "ours_milp":
+        from functools import partial
+        from hpcwedge.mu_critical import mu_critical
+        from hpcwedge.patterns import global_bracket_milp
+        st = BnBStats()
+        t = time.perf_counter()
+        mu = global_bracket_milp(param, m, MU_MAX, partial(mu_critical, param, m, mu_max=MU_MAX, scale=s),
+                                 st, s, dive=0)
+        return {"mu_c": mu, "seconds": time.perf_counter() - t, "route": "milp", "lps": st.solves,
+                "milp_solves": st.extra.get("milp_solves", 0), "milp_nodes": st.extra.get("milp_nodes", 0)}
     counts: dict = {}
     if engine == "highs_bisect":
         def decide(mu):
