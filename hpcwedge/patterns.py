@@ -370,7 +370,8 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     Two stages. The bracket: an upper value `best` (the certified mu^c of a pattern) with no
     pattern feasible below best (1 - 1e-7), found by
       route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D);
-      route "milp" (2D only): `global_bracket_milp`, one MILP per step (HiGHS), each pattern
+      route "milp" (2D; 3D runs the tree): `global_bracket_milp`, per step a short dive of
+        the tree and, where it does not settle the step, one MILP (HiGHS); each pattern
         it returns checked by our LP and its mu^c computed by our certified route; any doubt
         (an undecided MILP, a pattern our LP rejects at every mu, no wedge at all) falls back
         to the tree;
@@ -391,7 +392,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry)
     solve = partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale)
     best = None
-    if route == "milp" or (route == "auto" and problem_dim(param, m) == 2):
+    if route in ("auto", "milp") and problem_dim(param, m) == 2:          # 3D: the tree always
         best = global_bracket_milp(param, m, mu_max, solve, stats, scale)
         if best is not None:
             return best, "found"
