@@ -260,7 +260,10 @@ def _run_scene(scene: Scene, progress: Progress, engine: Engine,
                     param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb,
                     symmetry=sym, scale=scale)
                 stats["bnb"] = {"solves": bnb.solves, "skipped": bnb.skipped,
-                                "undecided": bnb.undecided, "nodes": bnb.nodes}
+                                "undecided": bnb.undecided, "nodes": bnb.nodes,
+                                "route": bnb.extra.get("route", "tree"),
+                                "milp_solves": bnb.extra.get("milp_solves", 0),
+                                "milp_nodes": bnb.extra.get("milp_nodes", 0)}
                 stats["mu_c_unpolished"] += bnb.extra.get("mu_c_unpolished", 0)
                 stats["mu_c_polished"] += bnb.extra.get("mu_c_polished", 0)
         timings["mu_c"] = time.perf_counter() - t
