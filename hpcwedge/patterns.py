@@ -38,6 +38,10 @@ NEAR_TOL = 1e-6
 MILP_STEPS = (1e-2, 1e-4, 1e-6)
 #: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
 DIVE_NODES = 2
+#: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
+#: which sees every pattern within 1e-9 of the answer (the MILP route can miss one within
+#: ~1e-6 below it, HiGHS's tolerance) and finishes in seconds there (m = 20: ~6 s)
+MILP_FROM_M = 25
 
 
 @dataclass
@@ -375,7 +379,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         it returns checked by our LP and its mu^c computed by our certified route; any doubt
         (an undecided MILP, a pattern our LP rejects at every mu, no wedge at all) falls back
         to the tree;
-      route "auto": "milp" in 2D, "tree" in 3D.
+      route "auto": "milp" in 2D from MILP_FROM_M contact nodes on, else "tree".
     The tree route then settles: every pattern (one per orbit) feasible at best (1 + 1e-9)
     gets its certified mu^c; the least is the answer. The MILP route skips that enumeration
     (exponential in m: 635 tree nodes on plug2d m = 16): its answer is the certified mu^c of
@@ -392,7 +396,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry)
     solve = partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale)
     best = None
-    if route in ("auto", "milp") and problem_dim(param, m) == 2:          # 3D: the tree always
+    if (route == "milp" or (route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
         best = global_bracket_milp(param, m, mu_max, solve, stats, scale)
         if best is not None:
             return best, "found"

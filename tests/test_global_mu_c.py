@@ -13,13 +13,13 @@ import pytest
 
 from hpcwedge.conic import FEASIBLE, INFEASIBLE, feasible, pattern_rows, wedge_milp
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import BnBStats, global_bracket_milp, global_mu_critical
+from hpcwedge.patterns import MILP_FROM_M, BnBStats, global_bracket_milp, global_mu_critical
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
 from hpcwedge.scene import parse_scene
 from instances import random_problem
 
-SCENES = "/work/shared/scenes"
+SCENES = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
 
 
 def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str = "global"):
@@ -30,16 +30,31 @@ def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str
     return run_scene(parse_scene(data))
 
 
-@pytest.mark.parametrize("rows", [2, 10])
-def test_plug2d_global_mu_c_is_tan_taper_by_milp(rows):
-    """plug2d: global mu^c = tan(taper) for any rows, to 1e-9, by the MILP route (m = 20:
-    a single MILP step at 1e-7 below the incumbent returned a blurred pattern and stopped
-    at 0.2975)."""
+def route_for(m: int) -> str:
+    """The route "auto" takes for a 2D scene with m contact nodes."""
+    return "milp" if m >= MILP_FROM_M else "tree"
+
+
+def by_milp(res) -> float | None:
+    """The global mu^c of a run's problem by the MILP route, asked for explicitly."""
+    p, st = parametrize(res.problem), BnBStats()
+    mu, _ = global_mu_critical(p, res.m, 100.0, stats=st, route="milp")
+    assert mu is None or st.extra["route"] == "milp"
+    return mu
+
+
+@pytest.mark.parametrize("rows", [2, 10, 20])
+def test_plug2d_global_mu_c_is_tan_taper_by_either_route(rows):
+    """plug2d: global mu^c = tan(taper) for any rows, to 1e-9, by the route "auto" takes
+    (the MILP route from MILP_FROM_M nodes) and by the MILP route asked for (m = 20: a single
+    MILP step at 1e-7 below the incumbent returned a blurred pattern and stopped at 0.2975)."""
     res = global_run({"kind": "plug2d", "rows": rows, "taper_deg": 10.0})
     want = math.tan(math.radians(10.0))
     assert res.mu_c_status == "found"
     assert abs(res.mu_c - want) <= 1e-9 * want
-    assert res.stats["bnb"]["route"] == "milp"
+    assert res.stats["bnb"]["route"] == route_for(2 * rows)
+    if rows < 20:
+        assert abs(by_milp(res) - want) <= 1e-9 * want
 
 
 @pytest.mark.parametrize("rows", [2, 10])
@@ -59,8 +74,9 @@ def test_vgroove_global_mu_c_analytic(theta, k, eps):
     th = math.radians(theta)
     want = math.tan(th) + eps / (k * math.sin(2 * th))
     res = global_run({"kind": "vgroove_bar", "theta_deg": theta, "EA": 2 * k, "eps": eps})
-    assert res.mu_c_status == "found" and res.stats["bnb"]["route"] == "milp"
+    assert res.mu_c_status == "found" and res.stats["bnb"]["route"] == "tree"
     assert abs(res.mu_c - want) <= 1e-9 * want
+    assert abs(by_milp(res) - want) <= 1e-9 * want
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -81,6 +97,7 @@ def test_milp_route_equals_tree_route_on_random_bodies(seed):
         assert alone is not None and abs(alone - tree[0]) <= 1e-9 * tree[0]
 
 
+@pytest.mark.skipif(not os.path.isdir(SCENES), reason="../shared/scenes not beside the checkout")
 @pytest.mark.parametrize("name", ["vgroove_free.toml", "vgroove_springs.toml", "node2d.toml",
                                   "uncoupled2d.toml", "plug2d_r2.toml", "plug2d_r3.toml"])
 def test_public_scenes_global_mu_c(name):
@@ -95,7 +112,7 @@ def test_public_scenes_global_mu_c(name):
         assert res.stats["bnb"]["route"] == "tree"            # a "none" is never the MILP's word
     else:
         assert abs(res.mu_c - want) <= 1e-9 * want
-        assert res.stats["bnb"]["route"] == "milp"
+        assert abs(by_milp(res) - want) <= 1e-9 * want
 
 
 def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
