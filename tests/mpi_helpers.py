@@ -329,4 +329,4 @@ def tmpfs(path, options: str):
     try:
         yield path
     finally:
-        subprocess.run(["umount", str(path)], check=True)
+        subprocess.run(["umount", "-l", str(path)], check=True)   # -l: even if a test left a file open
