@@ -30,7 +30,8 @@ import h5py
 import numpy as np
 
 from . import __version__
-from .results import FileError, compression, verify_checksum, write_atomic
+from .files import FileError, verify_checksum, write_atomic
+from .results import compression
 
 FORMAT = "hpcwedge-checkpoint"
 #: 2: checksummed (results.write_atomic), with the scene's input digests

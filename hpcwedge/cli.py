@@ -226,7 +226,7 @@ def _run(args) -> int:
 def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     """The message for a result that could not be written at the end of a run, after saving
     the engine's state as a checkpoint (if it can) so that --resume does not redo the work."""
-    from .results import error_reason
+    from .files import error_reason
     why = error_reason(err)
     try:
         kept = engine.write_checkpoint("output failed")
@@ -326,7 +326,8 @@ class OutputLock:
 
 
 def _read(path: str, with_rays: bool = True) -> dict:
-    from .results import FileError, read_result
+    from .files import FileError
+    from .results import read_result
     try:
         return read_result(path, with_rays=with_rays)
     except FileError as e:
@@ -335,7 +336,8 @@ def _read(path: str, with_rays: bool = True) -> dict:
 
 def _show(args) -> int:
     if args.json:
-        from .results import FileError, dump_result_json
+        from .files import FileError
+        from .results import dump_result_json
         _read(args.result, with_rays=False)
         try:
             dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)

@@ -35,13 +35,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 import tomllib
 from dataclasses import dataclass
 
 import h5py
 import numpy as np
 
+from .files import replace_atomic
 from .model import Model
 
 #: cell-data names by cell family, in the VTU and in Configuration.element_values
@@ -135,7 +135,8 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     body), a run or item index out of range, a run without that kind of item, or a pattern
     whose feasibility point the solvers cannot give.
     """
-    from .results import FileError, check_items, index, index_range, open_result
+    from .files import FileError
+    from .results import check_items, index, index_range, open_result
     chosen = [(k, v) for k, v in (("ray", ray), ("cone", cone), ("pattern", pattern)) if v is not None]
     if len(chosen) != 1:
         raise ConfigurationError("give exactly one of ray, cone, pattern")
@@ -300,14 +301,4 @@ def write_vtu(config: Configuration, path: str) -> None:
                        point_data={"displacement": pad(config.displacement),
                                    "reaction": pad(config.reaction), "contact": contact},
                        cell_data=cell_data)
-    folder = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".vtu", dir=folder)
-    os.close(fd)
-    try:
-        meshio.write(tmp, mesh, file_format="vtu")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    replace_atomic(path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"), ".vtu")

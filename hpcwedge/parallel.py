@@ -65,7 +65,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .checkpoint import CheckpointError, read_checkpoint, write_checkpoint
-from .results import error_reason
+from .files import error_reason
 
 if TYPE_CHECKING:
     from .dd import DDResult

@@ -30,10 +30,10 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 
 import numpy as np
 
+from .files import replace_atomic
 from .results import check_items, index, index_range, open_result
 
 DISP_FRACTION = 0.10     # largest drawn displacement / body size
@@ -683,14 +683,4 @@ def _message(ax, text: str, title: str) -> None:
 
 
 def _save_atomic(fig, output: str) -> None:
-    folder = os.path.dirname(os.path.abspath(output)) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".png", dir=folder)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, format="png")
-        os.replace(tmp, output)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    replace_atomic(output, lambda tmp: fig.savefig(tmp, format="png"), ".png")

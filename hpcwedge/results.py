@@ -1,11 +1,10 @@
-"""Result files (SPEC §4): HDF5 layout, atomic checksummed writes, and the JSON of `show`.
+"""Result files (SPEC §4): the HDF5 layout, its writer, the one reader, and the JSON of `show`.
 
-Every file write_atomic writes (results and checkpoints) starts with a 512-byte HDF5 user
-block: CHECKSUM_MAGIC, the SHA-256 (hex) of all the bytes after the block, a newline, zeros.
-verify_checksum checks it before h5py opens the file, so any damage (a flipped byte
-anywhere, a truncation) is found, also in bytes h5py would never read. Result files
-written before checksums (no user block: they start with the HDF5 signature) are still
-read, with a note on stderr.
+Results are written by files.write_atomic (checksummed user block, atomic rename) and
+opened by open_result, which verifies the checksum first. Result files written before
+checksums (no user block: they start with the HDF5 signature) are still read, with a note
+on stderr. show, plot and export read a result through open_result and the small readers
+below (read_run, read_rays, read_items, stored_scene, text).
 
 Layout of RESULT.h5
     /                attrs: name, dim, m, complete, mu_c (NaN = null), mu_c_status,
@@ -22,13 +21,10 @@ Layout of RESULT.h5
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
-import re
 import sys
-import tempfile
 import time
 from contextlib import contextmanager
 
@@ -36,110 +32,7 @@ import h5py
 import numpy as np
 
 from . import __version__
-
-
-class FileError(ValueError):
-    """A file this program wrote (a result, a checkpoint) that cannot be used: damaged, not
-    ours, or missing parts. The message is one line naming the file and the reason."""
-
-
-def error_reason(e: BaseException) -> str:
-    """A short one-line reason for an error of a file operation: the system's words for an
-    OSError's errno, also the errno HDF5 embeds in h5py's messages ("No space left on
-    device"), else the message on one line."""
-    m = re.search(r"errno = (\d+)", str(e))
-    if m:
-        return os.strerror(int(m.group(1)))
-    text = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
-    return " ".join(str(text).split()) or type(e).__name__
-
-
-#: the user block at the start of every file write_atomic writes (see the module doc)
-USERBLOCK_SIZE = 512
-CHECKSUM_MAGIC = b"hpcwedge-sha256 "
-_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-_CHUNK = 8 << 20
-
-
-def _body_digest(fh) -> str:
-    """SHA-256 (hex) of the bytes of the open binary file fh after the user block."""
-    h = hashlib.sha256()
-    fh.seek(USERBLOCK_SIZE)
-    while chunk := fh.read(_CHUNK):
-        h.update(chunk)
-    return h.hexdigest()
-
-
-def seal(path: str) -> None:
-    """Write the checksum user block of the closed HDF5 file `path` (made with
-    userblock_size=USERBLOCK_SIZE, or changed in place after it was sealed) and fsync it."""
-    with open(path, "rb+") as fh:
-        block = CHECKSUM_MAGIC + _body_digest(fh).encode() + b"\n"
-        fh.seek(0)
-        fh.write(block.ljust(USERBLOCK_SIZE, b"\0"))
-        fh.flush()
-        os.fsync(fh.fileno())
-
-
-def verify_checksum(path: str) -> bool:
-    """Check the checksum user block of `path` against its bytes. True: verified; False: an
-    HDF5 file without one (written before checksums). FileError when the file is damaged
-    (digest differs, truncated, block altered), is not an HDF5 file, or cannot be read."""
-    try:
-        with open(path, "rb") as fh:
-            block = fh.read(USERBLOCK_SIZE)
-            if block[:len(_HDF5_SIGNATURE)] == _HDF5_SIGNATURE:
-                return False
-            if not block.startswith(CHECKSUM_MAGIC):
-                raise FileError(f"{path}: not a file written by hpcwedge (no checksum block, no HDF5 signature)")
-            stored = block[len(CHECKSUM_MAGIC):len(CHECKSUM_MAGIC) + 65]
-            intact = (len(block) == USERBLOCK_SIZE and stored[-1:] == b"\n"
-                      and not block[len(CHECKSUM_MAGIC) + 65:].strip(b"\0"))
-            if not intact or _body_digest(fh).encode() != stored[:-1]:
-                raise FileError(f"{path}: damaged: its SHA-256 checksum does not match its contents, "
-                                f"it was truncated or altered after it was written")
-    except OSError as e:
-        raise FileError(f"{path}: cannot read ({error_reason(e)})") from None
-    return True
-
-
-def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> None:
-    """Write an HDF5 file through `fill(h5file)`: temp file in the same folder, closed,
-    sealed with its checksum (module doc) and fsynced, optionally `verify(tmp)` (raises if
-    the file is bad), then os.replace and an fsync of the folder, so a crash never leaves a
-    half-written file and a bad file never replaces a good one. tmp_path: a fixed temp name
-    (a stale one from a killed writer is simply overwritten); default: a fresh one.
-    A failed write (OSError: full disk, read-only folder...) raises and leaves `path` as it was."""
-    folder = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(folder, exist_ok=True)
-    if tmp_path is None:
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".h5", dir=folder)
-        os.close(fd)
-    else:
-        tmp = tmp_path
-    try:
-        with h5py.File(tmp, "w", userblock_size=USERBLOCK_SIZE) as f:
-            fill(f)
-        seal(tmp)
-        if verify is not None:
-            verify(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    try:
-        dfd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(dfd)
-    except OSError:
-        pass
-    finally:
-        os.close(dfd)
+from .files import FileError, error_reason, verify_checksum, write_atomic
 
 
 def compression(arr: np.ndarray) -> str | None:

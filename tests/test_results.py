@@ -12,8 +12,8 @@ import h5py
 import pytest
 
 from hpcwedge.cli import main
-from hpcwedge.results import (CHECKSUM_MAGIC, USERBLOCK_SIZE, FileError, read_result, seal, verify_checksum,
-                              write_atomic)
+from hpcwedge.files import CHECKSUM_MAGIC, USERBLOCK_SIZE, FileError, seal, verify_checksum, write_atomic
+from hpcwedge.results import read_result
 from mpi_helpers import ROOT, damaged, run, show_json, write_scene
 
 SCENE = 'name = "plug"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 2\n[friction]\nmu = [0.65]\n'

@@ -1,0 +1,136 @@
+"""Files this program writes: the one atomic writer and the checksum of HDF5 files.
+
+Every output (a result, a checkpoint, a plot's PNG, an export's VTU) is written by
+`replace_atomic`: a temp file in the same folder, filled, fsynced, then os.replace and an
+fsync of the folder, so a crash never leaves a half-written file at the path.
+
+Every HDF5 file `write_atomic` writes (results and checkpoints) starts with a 512-byte
+user block: CHECKSUM_MAGIC, the SHA-256 (hex) of all the bytes after the block, a
+newline, zeros. verify_checksum checks it before h5py opens the file, so any damage (a
+flipped byte anywhere, a truncation) is found, also in bytes h5py would never read.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import tempfile
+
+import h5py
+
+
+class FileError(ValueError):
+    """A file this program wrote (a result, a checkpoint) that cannot be used: damaged, not
+    ours, or missing parts. The message is one line naming the file and the reason."""
+
+
+def error_reason(e: BaseException) -> str:
+    """A short one-line reason for an error of a file operation: the system's words for an
+    OSError's errno, also the errno HDF5 embeds in h5py's messages ("No space left on
+    device"), else the message on one line."""
+    m = re.search(r"errno = (\d+)", str(e))
+    if m:
+        return os.strerror(int(m.group(1)))
+    text = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+    return " ".join(str(text).split()) or type(e).__name__
+
+
+#: the user block at the start of every file write_atomic writes (see the module doc)
+USERBLOCK_SIZE = 512
+CHECKSUM_MAGIC = b"hpcwedge-sha256 "
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_CHUNK = 8 << 20
+
+
+def _body_digest(fh) -> str:
+    """SHA-256 (hex) of the bytes of the open binary file fh after the user block."""
+    h = hashlib.sha256()
+    fh.seek(USERBLOCK_SIZE)
+    while chunk := fh.read(_CHUNK):
+        h.update(chunk)
+    return h.hexdigest()
+
+
+def seal(path: str) -> None:
+    """Write the checksum user block of the closed HDF5 file `path` (made with
+    userblock_size=USERBLOCK_SIZE, or changed in place after it was sealed) and fsync it."""
+    with open(path, "rb+") as fh:
+        block = CHECKSUM_MAGIC + _body_digest(fh).encode() + b"\n"
+        fh.seek(0)
+        fh.write(block.ljust(USERBLOCK_SIZE, b"\0"))
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def verify_checksum(path: str) -> bool:
+    """Check the checksum user block of `path` against its bytes. True: verified; False: an
+    HDF5 file without one (written before checksums). FileError when the file is damaged
+    (digest differs, truncated, block altered), is not an HDF5 file, or cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            block = fh.read(USERBLOCK_SIZE)
+            if block[:len(HDF5_SIGNATURE)] == HDF5_SIGNATURE:
+                return False
+            if not block.startswith(CHECKSUM_MAGIC):
+                raise FileError(f"{path}: not a file written by hpcwedge (no checksum block, no HDF5 signature)")
+            stored = block[len(CHECKSUM_MAGIC):len(CHECKSUM_MAGIC) + 65]
+            intact = (len(block) == USERBLOCK_SIZE and stored[-1:] == b"\n"
+                      and not block[len(CHECKSUM_MAGIC) + 65:].strip(b"\0"))
+            if not intact or _body_digest(fh).encode() != stored[:-1]:
+                raise FileError(f"{path}: damaged: its SHA-256 checksum does not match its contents, "
+                                f"it was truncated or altered after it was written")
+    except OSError as e:
+        raise FileError(f"{path}: cannot read ({error_reason(e)})") from None
+    return True
+
+
+def replace_atomic(path: str, write, suffix: str, tmp_path: str | None = None) -> None:
+    """Make the file `path` through `write(tmp)`, which fills the temp file `tmp` (same
+    folder; a fresh ".tmp-*<suffix>" name, mode 0600, or the fixed `tmp_path`: a stale one
+    from a killed writer is simply overwritten) and may raise to refuse it. Then tmp is
+    fsynced and renamed onto `path` and the folder fsynced, so a crash never leaves a
+    half-written file and a refused or failed write (OSError: full disk, read-only
+    folder...) raises, removes tmp and leaves `path` as it was."""
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    os.makedirs(folder, exist_ok=True)
+    if tmp_path is None:
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=suffix, dir=folder)
+        os.close(fd)
+    else:
+        tmp = tmp_path
+    try:
+        write(tmp)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    try:
+        dfd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(dfd)
+    except OSError:
+        pass
+    finally:
+        os.close(dfd)
+
+
+def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> None:
+    """Write an HDF5 file through `fill(h5file)` with replace_atomic: the temp file is
+    closed, sealed with its checksum (module doc), optionally `verify(tmp)` (raises if the
+    file is bad), then renamed, so a bad file never replaces a good one."""
+
+    def write(tmp):
+        with h5py.File(tmp, "w", userblock_size=USERBLOCK_SIZE) as f:
+            fill(f)
+        seal(tmp)
+        if verify is not None:
+            verify(tmp)
+
+    replace_atomic(path, write, ".h5", tmp_path)
