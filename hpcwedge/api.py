@@ -406,7 +406,8 @@ def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *,
     >>> c.displacement.shape
     (6, 2)
     """
-    from .configuration import load_configuration, write_vtu
+    from .export import write_vtu
+    from .recovery import load_configuration
     with _result_file(result) as path:
         config = load_configuration(path, run=run, ray=ray, cone=cone, pattern=pattern)
     write_vtu(config, os.fspath(output))

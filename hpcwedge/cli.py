@@ -378,7 +378,8 @@ def _plot(args) -> int:
 
 
 def _export(args) -> int:
-    from .configuration import ConfigurationError, load_configuration, write_vtu
+    from .export import write_vtu
+    from .recovery import ConfigurationError, load_configuration
     check_output(args.output, (args.result,))
     try:
         config = load_configuration(args.result, run=args.run, ray=args.ray, cone=args.cone,

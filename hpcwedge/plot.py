@@ -130,7 +130,7 @@ def _read_model(f, path: str, dim: int, m: int) -> dict | None:
 
 def _configuration(path: str, k: int, **item):
     """(Configuration of the item, None) or (None, the one-line reason it cannot be made)."""
-    from .configuration import ConfigurationError, load_configuration
+    from .recovery import ConfigurationError, load_configuration
     try:
         return load_configuration(path, run=k, **item), None
     except ConfigurationError as e:
@@ -202,7 +202,7 @@ def _read_3d(f, path: str, run: int, pattern: int) -> dict:
     if out["model"] is not None:
         out["config"], out["config_note"] = _configuration(path, k, pattern=j)
     elif scene is not None:                                # raw stiffness: the pattern's point only
-        from .configuration import ConfigurationError, pattern_point
+        from .recovery import ConfigurationError, pattern_point
         try:
             out["point"] = pattern_point(scene, None, patterns[j]["contact"], out["mu"])
         except (ConfigurationError, ValueError) as e:
@@ -358,7 +358,7 @@ def _coloured_body(ax, cells: dict, Y: np.ndarray, values: dict, label: str) -> 
     by axial force (diverging, tension red), each with a colour bar."""
     from matplotlib.collections import LineCollection, PolyCollection
 
-    from .configuration import AXIAL_FORCE, VON_MISES
+    from .recovery import AXIAL_FORCE, VON_MISES
     fig = ax.figure
     if VON_MISES in values:
         polys, vals = [], []
@@ -441,7 +441,7 @@ def _body_3d(ax, d: dict) -> None:
     """The body in perspective: undeformed and deformed, C/G nodes, reactions, obstacle."""
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-    from .configuration import AXIAL_FORCE, VON_MISES
+    from .recovery import AXIAL_FORCE, VON_MISES
     mdl, cfg, m = d["model"], d["config"], d["m"]
     pat, j = d["patterns"][d["pattern"]], d["pattern"]
     X, c = mdl["coords"], mdl["contact_nodes"]

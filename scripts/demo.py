@@ -124,7 +124,8 @@ def run_gmsh_examples(out: str, only=None) -> str:
     """Run the committed Gmsh example scenes (scripts/examples/<name>.toml) into
     out/gmsh_<name>.h5; plot the first wedged ray of cork2d and export cone 0 of cork2d
     and pattern 0 (at the last mu) of plug3d as VTU. Returns a markdown table."""
-    from hpcwedge.configuration import load_configuration, write_vtu
+    from hpcwedge.export import write_vtu
+    from hpcwedge.recovery import load_configuration
     from hpcwedge.plot import plot_result
     taper = {"cork2d": make_examples.TAPER_2D_DEG, "plug3d": make_examples.TAPER_3D_DEG}
     head = ("scene", "dim", "m", "mu", "wedged rays", "cones", "patterns", "global mu^c", "tan(taper)", "seconds")

@@ -7,7 +7,7 @@ import pytest
 from hpcwedge.build import build_model
 from hpcwedge.cli import main
 from hpcwedge.condense import condense, schur_dense
-from hpcwedge.configuration import whole_body
+from hpcwedge.recovery import whole_body
 from hpcwedge.models import block2d
 from hpcwedge.models.mesh import MeshData, mesh_model
 from hpcwedge.models.rigid import rigid_motions

@@ -209,7 +209,7 @@ BLOCK2D_TOML = PLUG2D_TOML.replace('"plug2d"', '"block2d"').replace("plug2d-rows
 def test_block2d_whole_body_von_mises(tmp_path):
     """A continuum body is drawn whole (interior nodes displaced too), coloured by von Mises;
     when the body cannot be rebuilt the contact-only drawing remains and the title says why."""
-    from hpcwedge.configuration import VON_MISES
+    from hpcwedge.recovery import VON_MISES
     from hpcwedge.plot import _load
     h5 = _result_file(tmp_path, BLOCK2D_TOML)
     d = _load(h5, -1, 1)
@@ -286,7 +286,7 @@ def _petsc_missing() -> str | None:
 def test_plug3d_png(tmp_path, capsys):
     """plug3d: the whole truss at pattern J's feasible point, C and G marked, reactions,
     wall squares; the patterns' mu^c; the count against mu. Index errors are one line."""
-    from hpcwedge.configuration import AXIAL_FORCE
+    from hpcwedge.recovery import AXIAL_FORCE
     from hpcwedge.plot import _load
     h5 = _result_file(tmp_path, PLUG3D_TOML)
     d = _load(h5, -1, pattern=0)
@@ -316,7 +316,7 @@ def test_plug3d_png(tmp_path, capsys):
 def test_gmsh_plug_png(tmp_path):
     """The Gmsh plug (scripts/examples/plug3d.*): the tetra mesh's boundary by von Mises and
     the scene's conical hole; with its mesh file gone, the contact nodes alone, still a figure."""
-    from hpcwedge.configuration import VON_MISES
+    from hpcwedge.recovery import VON_MISES
     from hpcwedge.models.obstacle import Cone
     from hpcwedge.plot import _load
     from hpcwedge.scene import load_scene

@@ -1,5 +1,5 @@
 """Whole-body wedged configurations: every node's displacement, the contact reactions and
-the element stresses of one item of a result, and its export as a VTU file.
+the element stresses of one item of a result (export.write_vtu writes one as a VTU file).
 
 A result stores the contact DOFs only (SPEC §1: local frames, block ordering
 [n_1..n_m, t_1..t_m(, t2_1..t2_m)]). One configuration (u_local, r_local), each (dim*m,),
@@ -33,7 +33,6 @@ element (plane stress in 2D), axial force (tension > 0) of every bar.
 from __future__ import annotations
 
 import json
-import math
 import os
 import tomllib
 from dataclasses import dataclass
@@ -41,7 +40,6 @@ from dataclasses import dataclass
 import h5py
 import numpy as np
 
-from .files import replace_atomic
 from .model import Model
 
 #: cell-data names by cell family, in the VTU and in Configuration.element_values
@@ -269,36 +267,3 @@ def rebuild_model(path: str, text: str, scene_dir: str | None, stored: dict | No
 def _text(v) -> str:
     v = v[()] if isinstance(v, h5py.Dataset) else v
     return v.decode() if isinstance(v, bytes) else str(v)
-
-
-# --------------------------------------------------------------------------- VTU
-
-def write_vtu(config: Configuration, path: str) -> None:
-    """Write the configuration as a VTK XML unstructured grid (meshio), atomically.
-
-    points: model.coords padded to 3 components. Point data: "displacement" (n, 3) and
-    "reaction" (n, 3) (global axes, padded with 0 in 2D; reaction nonzero at contact nodes
-    only), "contact" (n,) int: position in the contact list, -1 elsewhere. Cell data per
-    block of model.cells: "von_mises" (continuum) and/or "axial_force" (bars), NaN on blocks
-    of the other family.
-    """
-    import meshio
-    mdl = config.model
-    n, dim = mdl.coords.shape
-
-    def pad(a):
-        out = np.zeros((len(a), 3))
-        out[:, :dim] = a
-        return out
-
-    contact = np.full(n, -1, dtype=np.int64)
-    contact[mdl.contact_nodes] = np.arange(mdl.m)
-    blocks = [(c, np.asarray(q, dtype=np.int64)) for c, q in mdl.cells.items()]
-    cell_data = {name: [np.asarray(vals[c], dtype=float) if c in vals else np.full(len(q), math.nan)
-                        for c, q in blocks]
-                 for name, vals in config.element_values.items()}
-    mesh = meshio.Mesh(pad(mdl.coords), blocks,
-                       point_data={"displacement": pad(config.displacement),
-                                   "reaction": pad(config.reaction), "contact": contact},
-                       cell_data=cell_data)
-    replace_atomic(path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"), ".vtu")

@@ -1,6 +1,6 @@
-"""Whole-body configurations (hpcwedge.configuration): the recovered displacement against
+"""Whole-body configurations (hpcwedge.recovery): the recovered displacement against
 an independently assembled full stiffness, uniqueness on supported bodies, the items
-(ray, cone, pattern), element values, the VTU file, and one-line errors."""
+(ray, cone, pattern), element values, and one-line errors (the VTU file: test_export.py)."""
 import json
 import math
 import shutil
@@ -12,8 +12,8 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from hpcwedge.configuration import (AXIAL_FORCE, VON_MISES, ConfigurationError, element_values,
-                                    load_configuration, whole_body, write_vtu)
+from hpcwedge.recovery import (AXIAL_FORCE, VON_MISES, ConfigurationError, element_values, load_configuration,
+                               whole_body)
 from hpcwedge.models import block2d, plug2d, q4_stiffness
 from hpcwedge.models.elements import lame
 from hpcwedge.pipeline import run_scene
@@ -217,29 +217,6 @@ def test_pattern_point_matches_the_pattern(results):
         assert np.abs(cfg.u_local[:m][C]).max() <= 1e-7 * scale
         assert np.abs(r[:, ~C]).max(initial=0.0) <= 1e-7
         assert (np.linalg.norm(r[1:, C], axis=0) <= 0.65 * r[0, C] + 1e-7).all()
-
-
-# ----------------------------------------------------------------------------- VTU
-
-def test_vtu_round_trip(results, tmp_path):
-    for kind, item, name, block in (("block2d", {"cone": 0}, VON_MISES, "quad"),
-                                    ("plug3d", {"pattern": 1}, AXIAL_FORCE, "line")):
-        cfg = load_configuration(results[kind], **item)
-        path = tmp_path / f"{kind}.vtu"
-        write_vtu(cfg, str(path))
-        got = meshio.read(str(path))
-        mdl = cfg.model
-        n, dim = mdl.coords.shape
-        assert got.points.shape == (n, 3)
-        np.testing.assert_allclose(got.points[:, :dim], mdl.coords)
-        assert got.point_data["displacement"].shape == (n, 3) and got.point_data["reaction"].shape == (n, 3)
-        np.testing.assert_allclose(got.point_data["displacement"][:, :dim], cfg.displacement)
-        assert not got.point_data["displacement"][:, dim:].any()
-        assert sorted(np.flatnonzero(np.abs(got.point_data["reaction"]).sum(1))) == sorted(mdl.contact_nodes)
-        assert (got.point_data["contact"][mdl.contact_nodes] == np.arange(mdl.m)).all()
-        assert [c.type for c in got.cells] == [block] and len(got.cells[0].data) == len(mdl.cells[block])
-        np.testing.assert_allclose(got.cell_data[name][0], cfg.element_values[name][block])
-        assert list(got.cell_data) == [name]
 
 
 # ----------------------------------------------------------------------------- errors

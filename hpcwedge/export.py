@@ -1,0 +1,41 @@
+"""VTU export (`hpcwedge export`): one whole-body configuration (recovery.Configuration) as a
+VTK XML unstructured grid for ParaView, written atomically (files.replace_atomic)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .files import replace_atomic
+from .recovery import Configuration
+
+
+def write_vtu(config: Configuration, path: str) -> None:
+    """Write the configuration as a VTK XML unstructured grid (meshio), atomically.
+
+    points: model.coords padded to 3 components. Point data: "displacement" (n, 3) and
+    "reaction" (n, 3) (global axes, padded with 0 in 2D; reaction nonzero at contact nodes
+    only), "contact" (n,) int: position in the contact list, -1 elsewhere. Cell data per
+    block of model.cells: "von_mises" (continuum) and/or "axial_force" (bars), NaN on blocks
+    of the other family.
+    """
+    import meshio
+    mdl = config.model
+    n, dim = mdl.coords.shape
+
+    def pad(a):
+        out = np.zeros((len(a), 3))
+        out[:, :dim] = a
+        return out
+
+    contact = np.full(n, -1, dtype=np.int64)
+    contact[mdl.contact_nodes] = np.arange(mdl.m)
+    blocks = [(c, np.asarray(q, dtype=np.int64)) for c, q in mdl.cells.items()]
+    cell_data = {name: [np.asarray(vals[c], dtype=float) if c in vals else np.full(len(q), math.nan)
+                        for c, q in blocks]
+                 for name, vals in config.element_values.items()}
+    mesh = meshio.Mesh(pad(mdl.coords), blocks,
+                       point_data={"displacement": pad(config.displacement),
+                                   "reaction": pad(config.reaction), "contact": contact},
+                       cell_data=cell_data)
+    replace_atomic(path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"), ".vtu")
