@@ -32,12 +32,10 @@ element (plane stress in 2D), axial force (tension > 0) of every bar.
 """
 from __future__ import annotations
 
-import json
 import os
 import tomllib
 from dataclasses import dataclass
 
-import h5py
 import numpy as np
 
 from .model import Model
@@ -134,7 +132,8 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     whose feasibility point the solvers cannot give.
     """
     from .files import FileError
-    from .results import check_items, index, index_range, open_result
+    from .results import (RangeError, check_items, index, index_range, open_result, read_items, read_model,
+                          read_rays, read_run, stored_scene)
     chosen = [(k, v) for k, v in (("ray", ray), ("cone", cone), ("pattern", pattern)) if v is not None]
     if len(chosen) != 1:
         raise ConfigurationError("give exactly one of ray, cone, pattern")
@@ -142,18 +141,16 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     try:
         with open_result(path, passthrough=(ConfigurationError,)) as f:
             dim, m = int(f.attrs["dim"]), int(f.attrs["m"])
-            keys = sorted(f["runs"])
-            k = index(run, len(keys))
-            if k is None:
-                raise ConfigurationError(f"run {run} out of range (the result has {len(keys)} run(s): "
-                                         f"{index_range(len(keys))})")
-            g = f["runs"][keys[k]]
+            try:
+                k, _, g = read_run(f, run)
+            except RangeError as e:
+                raise ConfigurationError(str(e)) from None
             mu = float(g.attrs["mu"])
-            rays = np.asarray(g["rays"][()], dtype=float).reshape(-1, 2 * dim * m) if "rays" in g else None
-            cones = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
-            patterns = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
+            rays = read_rays(g, 2 * dim * m)
+            cones, patterns = read_items(g, "cones"), read_items(g, "patterns")
             check_items(cones, patterns, 0 if rays is None else len(rays), m)
-            stored = _stored_scene(f)
+            text, scene_dir, inputs = stored_scene(f)
+            stored = read_model(f)
     except FileError as e:
         raise ConfigurationError(str(e)) from None
     items = {"ray": rays, "cone": cones, "pattern": patterns}[what]
@@ -168,7 +165,7 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     if i is None:
         raise ConfigurationError(f"{what} {j} out of range ({head} has {len(items)} {noun}(s): "
                                  f"{index_range(len(items))})")
-    scene, model = rebuild_model(path, *stored)
+    scene, model = rebuild_model(path, text, scene_dir, stored, inputs)
     n = dim * m
     label = f"{head}, {noun} {i} of {len(items)}"
     if what == "ray":
@@ -208,18 +205,10 @@ def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[n
     return u / s, r / s
 
 
-def _stored_scene(f) -> tuple:
-    """(scene text, scene_dir or None, {"coords", "contact_nodes"} of /model or None, the input
-    digests or None) of the open result file f: what rebuild_model needs."""
-    return (_text(f["scene_text"]), _text(f.attrs["scene_dir"]) if "scene_dir" in f.attrs else None,
-            {k: f["model"][k][()] for k in ("coords", "contact_nodes")} if "model" in f else None,
-            dict(json.loads(f.attrs["inputs"])) if "inputs" in f.attrs else None)
-
-
 def rebuild_model(path: str, text: str, scene_dir: str | None, stored: dict | None,
                   inputs: dict | None = None):
-    """(Scene, Model) of the result file `path`, from its stored scene text and folder, its
-    /model arrays and input digests (_stored_scene, read with the rest of the file).
+    """(Scene, Model) of the result file `path`, from its stored scene text and folder and
+    input digests (results.stored_scene) and its /model (results.read_model; None: none).
 
     Files named in the scene (a mesh's model.file) are relative to the scene's folder, which
     the result records (attribute scene_dir); if the file is not there, the result's own
@@ -262,8 +251,3 @@ def rebuild_model(path: str, text: str, scene_dir: str | None, stored: dict | No
             raise ConfigurationError("the body rebuilt from the stored scene differs from the result's "
                                      "/model (was the mesh file changed since the run?)")
     return scene, model
-
-
-def _text(v) -> str:
-    v = v[()] if isinstance(v, h5py.Dataset) else v
-    return v.decode() if isinstance(v, bytes) else str(v)

@@ -206,8 +206,7 @@ def _result_object(f, rays) -> dict:
             if name in g and (g[name].ndim != 2 or g[name].dtype.kind != "f"):
                 raise TypeError(f"/runs/{k}/{name}: {g[name].ndim}-D {g[name].dtype}, expected 2-D floats")
             run[name] = rays(g[name]) if (name in g and rays is not None) else None
-        run["cones"] = json.loads(_text(g["cones_json"])) if "cones_json" in g else None
-        run["patterns"] = json.loads(_text(g["patterns_json"])) if "patterns_json" in g else None
+        run["cones"], run["patterns"] = read_items(g, "cones"), read_items(g, "patterns")
         n_rays = g["rays"].shape[0] if "rays" in g else int(g.attrs.get("n_wedged_rays", 0))
         check_items(run["cones"], run["patterns"], n_rays, out["m"])
         out["runs"].append(run)
@@ -244,9 +243,69 @@ def index_range(n: int) -> str:
     return f"0..{n - 1} or -{n}..-1" if n else "none"
 
 
-def _text(ds) -> str:
-    v = ds[()]
+# --------------------------------------------------------------------------- readers
+# The small readers show, plot and export share, each for an open result file f (or one of
+# its run groups g, from read_run). Run them inside open_result: a missing dataset or a
+# value of the wrong type raises there and becomes a FileError naming the file.
+
+class RangeError(ValueError):
+    """A run index outside a result's runs: one line, without the command's prefix."""
+
+
+def text(v) -> str:
+    """A string stored in a result (a dataset or an attribute value; bytes or str) as str."""
+    v = v[()] if isinstance(v, h5py.Dataset) else v
     return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def read_run(f, run: int) -> tuple[int, int, h5py.Group]:
+    """(k, the number of runs, the group /runs/<k>) of the Python-style run index `run`;
+    RangeError when it is out of range."""
+    keys = sorted(f["runs"])
+    k = index(run, len(keys))
+    if k is None:
+        raise RangeError(f"run {run} out of range (the result has {len(keys)} run(s): "
+                         f"{index_range(len(keys))})")
+    return k, len(keys), f["runs"][keys[k]]
+
+
+def read_counts(f, name: str) -> list[tuple[float, int | None]]:
+    """(mu, the count attribute `name`, e.g. "n_patterns", or None when absent) of every run."""
+    return [(float(g.attrs["mu"]), int(g.attrs[name]) if name in g.attrs else None)
+            for g in (f["runs"][k] for k in sorted(f["runs"]))]
+
+
+def read_rays(g, width: int) -> np.ndarray | None:
+    """The wedged rays of run group g as an (n, width) float array (width = 2 dim m), or None
+    when the run has none stored."""
+    return np.asarray(g["rays"][()], dtype=float).reshape(-1, width) if "rays" in g else None
+
+
+def read_items(g, kind: str) -> list | None:
+    """The parsed JSON list of run group g's "cones" or "patterns" (None when not stored);
+    check them with check_items before use."""
+    name = f"{kind}_json"
+    return json.loads(text(g[name])) if name in g else None
+
+
+def read_model(f) -> dict | None:
+    """The /model group as {"coords": (n, dim) floats, "contact_nodes": (m,) ints, "normals":
+    (m, dim) floats, "cells": {kind: int array}}, or None when the result has none."""
+    if "model" not in f:
+        return None
+    mg = f["model"]
+    return {"coords": np.asarray(mg["coords"][()], dtype=float),
+            "contact_nodes": np.asarray(mg["contact_nodes"][()], dtype=int),
+            "normals": np.asarray(mg["normals"][()], dtype=float),
+            "cells": {name[len("cells_"):]: np.asarray(mg[name][()], dtype=int)
+                      for name in mg if name.startswith("cells_")}}
+
+
+def stored_scene(f) -> tuple[str, str | None, dict | None]:
+    """(the scene text, its folder scene_dir, the input digests) the result recorded; the
+    last two are None in results written before they were recorded."""
+    return (text(f["scene_text"]), text(f.attrs["scene_dir"]) if "scene_dir" in f.attrs else None,
+            dict(json.loads(f.attrs["inputs"])) if "inputs" in f.attrs else None)
 
 
 def _plain(o):
