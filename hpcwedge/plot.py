@@ -41,7 +41,7 @@ def plot_result(path: str, output: str, run: int = -1, ray: int | None = None,
 
     ValueError (one line) for a bad run, ray or pattern index, `pattern` given for a 2D or
     `ray` for a 3D result (PlotError), or a file that is missing, damaged or not a hpcwedge
-    result (results.FileError).
+    result (files.FileError).
     """
     data = _load(path, run, ray, pattern)
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -74,7 +74,7 @@ class PlotError(ValueError):
 
 
 def _load(path: str, run: int, ray: int | None = None, pattern: int | None = None) -> dict:
-    """The data of the figure; results.FileError for a missing, damaged or malformed file."""
+    """The data of the figure; files.FileError for a missing, damaged or malformed file."""
     with open_result(path, passthrough=(PlotError,)) as f:
         return _read(f, path, run, ray, pattern)
 

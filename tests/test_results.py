@@ -12,7 +12,7 @@ import h5py
 import pytest
 
 from hpcwedge.cli import main
-from hpcwedge.files import CHECKSUM_MAGIC, USERBLOCK_SIZE, FileError, seal, verify_checksum, write_atomic
+from hpcwedge.files import CHECKSUM_MAGIC, FileError, seal, verify_checksum
 from hpcwedge.results import read_result
 from mpi_helpers import ROOT, damaged, run, show_json, write_scene
 
@@ -182,15 +182,3 @@ def test_the_result_records_the_digests_of_its_input_files(tmp_path):
     digest = hashlib.sha256((tmp_path / "plug8.npz").read_bytes()).hexdigest()
     assert show_json(out, rays=False)["inputs"] == {"model.file plug8.npz": digest}
 
-
-def test_write_atomic_seals_and_a_failed_verify_keeps_the_old_file(tmp_path):
-    path = str(tmp_path / "x.h5")
-    write_atomic(path, lambda f: f.create_dataset("a", data=[1, 2, 3]))
-    good = open(path, "rb").read()
-    assert verify_checksum(path) and len(good) > USERBLOCK_SIZE
-
-    def bad(tmp):
-        raise FileError("no")
-    with pytest.raises(FileError):
-        write_atomic(path, lambda f: f.create_dataset("a", data=[4]), verify=bad)
-    assert open(path, "rb").read() == good and os.listdir(tmp_path) == ["x.h5"]

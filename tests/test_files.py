@@ -1,0 +1,55 @@
+"""The one atomic writer and the checksum (files.py): a failed or refused write leaves the
+old file exactly as it was and no temp file behind; a written HDF5 file verifies."""
+import os
+import stat
+
+import pytest
+
+from hpcwedge.files import USERBLOCK_SIZE, FileError, replace_atomic, verify_checksum, write_atomic
+
+
+def test_write_atomic_seals_and_a_failed_verify_keeps_the_old_file(tmp_path):
+    path = str(tmp_path / "x.h5")
+    write_atomic(path, lambda f: f.create_dataset("a", data=[1, 2, 3]))
+    good = open(path, "rb").read()
+    assert verify_checksum(path) and len(good) > USERBLOCK_SIZE
+
+    def bad(tmp):
+        raise FileError("no")
+    with pytest.raises(FileError):
+        write_atomic(path, lambda f: f.create_dataset("a", data=[4]), verify=bad)
+    assert open(path, "rb").read() == good and os.listdir(tmp_path) == ["x.h5"]
+
+
+def test_replace_atomic_writes_through_a_temp_file_in_the_folder(tmp_path):
+    path = tmp_path / "new" / "deeper" / "f.png"
+    seen = []
+
+    def write(tmp):
+        seen.append(tmp)
+        assert os.path.dirname(tmp) == str(path.parent) and os.path.basename(tmp).startswith(".tmp-")
+        assert tmp.endswith(".png") and not path.exists()
+        open(tmp, "wb").write(b"picture")
+    replace_atomic(str(path), write, ".png")
+    assert path.read_bytes() == b"picture" and os.listdir(path.parent) == ["f.png"]
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and not os.path.exists(seen[0])
+
+
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device"), KeyboardInterrupt()])
+def test_replace_atomic_failure_keeps_the_old_file(tmp_path, error):
+    path = tmp_path / "f.vtu"
+    path.write_bytes(b"old")
+
+    def write(tmp):
+        open(tmp, "wb").write(b"half")
+        raise error
+    with pytest.raises(type(error)):
+        replace_atomic(str(path), write, ".vtu")
+    assert path.read_bytes() == b"old" and os.listdir(tmp_path) == ["f.vtu"]
+
+
+def test_replace_atomic_fixed_temp_name_overwrites_a_stale_one(tmp_path):
+    path, tmp = tmp_path / "c.ckpt", tmp_path / "c.ckpt.tmp"
+    tmp.write_bytes(b"stale from a killed writer")
+    replace_atomic(str(path), lambda t: open(t, "wb").write(b"fresh"), ".h5", tmp_path=str(tmp))
+    assert path.read_bytes() == b"fresh" and not tmp.exists()
