@@ -13,7 +13,7 @@
 3D: plug3d levels 2, ring 4..8 (m = 8..16), mu = 1.0, PatternTree branch and bound
   bnb_sym     with plug3d's node symmetry (as `hpcwedge run`), patterns expanded
   bnb         without a symmetry
-  brute       the peer: one SOCP per partition (bench_socp_count.brute), m <= 12
+  brute       the peer: one SOCP per partition (reference.brute_force_patterns), m <= 12
   3D stages: setup (model + parametrize), socp (Clarabel), lp (HiGHS), cores (learnt
   infeasible cores), other (the rest of the search: tree, rows, bookkeeping), expand (symmetry expansion).
 
@@ -71,7 +71,8 @@ def worker_3d(engine: str, ring: int) -> dict:
     import scipy.optimize
     from hpcwedge import conic, patterns
     from hpcwedge.patterns import PatternTree
-    from bench_socp_count import brute, plug
+    from bench_socp_count import plug
+    from hpcwedge.reference import brute_force_patterns
     t0 = time.perf_counter()
     p, m, group = plug(LEVELS, ring, symmetry=True)
     setup = time.perf_counter() - t0
@@ -81,7 +82,7 @@ def worker_3d(engine: str, ring: int) -> dict:
     _timed(patterns, "infeasible_core", acc, "cores")
     t0 = time.perf_counter()
     if engine == "brute":
-        found = brute(p, m, MU_3D)
+        found = brute_force_patterns(p, m, MU_3D)
         t1 = t2 = time.perf_counter()
         solves = 2 ** m
     else:

@@ -19,8 +19,8 @@
                and the clique search (bench_2d.peer_cdd)
   cdd_float    the same peer in cddlib's float arithmetic on the float rows (what a float
                user hands it), zero test |a.x| <= dd.FLOAT_ZERO_TOL on unit rows and rays
-  brute_lp     one LP per sign pattern, all 2^m of them (bench_socp_count.brute: HiGHS via
-               conic.feasible), compared with the pattern set the exact rays imply
+  brute_lp     one LP per sign pattern, all 2^m of them (reference.brute_force_patterns: HiGHS
+               via conic.feasible), compared with the pattern set the exact rays imply
                (patterns.implied_patterns, SPEC §2)
 mu^c: bench_mu_c's analytic scenes (its --quick list; --quick here: every other one): the
   critical cone / pattern once (bench_mu_c.critical_pattern), then plain bisection (LP in
@@ -120,11 +120,11 @@ def worker_2d(engine: str, spec: dict, mu: float) -> dict:
     elif engine in ("cdd_exact", "cdd_float"):
         out = bench_2d.peer_cdd(problem, mu, "fraction" if engine == "cdd_exact" else "float")
     elif engine == "brute_lp":
-        from bench_socp_count import brute
         from hpcwedge.problem import parametrize
+        from hpcwedge.reference import brute_force_patterns
         t0 = time.perf_counter()
         param = parametrize(problem)
-        found = brute(param, m, mu)
+        found = brute_force_patterns(param, m, mu)
         out = {"seconds": time.perf_counter() - t0, "patterns": sorted(found), "lps": 2 ** m}
     else:
         raise SystemExit(f"unknown 2D engine {engine}")
