@@ -11,9 +11,9 @@
                      a supported body, rows 4 (m = 8; --quick: rows 3)
   vgroove eps 0/0.1  the V-groove bar, free (eps 0) and supported (eps 0.1), mu 1.5 mu^c
 2D engines, each in its own subprocess with a time limit (bench_2d.run_script):
-  ours_float   our enumerate stage in float (bench_2d.enumerate_ours: parametrize,
-               complementarity-pruned DD, maximal cones)            <- the reference time
-  ours_exact   the same in exact rational arithmetic
+  ours_float   our enumerate stage in float as `hpcwedge run` runs it (bench_2d.enumerate_ours:
+               run_scene's timings.enumerate)                        <- the reference time
+  ours_exact   the same with compute.exact = true (exact rational arithmetic)
   cdd_exact    cddlib's full double description of P = {x : A x >= 0} in exact arithmetic
                (GMP rationals) on the exact integer rows, then the complementarity filter
                and the clique search (bench_2d.peer_cdd)
@@ -111,13 +111,14 @@ def _bits(patterns) -> list[int]:
 # --------------------------------------------------------------------------- workers (subprocess)
 
 def worker_2d(engine: str, spec: dict, mu: float) -> dict:
-    from hpcwedge.patterns import implied_patterns
+    if engine in ("ours_float", "ours_exact"):
+        from hpcwedge.patterns import implied_patterns
+        out = bench_2d.enumerate_ours(spec, mu, exact=engine == "ours_exact")
+        out["patterns"] = _bits(implied_patterns(out.pop("ray_zero"), out["m"]))
+        return {**out, "n_patterns": len(out["patterns"])}
     problem = _problem(spec, mu)
     m = problem.m
-    if engine in ("ours_float", "ours_exact"):
-        out = bench_2d.enumerate_ours(problem, mu, exact=engine == "ours_exact")
-        out["patterns"] = _bits(implied_patterns(out.pop("ray_zero"), m))
-    elif engine in ("cdd_exact", "cdd_float"):
+    if engine in ("cdd_exact", "cdd_float"):
         out = bench_2d.peer_cdd(problem, mu, "fraction" if engine == "cdd_exact" else "float")
     elif engine == "brute_lp":
         from hpcwedge.problem import parametrize
