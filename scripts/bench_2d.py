@@ -6,15 +6,17 @@
 Scene: plug2d (cols 3, taper 10 deg, free body), rows 2..10 (m = 2*rows = 4..20), mu = 0.65.
 Engines, run in the same invocation on the same condensed stiffness:
 
-  ours_enumerate  our float engine, the enumerate stage only: parametrize + friction_rows_2d
-                  + complementary_rays (complementarity-pruned DD) + maximal_cones
+  ours_enumerate  our float engine, the enumerate stage only, as `hpcwedge run` runs it:
+                  run_scene() with mu_c = "none", seconds = the run's own timings.enumerate
+                  (DD in balanced coordinates, whole or over faces, the run-time judgement
+                  and its exact fallback, the cones)
   ours_run_scene  the whole pipeline, run_scene() with mu_c = "global" (model, PETSc
                   condensation, enumeration, cones, every cone's mu^c, global mu^c)
   ours_mpirun     the whole run through the command line on both cores: `mpirun -n 3 hpcwedge
                   run` (master + 2 workers sharing the DD faces, SPEC §5, and the mu^c tasks);
                   seconds = the program's timings.total (scene to result, as ours_run_scene),
                   the wall time with MPI start-up and the result file write beside it
-  ours_exact      our engine in exact rational arithmetic (exact=True), enumerate stage,
+  ours_exact      the same with compute.exact = true (exact rational arithmetic),
                   for the sizes it finishes within --exact-limit (default 60 s)
   cdd_exact       the peer: a full double description with cddlib in exact arithmetic
                   (pycddlib, number_type 'fraction' = GMP rationals) of the cone
@@ -37,8 +39,9 @@ Writes results/bench_2d.csv, results/bench_2d.png and results/bench_2d.json (per
 breakdown); prints a summary. Exit status 1 (and MISMATCH on stderr) if two engines that
 both finished disagree on the wedged-ray or cone counts, or on the zero sets.
 
-peer_cdd (also with cddlib's float arithmetic) and enumerate_ours take any 2D ContactProblem:
-scripts/bench_peers.py runs them on other scenes.
+peer_cdd (also with cddlib's float arithmetic; the routes are hpcwedge.reference's) takes any
+2D ContactProblem, enumerate_ours any 2D scene's tables: scripts/bench_peers.py runs them on
+other scenes.
 
 The peer needs pycddlib (GPL, benchmark only):
     apt-get install -y libcdd-dev libgmp-dev
@@ -69,6 +72,11 @@ CDD_HELP = ("pycddlib is not installed (needed for the cdd_exact peer). Install 
 
 # --------------------------------------------------------------------------- workers
 
+def _tables(rows: int) -> dict:
+    """The scene tables of plug2d at `rows` (cols COLS, taper TAPER)."""
+    return {"model": {"kind": "plug2d", "rows": rows, "cols": COLS, "taper_deg": TAPER}}
+
+
 def _problem(rows: int):
     import hpcwedge.cones  # noqa: F401  (networkx: imported before any clock starts)
     from hpcwedge.condense import condense
@@ -97,53 +105,51 @@ def _cones_of(zero, wedged):
     return maximal_cones(gap, load, wedged)
 
 
-def worker_ours(rows: int, mu: float, exact: bool) -> dict:
-    out = enumerate_ours(_problem(rows), mu, exact)
-    del out["ray_zero"]
-    return out
-
-
-def enumerate_ours(problem, mu: float, exact: bool) -> dict:
-    """Our enumerate stage on a 2D ContactProblem: parametrize + friction rows + complementary
-    DD + maximal cones, timed; counts, fingerprint and a per-stage breakdown."""
-    from hpcwedge.dd import complementary_rays
-    from hpcwedge.problem import friction_rows_2d, parametrize
-    m = problem.m
-    t0 = time.perf_counter()
-    param = parametrize(problem, exact=exact)
-    A = friction_rows_2d(param, mu, m, exact=exact)
-    t1 = time.perf_counter()
-    dd = complementary_rays(A, m, exact=exact)
-    t2 = time.perf_counter()
-    wedged = dd.wedged()
-    cones = _cones_of(dd.zero, wedged)
-    t3 = time.perf_counter()
-    return {"seconds": t3 - t0, "n_wedged_rays": int(wedged.sum()), "n_cones": len(cones),
-            "n_trivial_rays": int((~wedged).sum()),
-            "fingerprint": _fingerprint(dd.zero[wedged], [c.key() for c in cones]),
-            "breakdown": {"parametrize": t1 - t0, "dd": t2 - t1, "cones": t3 - t2},
-            "dd_stats": {k: v for k, v in dd.stats.items()}, "d": int(A.shape[1]),
-            "ray_zero": dd.zero[wedged]}
-
-
-def worker_scene(rows: int, mu: float) -> dict:
+def _run_scene(tables: dict, mu: float, mu_c: str, exact: bool = False):
+    """(Result, wall seconds) of pipeline.run_scene on a 2D scene (tables: its model / contact
+    tables) at one mu, enumerate = true, the given compute.mu_c and compute.exact."""
+    import hpcwedge.cones  # noqa: F401  (networkx: imported before any clock starts)
     from hpcwedge.condense import solver_name
     from hpcwedge.pipeline import run_scene
     from hpcwedge.scene import parse_scene
     solver_name()      # imports and initialises petsc4py before the clock starts
-    scene = parse_scene({"name": f"plug2d-r{rows}", "dim": 2,
-                         "model": {"kind": "plug2d", "rows": rows, "cols": COLS, "taper_deg": TAPER},
-                         "friction": {"mu": [mu]},
-                         "compute": {"enumerate": True, "mu_c": "global"}})
+    scene = parse_scene({"name": "bench", "dim": 2, **tables, "friction": {"mu": [mu]},
+                         "compute": {"enumerate": True, "mu_c": mu_c, "exact": exact}})
     t0 = time.perf_counter()
     res = run_scene(scene)
-    sec = time.perf_counter() - t0
+    return res, time.perf_counter() - t0
+
+
+def _counts(res) -> dict:
+    """Counts, fingerprint and the run's own stage timings of a one-mu 2D Result."""
     run = res.runs[0]
     keys = [(c["zero_u"], c["zero_r"]) for c in run.cones]
-    return {"seconds": sec, "n_wedged_rays": run.n_wedged_rays, "n_cones": run.n_cones,
+    return {"m": res.m, "n_wedged_rays": run.n_wedged_rays, "n_cones": run.n_cones,
             "n_trivial_rays": run.n_trivial_rays, "fingerprint": _fingerprint(run.ray_zero, keys),
-            "breakdown": {k: float(v) for k, v in res.timings.items()},
-            "mu_c": res.mu_c, "mu_c_status": res.mu_c_status,
+            "breakdown": {k: float(v) for k, v in res.timings.items()}}
+
+
+def worker_ours(rows: int, mu: float, exact: bool) -> dict:
+    out = enumerate_ours(_tables(rows), mu, exact)
+    del out["ray_zero"]
+    return out
+
+
+def enumerate_ours(tables: dict, mu: float, exact: bool) -> dict:
+    """Our enumerate stage on a 2D scene (tables: its model / contact tables) as `hpcwedge run`
+    runs it: pipeline.run_scene with mu_c = "none" (the DD in balanced coordinates, whole or
+    over faces, the run-time judgement and its exact fallback, the cones). seconds: the run's
+    own timings["enumerate"] (condensation outside); counts, fingerprint, the run's timings
+    (breakdown), DD stats and numerics record, and the wedged rays' zero flags (ray_zero)."""
+    res, _ = _run_scene(tables, mu, "none", exact)
+    run = res.runs[0]
+    return {"seconds": res.timings["enumerate"], **_counts(res), "dd_stats": res.stats["dd"][0],
+            "numerics": res.stats["numerics"]["runs"][0], "ray_zero": run.ray_zero}
+
+
+def worker_scene(rows: int, mu: float) -> dict:
+    res, sec = _run_scene(_tables(rows), mu, "global")
+    return {"seconds": sec, **_counts(res), "mu_c": res.mu_c, "mu_c_status": res.mu_c_status,
             "mu_c_rel_err": (abs(res.mu_c - math.tan(math.radians(TAPER))) / math.tan(math.radians(TAPER))
                              if res.mu_c is not None else None),
             "lp_solves": res.stats.get("lp_solves")}
@@ -181,99 +187,21 @@ def worker_mpirun(rows: int, mu: float, workers: int = 2) -> dict:
             "workers": workers, "mu_c": res["mu_c"]}
 
 
-def _cdd_generators(H, number_type: str = "fraction"):
-    """Generators (rows [t, x...]) and lin_set of the H-representation rows H ([b, a...]:
-    b + a.x >= 0), pycddlib 2.x or 3.x: number_type "fraction" (exact, GMP rationals: Fractions
-    or ints) or "float" (cddlib's floating-point arithmetic)."""
-    try:
-        import cdd
-    except ImportError:
-        print(CDD_HELP, file=sys.stderr)
-        raise SystemExit(3)
-    if hasattr(cdd, "Matrix"):                      # pycddlib 2.x
-        mat = cdd.Matrix(H, number_type=number_type)
-        mat.rep_type = cdd.RepType.INEQUALITY
-        gen = cdd.Polyhedron(mat).get_generators()
-        return [gen[i] for i in range(gen.row_size)], set(gen.lin_set), "pycddlib " + _cdd_version()
-    if number_type == "float":                       # pycddlib 3.x, float
-        mat = cdd.matrix_from_array(H, rep_type=cdd.RepType.INEQUALITY)
-        gen = cdd.copy_generators(cdd.polyhedron_from_matrix(mat))
-        return list(gen.array), set(gen.lin_set), "pycddlib " + _cdd_version()
-    import cdd.gmp                                   # pycddlib 3.x (needs a GMP build)
-    mat = cdd.gmp.matrix_from_array(H, rep_type=cdd.RepType.INEQUALITY)
-    gen = cdd.gmp.copy_generators(cdd.gmp.polyhedron_from_matrix(mat))
-    return list(gen.array), set(gen.lin_set), "pycddlib " + _cdd_version()
-
-
-def _cdd_version() -> str:
-    try:
-        from importlib.metadata import version
-        return version("pycddlib")
-    except Exception:
-        return "?"
-
-
 def worker_peer(rows: int, mu: float) -> dict:
     return peer_cdd(_problem(rows), mu)
-
-
-def complementary_filter(zero):
-    """The peer's post-processing of P's extreme rays: (zero flags of the complementary
-    ones, their wedged mask, how many there are). zero: (R, 3m) boolean zero flags."""
-    zu, zr = zero[:, 0::3], zero[:, 1::3] & zero[:, 2::3]
-    comp = (zu | zr).all(axis=1)
-    zero = zero[comp]
-    wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
-    return zero, wedged, int(comp.sum())
-
-
-def _exact_zero(Aint, gens):
-    """Zero flags (R, 3m) of cddlib's exact generators on the integer rows (exact signs)."""
-    import flint
-    import numpy as np
-    from fractions import Fraction
-    from math import lcm
-    rays = []
-    for g in gens:
-        if g[0] != 0:          # the apex (origin) vertex
-            continue
-        x = [Fraction(v) for v in g[1:]]
-        den = lcm(*(v.denominator for v in x))
-        rays.append([int(v * den) for v in x])
-    d, R = len(Aint[0]), len(rays)
-    if not R:
-        return np.zeros((0, len(Aint)), dtype=bool)
-    S = flint.fmpz_mat(Aint) * flint.fmpz_mat(d, R, [v for j in range(d) for v in (r[j] for r in rays)])
-    sign = np.array([int(s > 0) - int(s < 0) for s in S.entries()], dtype=np.int8).reshape(len(Aint), R).T
-    if (sign < 0).any():
-        raise RuntimeError("a cddlib generator violates A x >= 0")
-    return sign == 0
-
-
-def _float_zero(A, gens):
-    """Zero flags (R, 3m) of cddlib's float generators: |a.x| <= dd.FLOAT_ZERO_TOL on unit rows
-    and unit rays (the tolerance our float engine uses); a ray violating a row by more than
-    that is an error of cddlib's float arithmetic."""
-    import numpy as np
-    from hpcwedge.dd import FLOAT_ZERO_TOL
-    X = np.array([[float(v) for v in g[1:]] for g in gens if float(g[0]) == 0.0], dtype=float)
-    if not len(X):
-        return np.zeros((0, A.shape[0]), dtype=bool)
-    X /= np.linalg.norm(X, axis=1, keepdims=True)
-    S = X @ (A / np.linalg.norm(A, axis=1, keepdims=True)).T
-    if (S < -FLOAT_ZERO_TOL).any():
-        raise RuntimeError(f"a cddlib float generator violates A x >= 0 by {-S.min():.1e}")
-    return np.abs(S) <= FLOAT_ZERO_TOL
 
 
 def peer_cdd(problem, mu: float, number_type: str = "fraction") -> dict:
     """The peer on a 2D ContactProblem: cddlib's full double description of P = {x : A x >= 0},
     A = friction_rows_2d of our parametrisation, then the complementarity filter and the clique
-    search. number_type "fraction": the exact integer rows, exact arithmetic; "float": the float
-    rows (what a float user hands cddlib), cddlib's float arithmetic, zero test as _float_zero.
+    search (reference.cdd_generators, cdd_zero, complementary_filter). number_type "fraction":
+    the exact integer rows, exact arithmetic; "float": the float rows (what a float user hands
+    it), cddlib's float arithmetic, zero test |a.x| <= dd.FLOAT_ZERO_TOL on unit rows and rays.
     Raises RuntimeError when cddlib returns lines (a cone it takes for not pointed) or a
-    generator outside P."""
+    generator outside P; exits with status 3 (CDD_HELP) without pycddlib."""
+    from hpcwedge.dd import FLOAT_ZERO_TOL
     from hpcwedge.problem import friction_rows_2d, parametrize
+    from hpcwedge.reference import cdd_generators, cdd_zero, complementary_filter
     m = problem.m
     exact = number_type == "fraction"
     t0 = time.perf_counter()
@@ -287,11 +215,11 @@ def peer_cdd(problem, mu: float, number_type: str = "fraction") -> dict:
         print(CDD_HELP, file=sys.stderr)
         raise SystemExit(3)
     t0 = time.perf_counter()
-    gens, lin, version = _cdd_generators([[0] + row for row in rows], number_type)
+    gens, lin, version = cdd_generators([[0] + row for row in rows], number_type)
     t1 = time.perf_counter()
     if lin:
         raise RuntimeError(f"cddlib found {len(lin)} lines: the cone is not pointed")
-    zero = _exact_zero(rows, gens) if exact else _float_zero(A, gens)
+    zero = cdd_zero(rows if exact else A, gens, exact, FLOAT_ZERO_TOL)
     R = len(zero)
     zero, wedged, n_comp = complementary_filter(zero)
     t2 = time.perf_counter()
@@ -380,7 +308,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-mpirun", action="store_true", help="skip ours_mpirun (mpirun -n 3)")
     ap.add_argument("--out", default=os.path.join(ROOT, "results"), help="output directory")
     ap.add_argument("--profile-m", type=int, default=None,
-                    help="also profile ours_enumerate at this m with pyinstrument "
+                    help="also profile ours_enumerate's run_scene at this m with pyinstrument "
                          "(writes results/bench_2d_profile_m<M>.txt)")
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     ap.add_argument("--rows", type=int, help=argparse.SUPPRESS)
@@ -632,15 +560,9 @@ def profile(m: int, mu: float, out: str) -> None:
     except ImportError:
         print("pyinstrument is not installed: pip install pyinstrument", file=sys.stderr)
         return
-    from hpcwedge.dd import complementary_rays
-    from hpcwedge.problem import friction_rows_2d, parametrize
-    problem = _problem(m // 2)
     prof = Profiler(interval=0.005)
     prof.start()
-    param = parametrize(problem)
-    A = friction_rows_2d(param, mu, problem.m)
-    dd = complementary_rays(A, problem.m)
-    _cones_of(dd.zero, dd.wedged())
+    _run_scene(_tables(m // 2), mu, "none")         # ours_enumerate's run (condensation included)
     prof.stop()
     text = prof.output_text(unicode=False, color=False, show_all=False)
     path = os.path.join(out, f"bench_2d_profile_m{m}.txt")

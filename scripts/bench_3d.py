@@ -5,8 +5,8 @@ mu^c accuracy against tan(taper), solver statuses.
     PYTHONPATH=. python scripts/bench_3d.py [--levels 2 --ring 5] [--mu 0.55 0.6 0.65 0.7 1.0]
 
 For each mu: the branch and bound (PatternTree over the whole tree), then the
-brute force (one SOCP per partition, 2^m) as the peer, both timed, with their
-pattern sets compared; then mu^c of every pattern found at the largest mu and
+brute force (one SOCP per partition, 2^m: reference.brute_force_patterns) as the
+peer, both timed, with their pattern sets compared; then mu^c of every pattern found at the largest mu and
 the global mu^c. Writes results/bench_3d_<levels>x<ring>.json and prints a table.
 """
 from __future__ import annotations
@@ -17,14 +17,12 @@ import math
 import os
 import time
 
-import numpy as np
-
 from hpcwedge.build import contact_problem
-from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
 from hpcwedge.environment import environment
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.patterns import BnBStats, PatternTree, Subtree, global_mu_critical
 from hpcwedge.problem import parametrize
+from hpcwedge.reference import brute_force_patterns
 from hpcwedge.scene import parse_scene
 
 
@@ -63,11 +61,7 @@ def main():
         if not args.no_brute:
             t = time.perf_counter()
             counts = {}
-            brute = []
-            for bits in range(1 << m):
-                zu = Subtree(m, contact=bits).masks(m)[0]
-                if feasible(pattern_rows(p, m, zu, ~zu), mu, counts)[0] == FEASIBLE:
-                    brute.append(bits)
+            brute = brute_force_patterns(p, m, mu, counts)
             row["brute_seconds"] = round(time.perf_counter() - t, 3)
             row["brute_statuses"] = counts
             row["brute_equal"] = brute == got

@@ -16,9 +16,10 @@ Engines, each in its own process with a time limit (bench_2d.run_script):
                with an incumbent (the route before issue 13)
   highs_bisect the MILP of conic.wedge_milp at fixed mu (valid big-M from the
                normalisation sum r_n + s sum u_n = 1), bisection on mu to 1e-6 relative
-  scip_bisect  SCIP (pyscipopt) on the MILP of issue 13's text: x in the (r, alpha) form,
-               u_n >= 0, friction, sum r_n = 1, r_n,i <= z_i, indicator z_i = 1 => u_n,i <= 0;
-               pure feasibility, bisection on mu to 1e-6 relative ("missing" without pyscipopt)
+  scip_bisect  SCIP (pyscipopt) on the MILP of issue 13's text (reference.scip_wedged): x in
+               the (r, alpha) form, u_n >= 0, friction, sum r_n = 1, r_n,i <= z_i, indicator
+               z_i = 1 => u_n,i <= 0; pure feasibility, bisection on mu to 1e-6 relative
+               (reference.bisect; "missing" without pyscipopt)
 Counts: ours/ours_tree LPs and tree nodes, MILP solves and branch-and-bound nodes (HiGHS's
 mip_node_count, SCIP's getNNodes); counts are the same on every machine, seconds are not
 (2 cores shared: read them as +-2x). Error: relative to tan(10 deg).
@@ -63,49 +64,10 @@ def scene(rows: int, mu_c: str):
 
 
 def bisect(decide, hi: float = MU_MAX, rtol: float = BISECT_RTOL) -> float | None:
-    """Least mu in (0, hi] at which decide(mu) holds, to rtol (the bracket's upper end);
-    None if decide(hi) fails."""
-    if not decide(hi):
-        return None
-    lo = 0.0
-    while hi - lo > rtol * hi:
-        mid = 0.5 * (lo + hi)
-        if decide(mid):
-            hi = mid
-        else:
-            lo = mid
-    return hi
-
-
-def scip_feasible(param, m: int, mu: float, counts: dict) -> bool:
-    """SCIP on issue 13's indicator MILP at mu: is there a wedged configuration?"""
-    from pyscipopt import Model, quicksum
-    U, R = param.U, param.R
-    d = param.d
-    model = Model()
-    model.hideOutput()
-    x = [model.addVar(lb=None, ub=None, name=f"x{j}") for j in range(d)]
-    z = [model.addVar(vtype="B", name=f"z{i}") for i in range(m)]
-
-    def lin(row):
-        return quicksum(float(row[j]) * x[j] for j in range(d) if row[j] != 0.0)
-
-    for i in range(m):
-        un, rn, rt = lin(U[i]), lin(R[i]), lin(R[m + i])
-        model.addCons(un >= 0)
-        model.addCons(mu * rn + rt >= 0)
-        model.addCons(mu * rn - rt >= 0)
-        model.addCons(rn <= z[i])
-        model.addConsIndicator(un <= 0, binvar=z[i])
-    model.addCons(lin(R[:m].sum(0)) == 1)
-    model.optimize()
-    counts["milp_solves"] = counts.get("milp_solves", 0) + 1
-    counts["milp_nodes"] = counts.get("milp_nodes", 0) + int(model.getNNodes())
-    status = model.getStatus()
-    if status not in ("optimal", "infeasible"):
-        counts["undecided"] = counts.get("undecided", 0) + 1
-        return True                          # conservative: keeps the bracket's upper end valid
-    return status == "optimal"
+    """Least mu in (0, hi] at which decide(mu) holds, to rtol (the bracket's upper end;
+    reference.bisect); None if decide(hi) fails."""
+    from hpcwedge.reference import bisect as bisection
+    return bisection(decide, 0.0, hi, rtol) if decide(hi) else None
 
 
 def worker(engine: str, rows: int) -> dict:
@@ -113,6 +75,7 @@ def worker(engine: str, rows: int) -> dict:
     from hpcwedge.conic import FEASIBLE, INFEASIBLE, wedge_milp
     from hpcwedge.patterns import BnBStats, global_mu_critical
     from hpcwedge.pipeline import run_scene
+    from hpcwedge.reference import scip_wedged
     if engine == "ours":
         t = time.perf_counter()
         res = run_scene(scene(rows, "global"))
@@ -152,8 +115,9 @@ def worker(engine: str, rows: int) -> dict:
             import pyscipopt  # noqa: F401
         except ImportError:
             sys.exit(3)
+
         def decide(mu):
-            return scip_feasible(param, m, mu, counts)
+            return scip_wedged(param, m, mu, counts)
     else:
         raise SystemExit(f"unknown engine {engine}")
     t = time.perf_counter()

@@ -6,16 +6,17 @@
 2D: plug2d (cols 3, taper 10 deg, free body), mu = 0.65, rows 2..9 (m = 4..18):
   ours        run_scene (enumerate + mu_c "global"); stages from result.timings
               (condense, enumerate, mu_c)
-  ours_split  the enumerate stage alone, split into parametrize / DD / cliques
-              (bench_2d.worker_ours)
+  ours_split  the enumerate stage alone, run_scene with mu_c "none" (bench_2d.worker_ours:
+              time = the run's timings.enumerate)
   cdd_exact   the peer: cddlib exact full DD + complementarity filter + cliques
               (bench_2d.worker_peer), m <= 8, 120 s per point
 3D: plug3d levels 2, ring 4..8 (m = 8..16), mu = 1.0, PatternTree branch and bound
   bnb_sym     with plug3d's node symmetry (as `hpcwedge run`), patterns expanded
   bnb         without a symmetry
-  brute       the peer: one SOCP per partition (bench_socp_count.brute), m <= 12
-  3D stages: setup (model + parametrize), socp (Clarabel), lp (HiGHS), cores (learnt
-  infeasible cores), other (the rest of the search: tree, rows, bookkeeping), expand (symmetry expansion).
+  brute       the peer: one SOCP per partition (reference.brute_force_patterns), m <= 12
+  3D: bnb_sym and bnb are the product's own runs (run_scene, mu_c "none", run.symmetry on /
+  off); their stages and counters are the run's own (timings condense / enumerate, stats
+  bnb: nodes, SOCPs, skipped, pruned, undecided); time = the enumerate stage.
 
 Every point runs in a fresh subprocess (this script with --point), which reports its
 peak RSS (getrusage ru_maxrss); memory growth is that peak above the same engine's
@@ -54,60 +55,41 @@ LABELS = {"ours": "ours (run_scene)", "ours_split": "ours (enumerate only)", "cd
 
 # --------------------------------------------------------------------------- workers (in the subprocess)
 
-def _timed(module, name: str, acc: dict, key: str) -> None:
-    """Replace module.name by a wrapper adding its run time to acc[key]."""
-    fn = getattr(module, name)
-
-    def wrapper(*a, **k):
-        t = time.perf_counter()
-        try:
-            return fn(*a, **k)
-        finally:
-            acc[key] = acc.get(key, 0.0) + time.perf_counter() - t
-    setattr(module, name, wrapper)
-
-
 def worker_3d(engine: str, ring: int) -> dict:
-    import scipy.optimize
-    from hpcwedge import conic, patterns
-    from hpcwedge.patterns import PatternTree
-    from bench_socp_count import brute, plug
-    t0 = time.perf_counter()
-    p, m, group = plug(LEVELS, ring, symmetry=True)
-    setup = time.perf_counter() - t0
-    acc: dict = {}
-    _timed(conic, "_clarabel", acc, "socp")
-    _timed(scipy.optimize, "linprog", acc, "lp")     # (conic imports it when it solves)
-    _timed(patterns, "infeasible_core", acc, "cores")
-    t0 = time.perf_counter()
+    """One 3D point, plug3d (levels LEVELS, ring) at MU_3D. bnb_sym / bnb: the product's own
+    run (pipeline.run_scene, enumerate = true, mu_c = "none", run.symmetry on / off), its
+    stages and counters its own (timings condense / enumerate, stats bnb); brute: one SOCP
+    per partition (reference.brute_force_patterns), "condense" = model + parametrize."""
     if engine == "brute":
-        found = brute(p, m, MU_3D)
-        t1 = t2 = time.perf_counter()
-        solves = 2 ** m
-    else:
-        tree = PatternTree(p, m, MU_3D, symmetry=group if engine == "bnb_sym" else None)
-        out = tree.explore(tree.root())
+        from bench_socp_count import plug
+        from hpcwedge.reference import brute_force_patterns
+        t0 = time.perf_counter()
+        p, m = plug(LEVELS, ring)
         t1 = time.perf_counter()
-        found = [s.contact for s in tree.expand(out.found)]
-        t2 = time.perf_counter()
-        solves = out.stats.solves
-    n = len(found)
-    search = t1 - t0
-    stages = {"setup": setup, **{k: acc.get(k, 0.0) for k in ("socp", "lp", "cores")}}
-    stages["other"] = search - stages["socp"] - stages["lp"] - stages["cores"]
-    stages["expand"] = t2 - t1
+        found = brute_force_patterns(p, m, MU_3D)
+        stages = {"condense": t1 - t0, "enumerate": time.perf_counter() - t1}
+        counters = {"solves": 2 ** m}
+    else:
+        from hpcwedge.pipeline import run_scene
+        from hpcwedge.scene import parse_scene
+        scene = parse_scene({"name": "growth", "dim": 3, "friction": {"mu": [MU_3D]},
+                             "model": {"kind": "plug3d", "levels": LEVELS, "ring": ring, "taper_deg": 10.0},
+                             "compute": {"enumerate": True, "mu_c": "none"},
+                             "run": {"symmetry": engine == "bnb_sym"}})
+        res = run_scene(scene)
+        m = res.m
+        found = [sum(1 << i for i in pat["contact"]) for pat in res.runs[0].patterns]
+        stages = {k: res.timings[k] for k in ("condense", "enumerate")}
+        counters = {k: res.stats["bnb"][k] for k in ("nodes", "solves", "skipped", "pruned", "undecided")}
     digest = hashlib.sha1(repr(sorted(found)).encode()).hexdigest()[:16]     # the pattern set
-    return {"m": m, "seconds": t2 - t0, "patterns": n, "patterns_digest": digest, "socps": solves,
-            "stages": stages}
+    return {"m": m, "seconds": stages["enumerate"], "patterns": len(found), "patterns_digest": digest,
+            "socps": counters["solves"], "counters": counters, "stages": stages}
 
 
 def worker_2d(engine: str, rows: int) -> dict:
-    if engine == "ours":
-        r = bench_2d.worker_scene(rows, MU_2D)
+    if engine in ("ours", "ours_split"):         # the run's own stage timings
+        r = bench_2d.worker_scene(rows, MU_2D) if engine == "ours" else bench_2d.worker_ours(rows, MU_2D, False)
         stages = {k: v for k, v in r["breakdown"].items() if k != "total"}
-    elif engine == "ours_split":
-        r = bench_2d.worker_ours(rows, MU_2D, exact=False)
-        stages = r["breakdown"]
     else:
         r = bench_2d.worker_peer(rows, MU_2D)
         stages = r["breakdown"]

@@ -11,16 +11,16 @@
                      a supported body, rows 4 (m = 8; --quick: rows 3)
   vgroove eps 0/0.1  the V-groove bar, free (eps 0) and supported (eps 0.1), mu 1.5 mu^c
 2D engines, each in its own subprocess with a time limit (bench_2d.run_script):
-  ours_float   our enumerate stage in float (bench_2d.enumerate_ours: parametrize,
-               complementarity-pruned DD, maximal cones)            <- the reference time
-  ours_exact   the same in exact rational arithmetic
+  ours_float   our enumerate stage in float as `hpcwedge run` runs it (bench_2d.enumerate_ours:
+               run_scene's timings.enumerate)                        <- the reference time
+  ours_exact   the same with compute.exact = true (exact rational arithmetic)
   cdd_exact    cddlib's full double description of P = {x : A x >= 0} in exact arithmetic
                (GMP rationals) on the exact integer rows, then the complementarity filter
                and the clique search (bench_2d.peer_cdd)
   cdd_float    the same peer in cddlib's float arithmetic on the float rows (what a float
                user hands it), zero test |a.x| <= dd.FLOAT_ZERO_TOL on unit rows and rays
-  brute_lp     one LP per sign pattern, all 2^m of them (bench_socp_count.brute: HiGHS via
-               conic.feasible), compared with the pattern set the exact rays imply
+  brute_lp     one LP per sign pattern, all 2^m of them (reference.brute_force_patterns: HiGHS
+               via conic.feasible), compared with the pattern set the exact rays imply
                (patterns.implied_patterns, SPEC §2)
 mu^c: bench_mu_c's analytic scenes (its --quick list; --quick here: every other one): the
   critical cone / pattern once (bench_mu_c.critical_pattern), then plain bisection (LP in
@@ -111,20 +111,21 @@ def _bits(patterns) -> list[int]:
 # --------------------------------------------------------------------------- workers (subprocess)
 
 def worker_2d(engine: str, spec: dict, mu: float) -> dict:
-    from hpcwedge.patterns import implied_patterns
+    if engine in ("ours_float", "ours_exact"):
+        from hpcwedge.patterns import implied_patterns
+        out = bench_2d.enumerate_ours(spec, mu, exact=engine == "ours_exact")
+        out["patterns"] = _bits(implied_patterns(out.pop("ray_zero"), out["m"]))
+        return {**out, "n_patterns": len(out["patterns"])}
     problem = _problem(spec, mu)
     m = problem.m
-    if engine in ("ours_float", "ours_exact"):
-        out = bench_2d.enumerate_ours(problem, mu, exact=engine == "ours_exact")
-        out["patterns"] = _bits(implied_patterns(out.pop("ray_zero"), m))
-    elif engine in ("cdd_exact", "cdd_float"):
+    if engine in ("cdd_exact", "cdd_float"):
         out = bench_2d.peer_cdd(problem, mu, "fraction" if engine == "cdd_exact" else "float")
     elif engine == "brute_lp":
-        from bench_socp_count import brute
         from hpcwedge.problem import parametrize
+        from hpcwedge.reference import brute_force_patterns
         t0 = time.perf_counter()
         param = parametrize(problem)
-        found = brute(param, m, mu)
+        found = brute_force_patterns(param, m, mu)
         out = {"seconds": time.perf_counter() - t0, "patterns": sorted(found), "lps": 2 ** m}
     else:
         raise SystemExit(f"unknown 2D engine {engine}")

@@ -8,9 +8,9 @@ plug3d, levels = 2, ring = 4..7 (m = 8, 10, 12, 14). For each (m, mu): the whole
 tree (PatternTree.explore from the root): SOCPs (Clarabel problems solved, each
 retry of the status policy not counted again), LPs (every HiGHS call: screens and
 pyramid fallbacks), tree nodes, nodes decided without a solve, feasible patterns,
-wall time; with m <= --brute-max also the brute force (one SOCP per partition) and
-whether the two pattern sets agree. Branching: "symmetric" (what `hpcwedge run`
-does: dynamic branching over orbits of plug3d's dihedral node symmetry, patterns
+wall time; with m <= --brute-max also the brute force (one SOCP per partition,
+reference.brute_force_patterns) and whether the two pattern sets agree.
+Branching: "symmetric" (what `hpcwedge run` does: dynamic branching over orbits of plug3d's dihedral node symmetry, patterns
 expanded over the group afterwards), "dynamic" (PatternTree without a symmetry: on
 the free node whose relaxed solution violates complementarity most) and "static"
 (the order m-1..0 with steered solves). Every variant learns infeasible cores
@@ -23,13 +23,11 @@ import json
 import os
 import time
 
-import numpy as np
-
 from hpcwedge.build import contact_problem
-from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
 from hpcwedge.environment import environment
-from hpcwedge.patterns import PatternTree, Subtree
+from hpcwedge.patterns import PatternTree
 from hpcwedge.problem import parametrize
+from hpcwedge.reference import brute_force_patterns
 from hpcwedge.scene import parse_scene
 from hpcwedge.symmetry import node_symmetries
 
@@ -42,15 +40,6 @@ def plug(levels, ring, taper=10.0, symmetry=False):
     if symmetry:
         return parametrize(prob), prob.m, node_symmetries(prob.K, 3)
     return parametrize(prob), prob.m
-
-
-def brute(p, m, mu):
-    out = []
-    for bits in range(1 << m):
-        zu = Subtree(m, contact=bits).masks(m)[0]
-        if feasible(pattern_rows(p, m, zu, ~zu), mu)[0] == FEASIBLE:
-            out.append(bits)
-    return out
 
 
 def main():
@@ -87,7 +76,7 @@ def main():
             same, tb = "-", float("nan")
             if m <= args.brute_max and branching == args.branching[0]:
                 t = time.perf_counter()
-                ref = brute(p, m, mu)
+                ref = brute_force_patterns(p, m, mu)
                 tb = time.perf_counter() - t
                 row["brute_seconds"] = round(tb, 3)
                 row["brute_equal"] = ref == got

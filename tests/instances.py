@@ -1,12 +1,11 @@
-"""Random small contact problems for the tests (supported and free bodies), and an
-independent feasibility route for 3D patterns."""
+"""Random small contact problems for the tests (supported and free bodies, 2D and 3D, with
+a planted node symmetry); the independent routes are in hpcwedge.reference."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.optimize import linprog
 
 from hpcwedge.problem import ContactProblem
 
@@ -81,54 +80,6 @@ def random_problem_3d(rng: np.random.Generator, m: int, free: bool) -> ContactPr
     G = rng.standard_normal((B.shape[1], B.shape[1]))
     K = B @ (G @ G.T + 0.2 * np.eye(B.shape[1])) @ B.T
     return ContactProblem(3, 0.5 * (K + K.T), N)
-
-
-def ur_pyramid_feasible(prob, contact: np.ndarray, mu: float, sides: int, inner: bool) -> bool:
-    """Is the full pattern (contact nodes C, the others gap G) feasible with every
-    friction cone replaced by an inscribed (inner) or circumscribed pyramid? In
-    the variables (u, r) in R^{6m} with K u = r, by HiGHS: independent of
-    parametrize() and of Clarabel."""
-    m, n = prob.m, prob.n
-    K = prob.K
-    C, G = np.flatnonzero(contact), np.flatnonzero(~contact)
-    eq, ub = [np.hstack([K, -np.eye(n)])], []
-    for i in C:                                 # u_n,i = 0
-        r_ = np.zeros((1, 2 * n))
-        r_[0, i] = 1.0
-        eq.append(r_)
-    for i in G:                                 # r_i = 0, u_n,i >= 0
-        r_ = np.zeros((3, 2 * n))
-        r_[np.arange(3), n + np.arange(3) * m + i] = 1.0
-        eq.append(r_)
-        r_ = np.zeros((1, 2 * n))
-        r_[0, i] = -1.0
-        ub.append(r_)
-    norm = np.zeros((1, 2 * n))
-    norm[0, n:n + m] = 1.0
-    th = 2 * np.pi * (np.arange(sides) + 0.5) / sides
-    c = math.cos(math.pi / sides) if inner else 1.0
-    for i in C:                                 # cos t r_t1 + sin t r_t2 <= c mu r_n
-        r_ = np.zeros((sides, 2 * n))
-        r_[:, n + m + i], r_[:, n + 2 * m + i] = np.cos(th), np.sin(th)
-        r_[:, n + i] = -c * mu
-        ub.append(r_)
-    A_eq = np.vstack(eq + [norm])
-    b_eq = np.zeros(len(A_eq))
-    b_eq[-1] = 1.0
-    A_ub = np.vstack(ub) if ub else None
-    res = linprog(np.zeros(2 * n), A_ub=A_ub, b_ub=np.zeros(len(A_ub)) if ub else None, A_eq=A_eq,
-                  b_eq=b_eq, bounds=[(None, None)] * (2 * n), method="highs")
-    return res.status == 0
-
-
-def ur_sandwich(prob, contact: np.ndarray, mu: float, sides: int = 64):
-    """"feasible" when the inscribed pyramids admit a point, "infeasible" when the
-    circumscribed ones do not, None in between (see ur_pyramid_feasible)."""
-    if ur_pyramid_feasible(prob, contact, mu, sides, inner=True):
-        return "feasible"
-    if not ur_pyramid_feasible(prob, contact, mu, sides, inner=False):
-        return "infeasible"
-    return None
 
 
 def symmetric_problem_3d(rng: np.random.Generator, m: int, free: bool) -> ContactProblem:

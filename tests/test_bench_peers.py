@@ -24,9 +24,8 @@ PLUG = {"model": {"kind": "plug2d", "rows": 2, "cols": 3, "taper_deg": 10.0}}
 @needs_cdd
 @pytest.mark.parametrize("number_type", ["fraction", "float"])
 def test_cdd_peer_matches_ours_on_plug_m4(number_type):
-    problem = bench_peers._problem(PLUG, 0.65)
-    ours = bench_2d.enumerate_ours(problem, 0.65, exact=False)
-    peer = bench_2d.peer_cdd(problem, 0.65, number_type)
+    ours = bench_2d.enumerate_ours(PLUG, 0.65, exact=False)
+    peer = bench_2d.peer_cdd(bench_peers._problem(PLUG, 0.65), 0.65, number_type)
     assert (peer["n_wedged_rays"], peer["n_cones"]) == (ours["n_wedged_rays"], ours["n_cones"]) == (8, 1)
     assert peer["fingerprint"] == ours["fingerprint"]
     assert peer["n_extreme_rays_P"] > peer["n_complementary"]       # the filter dropped rays
@@ -52,8 +51,8 @@ def test_float_peer_aborts_on_small_taper():
     problem = bench_peers._problem(spec, mu)
     with pytest.raises(RuntimeError, match="[Ii]nconsisten"):
         bench_2d.peer_cdd(problem, mu, "float")
-    ours = bench_2d.enumerate_ours(problem, mu, exact=False)
-    assert ours["fingerprint"] == bench_2d.enumerate_ours(problem, mu, exact=True)["fingerprint"]
+    ours = bench_2d.enumerate_ours(spec, mu, exact=False)
+    assert ours["fingerprint"] == bench_2d.enumerate_ours(spec, mu, exact=True)["fingerprint"]
 
 
 def _rec(engine, status="ok", seconds=1.0, rays=8, fp="a"):

@@ -11,12 +11,8 @@ from hpcwedge.conic import (FEASIBLE, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, VERI
 from hpcwedge.mu_critical import mu_critical, mu_critical_rows
 from hpcwedge.patterns import PatternTree
 from hpcwedge.problem import parametrize
-from instances import random_problem, random_problem_3d, ur_sandwich
-
-
-def full_patterns(m):
-    for bits in range(1 << m):
-        yield bits, np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
+from hpcwedge.reference import pattern_decisions, ur_sandwich
+from instances import random_problem, random_problem_3d
 
 
 CASES = [(seed, [2, 3, 4, 3, 2, 4][seed % 6], bool(seed % 2)) for seed in range(110)] + \
@@ -29,10 +25,8 @@ def test_3d_patterns_bnb_equals_brute_force_and_independent_route(seed, m, free)
     prob = random_problem_3d(rng, m, free)
     mu = float(np.exp(rng.uniform(np.log(0.3), np.log(3.0))))
     p = parametrize(prob)
-    counts = {}
     brute, undecided_indep = set(), 0
-    for bits, zu in full_patterns(m):
-        status, x = feasible(pattern_rows(p, m, zu, ~zu), mu, counts)
+    for bits, zu, status, x in pattern_decisions(p, m, mu, {}):
         assert status != UNDECIDED
         if status == FEASIBLE:
             brute.add(bits)

@@ -1,45 +1,14 @@
 """Complementarity-pruned DD against exact arithmetic, an unpruned brute force, and
 an LP per sign pattern, on random supported and free bodies."""
-import itertools
 
 import numpy as np
 import pytest
 
-from hpcwedge.conic import FEASIBLE, INFEASIBLE, lp_feasible, pattern_rows
+from hpcwedge.conic import FEASIBLE, INFEASIBLE
 from hpcwedge.dd import canonical_order, complementary_rays, merge_results, split_faces
 from hpcwedge.problem import friction_rows_2d, parametrize
+from hpcwedge.reference import brute_force_rays, pattern_decisions, patterns_of_rays
 from instances import random_problem
-
-
-def brute_force_rays(A: np.ndarray) -> set:
-    """Zero sets of all extreme rays of {A x >= 0}: every d-1 row subset of rank
-    d-1, its null vector (either sign) if feasible; then the complementarity filter."""
-    nc, d = A.shape
-    found = set()
-    for S in itertools.combinations(range(nc), d - 1):
-        _, s, vt = np.linalg.svd(A[list(S)])
-        if s[-1] < 1e-9 * s[0]:
-            continue
-        for y in (vt[-1], -vt[-1]):
-            v = A @ y
-            if np.all(v >= -1e-9):
-                found.add(tuple(np.abs(v) <= 1e-9))
-    return {z for z in found
-            if all(z[3 * i] or (z[3 * i + 1] and z[3 * i + 2]) for i in range(nc // 3))}
-
-
-def patterns_from_rays(zero: np.ndarray, m: int) -> set:
-    """(C, G) is feasible iff a wedged ray has supp(r_n) in C and supp(u_n) in G."""
-    out = set()
-    for z in zero:
-        zu, zr = z[0::3], z[1::3] & z[2::3]
-        if zr.all():
-            continue
-        free = [i for i in range(m) if zu[i] and zr[i]]
-        for bits in itertools.product((0, 1), repeat=len(free)):
-            contact = set(np.flatnonzero(~zr)) | {i for i, b in zip(free, bits) if b}
-            out.add(tuple(sorted(contact)))
-    return out
 
 
 CASES = [(seed, m, free) for seed in range(40) for m, free in
@@ -75,13 +44,11 @@ def test_patterns_lp_per_pattern(seed, m, free):
     p = parametrize(prob)
     dd = complementary_rays(friction_rows_2d(p, mu, m), m)
     lp = set()
-    for bits in itertools.product((False, True), repeat=m):
-        zu = np.array(bits)
-        status, _ = lp_feasible(pattern_rows(p, m, zu, ~zu), mu)
+    for bits, _, status, _ in pattern_decisions(p, m, mu):
         assert status in (FEASIBLE, INFEASIBLE)
         if status == FEASIBLE:
-            lp.add(tuple(np.flatnonzero(zu)))
-    assert patterns_from_rays(dd.zero, m) == lp
+            lp.add(bits)
+    assert patterns_of_rays(dd.zero, m) == lp
 
 
 @pytest.mark.parametrize("seed", range(6))

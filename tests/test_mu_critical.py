@@ -182,14 +182,8 @@ def test_plug3d_global_mu_c_is_tan_taper(taper):
 
 
 def _bisect_ur(prob, contact, lo, hi, sides, inner, rtol=1e-10):
-    from instances import ur_pyramid_feasible
-    while hi - lo > rtol * hi:
-        mid = 0.5 * (lo + hi)
-        if ur_pyramid_feasible(prob, contact, mid, sides, inner):
-            hi = mid
-        else:
-            lo = mid
-    return hi
+    from hpcwedge.reference import bisect, ur_pyramid_feasible
+    return bisect(lambda mu: ur_pyramid_feasible(prob, contact, mu, sides, inner), lo, hi, rtol)
 
 
 @pytest.mark.parametrize("seed", range(8))

@@ -4,7 +4,6 @@ rays split over faces (tasks "face") give the unsplit answers and survive a
 checkpoint (bit for bit on 1-4 ranks: tests/test_determinism.py); idle ranks sleep
 (CPU time from /proc); 2D sign patterns agree with
 the rays; the SLURM_NTASKS check."""
-import itertools
 import json
 import os
 import signal
@@ -245,6 +244,8 @@ def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
 def test_2d_patterns_agree_with_rays(rows, taper, mus):
     """SPEC §2: (C, G) is feasible iff some wedged ray has supp(r_n) in C and
     supp(u_n) in G — the engine's patterns against the double description's rays."""
+    from hpcwedge.reference import patterns_of_supports
+
     def scene(enum):
         return parse_scene({"name": "t", "dim": 2, "model": {"kind": "plug2d", "rows": rows, "taper_deg": taper},
                             "friction": {"mu": mus}, "compute": {"enumerate": enum, "mu_c": "cones"},
@@ -258,12 +259,8 @@ def test_2d_patterns_agree_with_rays(rows, taper, mus):
         un, rn = rr.rays[:, :m], rr.rays[:, 2 * m:3 * m]
         scale = np.abs(rr.rays).max(axis=1, keepdims=True)
         supp_u, supp_r = np.abs(un) > 1e-9 * scale, np.abs(rn) > 1e-9 * scale
-        want = []
-        for bits in itertools.product([True, False], repeat=m):     # contact first, node 0 first
-            c = np.array(bits)
-            if np.any(~(supp_r & ~c).any(axis=1) & ~(supp_u & c).any(axis=1)):
-                want.append(np.flatnonzero(c).tolist())
-        want.sort(key=lambda c: sum(1 << i for i in c))                  # canonical: by contact bits
+        want = [[i for i in range(m) if bits >> i & 1]                   # canonical: by contact bits
+                for bits in sorted(patterns_of_supports(supp_r, supp_u, m))]
         assert [p["contact"] for p in rp.patterns] == want
         for p in rp.patterns:               # a pattern's mu^c: at most the run's mu, at least the global one
             assert ray.mu_c * (1 - 1e-9) <= p["mu_c"] <= rp.mu * (1 + 1e-9)

@@ -5,6 +5,7 @@ import pytest
 
 from hpcwedge.patterns import PatternTree, Subtree
 from hpcwedge.problem import parametrize
+from hpcwedge.reference import brute_force_patterns, patterns_of_supports
 from instances import random_problem
 
 
@@ -55,11 +56,7 @@ def test_2d_patterns_are_the_ones_the_rays_imply(seed):
     dd = complementary_rays(friction_rows_2d(p, mu, m), m)
     w = dd.wedged()
     loaded, lifted = ~dd.zero_r()[w], ~dd.zero_u()[w]          # supp(r_n), supp(u_n) per wedged ray
-    implied = set()
-    for bits in range(1 << m):
-        C = np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
-        if np.any(~(loaded & ~C).any(axis=1) & ~(lifted & C).any(axis=1)):
-            implied.add(bits)
+    implied = patterns_of_supports(loaded, lifted, m)
     got = {int(sum(1 << i for i in range(m) if zu[i])) for zu, _ in sign_patterns(p, m, mu)}
     assert got == implied
 
@@ -111,13 +108,7 @@ def test_3d_skip_rule_and_steering_save_solves():
 
 def _brute_3d(p, m, mu):
     """Feasible full patterns by one SOCP per partition (contact bits)."""
-    from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
-    out = set()
-    for bits in range(1 << m):
-        zu = Subtree(m, contact=bits).masks(m)[0]
-        if feasible(pattern_rows(p, m, zu, ~zu), mu)[0] == FEASIBLE:
-            out.add(bits)
-    return out
+    return set(brute_force_patterns(p, m, mu))
 
 
 @pytest.mark.parametrize("seed", range(16))
