@@ -36,8 +36,8 @@ next row greedily (_next_row: smallest expected ray set after the step, scored o
 a sample of the rays); exact runs, and runs given a node order, use the static
 order (u_n rows node by node, then the friction rows left out of the basis).
 
-Zero sets are bitsets: node i's three rows occupy bits 3*(i % 21) + kind of
-uint64 word i // 21, so each node's test stays inside one word.
+Zero sets are bitsets in nodesets.RowBits's layout: node i's three rows occupy
+bits 3*(i % 21) + kind of uint64 word i // 21, so each node's test stays inside one word.
 """
 from __future__ import annotations
 
@@ -50,9 +50,9 @@ from typing import Callable
 import numpy as np
 
 from . import exact as xq
+from .nodesets import Face, RowBits, canonical_face, canonical_order
 from .problem import F_MINUS, F_PLUS, U_N
 
-NODES_PER_WORD = 21
 FLOAT_ZERO_TOL = 1e-10   # on unit-norm rows and unit-norm rays
 BASIS_DEPENDENT = 1e-9   # a unit row this close to the span of others is dependent
 BASIS_WELL_POSED = 1e-3  # initial basis rows are taken this far from the span first
@@ -90,54 +90,6 @@ class DDResult:
         return ~self.zero_r().all(axis=1)
 
 
-class _Bits:
-    """Bit layout of zero sets and node masks."""
-
-    def __init__(self, m: int):
-        self.m = m
-        self.W = max(1, -(-m // NODES_PER_WORD))
-        self.node_mask = np.zeros(self.W, dtype=np.uint64)   # bits 3j of every node slot used
-        for i in range(m):
-            w, b = divmod(i, NODES_PER_WORD)
-            self.node_mask[w] |= np.uint64(1) << np.uint64(3 * b)
-
-    def pos(self, c: int) -> tuple[int, np.uint64]:
-        i, kind = divmod(c, 3)
-        w, b = divmod(i, NODES_PER_WORD)
-        return w, np.uint64(1) << np.uint64(3 * b + kind)
-
-    def pack(self, zero: np.ndarray) -> np.ndarray:
-        """(R, 3m) bool -> (R, W) uint64."""
-        Z = np.zeros((zero.shape[0], self.W), dtype=np.uint64)
-        for c in range(zero.shape[1]):
-            w, bit = self.pos(c)
-            Z[zero[:, c], w] |= bit
-        return Z
-
-    def unpack(self, Z: np.ndarray) -> np.ndarray:
-        out = np.zeros((Z.shape[0], 3 * self.m), dtype=bool)
-        for c in range(3 * self.m):
-            w, bit = self.pos(c)
-            out[:, c] = (Z[:, w] & bit) != 0
-        return out
-
-    def faces(self, Z: np.ndarray, done: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(R, W) zero words -> (u, r) words with bit 3j set where finished node j has
-        u_n = 0 (u) or r_n = 0 (r)."""
-        one, two = np.uint64(1), np.uint64(2)
-        return Z & done, (Z >> one) & (Z >> two) & done
-
-    def complementary_at(self, Z: np.ndarray, done: np.ndarray) -> np.ndarray:
-        """(..., W) zero words -> (...) bool: at every node in `done` (W words of
-        bits 3j) u_n = 0 or both friction rows tight."""
-        one, two = np.uint64(1), np.uint64(2)
-        ok = (Z | ((Z >> one) & (Z >> two))) & done
-        return np.all(ok == done, axis=-1)
-
-
-Face = tuple[tuple[int, ...], tuple[int, ...]]
-
-
 def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
                        order: list[int] | str | None = None,
                        progress: Callable[[dict], None] | None = None,
@@ -162,7 +114,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
     """
     t0 = time.perf_counter()
     nc, d = A.shape
-    bits = _Bits(m)
+    bits = RowBits(m)
     if isinstance(order, str) and order not in ("greedy", "static"):
         raise ValueError(f'order must be a list of nodes, "greedy" or "static", got {order!r}')
     greedy = (order is None and not exact) or (isinstance(order, str) and order == "greedy")
@@ -191,8 +143,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
     done = np.zeros(bits.W, dtype=np.uint64)
     for i in range(m):
         if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
-            w, b = divmod(i, NODES_PER_WORD)
-            done[w] |= np.uint64(1) << np.uint64(3 * b)
+            bits.add_node(done, i)
     keep = bits.complementary_at(Z, done)
     X, Z = X[keep], Z[keep]
     rest = [3 * i + U_N for i in order if 3 * i + U_N not in added]
@@ -202,7 +153,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
     if not exact:
         stats.update(close_calls=0, closest=None, cancellation=1.0)
     if face is not None:
-        stats["face"] = _canonical_face(face)
+        stats["face"] = canonical_face(face)
     total = len(rest)
     work: dict = {}                  # buffers reused from step to step
     pending = list(rest)
@@ -213,8 +164,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
         i = h // 3
         done_after = done.copy()
         if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
-            w, b = divmod(i, NODES_PER_WORD)
-            done_after[w] |= np.uint64(1) << np.uint64(3 * b)
+            bits.add_node(done_after, i)
         X, Z = _add_constraint(A[h], h, X, Z, done, done_after, fixed, nz1, bits, exact, stats, work)
         done = done_after
         stats["max_rays"] = max(stats["max_rays"], int(X.shape[0]))
@@ -258,17 +208,12 @@ def _next_row(pending, A, X, Z, added, bits):
     return pending[int(np.argmin(score))]
 
 
-def _canonical_face(face: Face) -> Face:
-    contact, gap = face
-    return (tuple(sorted({int(i) for i in contact})), tuple(sorted({int(i) for i in gap})))
-
-
 def _face_rows(face: Face | None, m: int) -> list[int]:
     """Constraint rows that are equalities on the face (u_n rows of contact nodes,
     both friction rows of gap nodes)."""
     if face is None:
         return []
-    contact, gap = _canonical_face(face)
+    contact, gap = canonical_face(face)
     for i in contact + gap:
         if not 0 <= i < m:
             raise ValueError(f"face node {i} is not in 0..{m - 1}")
@@ -351,21 +296,6 @@ def _closest(values) -> float | None:
     FLOAT_ZERO_TOL in ratio."""
     vals = [v for v in values if v is not None]
     return min(vals, key=lambda v: abs(math.log(v / FLOAT_ZERO_TOL))) if vals else None
-
-
-def canonical_order(zero: np.ndarray, return_words: bool = False):
-    """Stable permutation sorting the rows of zero (R, k) bool lexicographically
-    (column 0 first, False < True): the same as np.lexsort(zero.T[::-1]), but on
-    the rows packed into big-endian 64-bit words (one sort key per 64 columns).
-    With return_words, also the packed rows (R, ceil(k / 64)) uint64."""
-    R, k = zero.shape
-    nw = max(1, -(-k // 64))
-    packed = np.zeros((R, 8 * nw), dtype=np.uint8)
-    if k:
-        packed[:, :-(-k // 8)] = np.packbits(zero, axis=1)
-    words = packed.view(">u8").astype(np.uint64)
-    order = np.lexsort(words.T[::-1]) if nw > 1 else np.argsort(words[:, 0], kind="stable")
-    return (order, words) if return_words else order
 
 
 def _initial_basis(A, m, order, exact, eq=()) -> tuple[list[int], list[int]]:
