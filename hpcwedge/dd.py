@@ -21,7 +21,7 @@ unpruned run and against brute force.
 
 Faces (SPEC §5). Every complementary ray lies on {u_n,i = 0} or {r_n,i = 0} at
 every node, so for k branching nodes the complementary extreme rays of P are the
-union of those of the 2^k faces F (split_faces), deduplicated (merge_results);
+union of those of the 2^k faces F (faces.split_faces), deduplicated (faces.merge_results);
 the extreme rays of a face of P are the extreme rays of P lying on it. A face run
 starts from the equality rows E of F: they are taken first into the initial basis,
 and only the initial rays tight at all of them are kept (the face of the
@@ -41,7 +41,6 @@ bits 3*(i % 21) + kind of uint64 word i // 21, so each node's test stays inside 
 """
 from __future__ import annotations
 
-import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,7 +50,7 @@ import numpy as np
 
 from . import exact as xq
 from .adjacency import adjacent_pairs
-from .nodesets import Face, RowBits, canonical_face, canonical_order
+from .nodesets import Face, RowBits, canonical_face
 from .problem import F_MINUS, F_PLUS, U_N
 
 FLOAT_ZERO_TOL = 1e-10   # on unit-norm rows and unit-norm rays
@@ -111,8 +110,8 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
       u_n,i = 0 for i in contact and r_i = 0 (both friction rows tight, so r_n,i =
       r_t,i = 0) for i in gap (a node may be in both). The DD then runs on that face
       (a pointed cone of lower dimension): its complementary extreme rays are exactly
-      the complementary extreme rays of P that lie on it. See split_faces and
-      merge_results; a face run is a pure function of (A, m, exact, face, order).
+      the complementary extreme rays of P that lie on it. See faces.split_faces and
+      faces.merge_results; a face run is a pure function of (A, m, exact, face, order).
     """
     t0 = time.perf_counter()
     nc, d = A.shape
@@ -223,79 +222,9 @@ def _face_rows(face: Face | None, m: int) -> list[int]:
     return sorted(rows)
 
 
-def split_faces(m: int, nodes) -> list[Face]:
-    """The 2^k faces of P given by k branching nodes: for every node, u_n = 0
-    (contact) or r = 0 (gap). Every complementary ray lies on one of them (on
-    several if u_n = r_n = 0 at a branching node). Listed in canonical order
-    (node by node, contact before gap; the first node varies slowest)."""
-    nodes = [int(i) for i in nodes]
-    if len(set(nodes)) != len(nodes) or any(not 0 <= i < m for i in nodes):
-        raise ValueError(f"branching nodes must be distinct nodes of 0..{m - 1}: {nodes}")
-    faces = []
-    for choice in itertools.product((0, 1), repeat=len(nodes)):
-        contact = tuple(sorted(i for i, c in zip(nodes, choice) if c == 0))
-        gap = tuple(sorted(i for i, c in zip(nodes, choice) if c == 1))
-        faces.append((contact, gap))
-    return faces
-
-
-def merge_results(results: list[DDResult]) -> DDResult:
-    """Union of face runs (any order), duplicates removed, rays in canonical order
-    (lexicographic in the zero flags, as pipeline._fill_rays). A ray found on
-    several faces is taken from the first face in canonical face order, so the
-    merge does not depend on the order in which the results arrive."""
-    if not results:
-        raise ValueError("nothing to merge")
-    results = sorted(results, key=lambda r: r.stats.get("face", ((), ())))
-    X = np.concatenate([r.X for r in results])
-    zero = np.concatenate([r.zero for r in results])
-    order, words = canonical_order(zero, return_words=True)   # stable: first face first
-    words = words[order]
-    new = np.ones(len(zero), dtype=bool)
-    new[1:] = np.any(words[1:] != words[:-1], axis=1)
-    keep = order[new]
-    X, zero = X[keep], zero[keep]
-    stats = {"faces": len(results),
-             "rays_found": int(sum(len(r.X) for r in results)),
-             "initial_rays": int(sum(r.stats.get("initial_rays", 0) for r in results)),
-             "pairs_tested": int(sum(r.stats.get("pairs_tested", 0) for r in results)),
-             "pairs_adjacent": int(sum(r.stats.get("pairs_adjacent", 0) for r in results)),
-             "max_rays": int(max(r.stats.get("max_rays", 0) for r in results)),
-             "seconds": float(sum(r.stats.get("seconds", 0.0) for r in results)),
-             "close_calls": int(sum(r.stats.get("close_calls", 0) for r in results)),
-             "cancellation": float(min(r.stats.get("cancellation", 1.0) for r in results)),
-             "closest": _closest(r.stats.get("closest") for r in results),
-             "face_seconds": [float(r.stats.get("seconds", 0.0)) for r in results]}
-    return DDResult(X=X, zero=zero, stats=stats)
-
-
-#: run.face_split = "auto" splits from this m on (below, one DD takes < 1 s)
-FACE_SPLIT_MIN_M = 16
-#: at most this many branching nodes: the face where every branching node is in
-#: contact holds ~97% of plug2d's rays and costs ~40% of the full run whatever k is,
-#: so more faces only add work (scripts/bench_dd_faces.py, plug2d m = 18: k = 3
-#: sums 6.4 s CPU, largest face 2.8 s; k = 4 sums 8.6 s, largest 4.2 s)
-MAX_BRANCHING_NODES = 3
-
-
-def branching_nodes(m: int, split: int | str = "auto") -> list[int]:
-    """The nodes whose faces split the DD (SPEC §5): the last k nodes m-k..m-1, k
-    from the scene's run.face_split — "auto": MAX_BRANCHING_NODES when m >=
-    FACE_SPLIT_MIN_M, else 0 (one DD); an integer: that many — at most m - 1.
-
-    A function of the scene alone, never of the rank count: a ray's floats depend on
-    the DD's path to it, so one split gives the same bits on 1 or 100 ranks. (On
-    plug2d the last nodes are the top of the right wall; splitting there was the
-    cheapest of the node sets measured: the bottom nodes or both top corners cost
-    1.5-2x more CPU in total.)"""
-    k = (MAX_BRANCHING_NODES if m >= FACE_SPLIT_MIN_M else 0) if split == "auto" else int(split)
-    k = max(0, min(k, m - 1))
-    return list(range(m - k, m))
-
-
-def _closest(values) -> float | None:
-    """Of the face runs' "closest" values (None: no close call), the one nearest to
-    FLOAT_ZERO_TOL in ratio."""
+def closest_to_tolerance(values) -> float | None:
+    """Of "closest" values (stats of float DD runs or steps; None: no close call), the one
+    nearest to FLOAT_ZERO_TOL in ratio (None if none)."""
     vals = [v for v in values if v is not None]
     return min(vals, key=lambda v: abs(math.log(v / FLOAT_ZERO_TOL))) if vals else None
 
@@ -422,7 +351,7 @@ def _count_close_calls(s: np.ndarray, stats: dict) -> None:
         return
     stats["close_calls"] += int(close.size)
     v = float(close[np.argmin(np.abs(np.log(close / FLOAT_ZERO_TOL)))])
-    stats["closest"] = _closest([stats["closest"], v])
+    stats["closest"] = closest_to_tolerance([stats["closest"], v])
 
 
 def _note_cancellation(nrm: np.ndarray, sp: np.ndarray, sq: np.ndarray, stats: dict) -> None:

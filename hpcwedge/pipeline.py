@@ -22,8 +22,8 @@ from functools import cache as once, partial
 import numpy as np
 
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
-from .dd import branching_nodes
 from .environment import environment, single_threaded
+from .faces import branching_nodes
 from .model import Model
 from .mu_critical import mu_critical
 from .nodesets import canonical_order

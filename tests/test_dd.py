@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from hpcwedge.conic import FEASIBLE, INFEASIBLE, lp_feasible, pattern_rows
-from hpcwedge.dd import complementary_rays, merge_results, split_faces
+from hpcwedge.dd import complementary_rays
+from hpcwedge.faces import merge_results, split_faces
 from hpcwedge.nodesets import canonical_order
 from hpcwedge.problem import friction_rows_2d, parametrize
 from instances import random_problem

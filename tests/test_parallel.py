@@ -17,7 +17,8 @@ import pytest
 
 from hpcwedge import parallel
 from hpcwedge.checkpoint import CheckpointError, read_checkpoint
-from hpcwedge.dd import branching_nodes, complementary_rays
+from hpcwedge.dd import complementary_rays
+from hpcwedge.faces import branching_nodes
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.nodesets import canonical_order
 from hpcwedge.patterns import PatternTree, sign_patterns

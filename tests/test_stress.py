@@ -227,7 +227,8 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
     degenerate (at m = 16 the face ran > 16 min instead of 0.2 s). Now the basis is
     well conditioned and every ray's zero flags agree with its values."""
     from hpcwedge.build import build_model, contact_problem
-    from hpcwedge.dd import _face_rows, _initial_basis, split_faces
+    from hpcwedge.dd import _face_rows, _initial_basis
+    from hpcwedge.faces import split_faces
     from hpcwedge.numerics import Numerics
 
     mu = 1.5 * tan(0.1)
