@@ -94,7 +94,7 @@ class DDResult:
 def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
                        order: list[int] | str | None = None,
                        progress: Callable[[dict], None] | None = None,
-                       face: Face | None = None) -> DDResult:
+                       face: Face | None = None, well_posed: float = BASIS_WELL_POSED) -> DDResult:
     """All complementary extreme rays of {x : A x >= 0} (pointed, rank d).
 
     A: (3m, d) node-wise rows (float unit rows, or exact integer object rows).
@@ -112,6 +112,7 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
       (a pointed cone of lower dimension): its complementary extreme rays are exactly
       the complementary extreme rays of P that lie on it. See faces.split_faces and
       faces.merge_results; a face run is a pure function of (A, m, exact, face, order).
+    well_posed: initial_basis's threshold for a well-posed basis row (float runs).
     """
     t0 = time.perf_counter()
     nc, d = A.shape
@@ -122,8 +123,8 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
     if greedy and exact:
         raise ValueError('order="greedy" needs float arithmetic')
     order = list(range(m)) if order is None or isinstance(order, str) else [int(i) for i in order]
-    eq = _face_rows(face, m)
-    basis, implied = _initial_basis(A, m, order, exact, eq)
+    eq = face_rows(face, m)
+    basis, implied = initial_basis(A, m, order, exact, eq, well_posed)
     X = _initial_rays(A[basis], exact)
     # the face of the simplicial cone: rays that are tight at every equality row
     on_face = np.array([c not in eq for c in basis], dtype=bool)
@@ -209,7 +210,7 @@ def _next_row(pending, A, X, Z, added, bits):
     return pending[int(np.argmin(score))]
 
 
-def _face_rows(face: Face | None, m: int) -> list[int]:
+def face_rows(face: Face | None, m: int) -> list[int]:
     """Constraint rows that are equalities on the face (u_n rows of contact nodes,
     both friction rows of gap nodes)."""
     if face is None:
@@ -229,12 +230,12 @@ def closest_to_tolerance(values) -> float | None:
     return min(vals, key=lambda v: abs(math.log(v / FLOAT_ZERO_TOL))) if vals else None
 
 
-def _initial_basis(A, m, order, exact, eq=()) -> tuple[list[int], list[int]]:
+def initial_basis(A, m, order, exact, eq=(), well_posed: float = BASIS_WELL_POSED) -> tuple[list[int], list[int]]:
     """d independent rows: equality rows first, then friction rows, then u_n rows,
     nodes in `order`. Returns (basis, implied): implied are the rows outside the basis
     that lie in the span of the chosen equality rows (they vanish on the whole face).
     Float: a row whose distance to the span of those chosen before it is below
-    BASIS_WELL_POSED is passed over at first (a nearly dependent basis row makes the
+    well_posed is passed over at first (a nearly dependent basis row makes the
     initial rays, and every ray built from them, inaccurate); if fewer than d rows
     are taken, the rest are taken largest distance first, down to BASIS_DEPENDENT."""
     eq = list(eq)
@@ -270,7 +271,7 @@ def _initial_basis(A, m, order, exact, eq=()) -> tuple[list[int], list[int]]:
     for c in rest:
         if len(chosen) == d:
             break
-        if distance(c) > BASIS_WELL_POSED:
+        if distance(c) > well_posed:
             take(c)
     while len(chosen) < d:
         left = [c for c in rest if c not in chosen]
