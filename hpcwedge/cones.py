@@ -1,4 +1,5 @@
-"""Cross-complementarity graph, its maximal cliques (the solution cones), zero sets.
+"""From the complementary rays' zero sets: the cross-complementarity graph, its maximal
+cliques (the solution cones), and the 2D sign patterns the rays imply.
 
 Rays enter as support masks over nodes: gap (u_n,i != 0) and load (r_n,i != 0).
 Two complementary rays are cross-complementary when gap(a) & load(b) and
@@ -12,6 +13,8 @@ from dataclasses import dataclass
 
 import networkx as nx
 import numpy as np
+
+from .nodesets import bits_to_nodes, masks_to_bits
 
 
 @dataclass(frozen=True)
@@ -69,3 +72,20 @@ def maximal_cones(gap: np.ndarray, load: np.ndarray, wedged: np.ndarray) -> list
         cones.append(Cone(rays=rays, zero_u=zero_u, zero_r=zero_r))
     cones.sort(key=Cone.key)
     return cones
+
+
+def implied_patterns(ray_zero: np.ndarray, m: int) -> set[tuple[int, ...]]:
+    """The 2D sign patterns the wedged rays imply (SPEC §2): (C, G) is feasible iff some
+    wedged ray has supp(r_n) in C and supp(u_n) in G. ray_zero: (R, 3m) zero flags of the
+    wedged rays (pipeline Run.ray_zero). Returns the contact sets C as sorted tuples."""
+    out: set[int] = set()
+    zu = ray_zero[:, 0::3]
+    zr = ray_zero[:, 1::3] & ray_zero[:, 2::3]
+    for need, free in zip(masks_to_bits(~zr), masks_to_bits(zu & zr)):
+        sub = int(free)
+        while True:                      # every subset of the free nodes
+            out.add(int(need) | sub)
+            if sub == 0:
+                break
+            sub = (sub - 1) & int(free)
+    return {bits_to_nodes(c, m) for c in out}

@@ -25,8 +25,8 @@ from typing import Callable
 
 import numpy as np
 
+from .cones import implied_patterns
 from .dd import CANCELLATION_MIN, FLOAT_ZERO_TOL, DDResult, complementary_rays
-from .patterns import implied_patterns
 from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d
 
 #: cond(K on range K) above this makes a float enumeration suspect: relative errors of

@@ -21,7 +21,7 @@
                user hands it), zero test |a.x| <= dd.FLOAT_ZERO_TOL on unit rows and rays
   brute_lp     one LP per sign pattern, all 2^m of them (bench_socp_count.brute: HiGHS via
                conic.feasible), compared with the pattern set the exact rays imply
-               (patterns.implied_patterns, SPEC §2)
+               (cones.implied_patterns, SPEC §2)
 mu^c: bench_mu_c's analytic scenes (its --quick list; --quick here: every other one): the
   critical cone / pattern once (bench_mu_c.critical_pattern), then plain bisection (LP in
   2D, SOCP in 3D) to relative width 1e-6 and 1e-9 against our accurate mu^c (2D bracket +
@@ -111,7 +111,7 @@ def _bits(patterns) -> list[int]:
 # --------------------------------------------------------------------------- workers (subprocess)
 
 def worker_2d(engine: str, spec: dict, mu: float) -> dict:
-    from hpcwedge.patterns import implied_patterns
+    from hpcwedge.cones import implied_patterns
     problem = _problem(spec, mu)
     m = problem.m
     if engine in ("ours_float", "ours_exact"):

@@ -19,8 +19,8 @@ import sys
 import numpy as np
 import pytest
 
+from hpcwedge.cones import implied_patterns
 from hpcwedge.dd import complementary_rays
-from hpcwedge.patterns import implied_patterns
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from hpcwedge.progress import Progress
