@@ -27,26 +27,18 @@ import numpy as np
 
 from .cones import implied_patterns
 from .dd import CANCELLATION_MIN, FLOAT_ZERO_TOL, DDResult, complementary_rays
-from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d
+from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d, stiffness_range
 
 #: cond(K on range K) above this makes a float enumeration suspect: relative errors of
 #: cond * eps in u reach the DD's zero tolerance
 COND_SUSPECT = FLOAT_ZERO_TOL / float(np.finfo(float).eps)
 
 
-def stiffness_range(problem: ContactProblem) -> tuple[float, float]:
-    """(smallest, largest) eigenvalue of K on range(K) = N^perp: the k smallest
-    eigenvalues (the rigid modes, zero up to rounding) left out."""
-    lam = np.linalg.eigvalsh(problem.K)
-    k = problem.N.shape[1]
-    return (float(lam[k]), float(lam[-1])) if lam.size > k else (1.0, 1.0)
-
-
 @dataclass
 class Numerics:
     """What the run-time checks found (the stats["numerics"] entry, see as_dict).
 
-    lam_min, lam_max: stiffness_range of the problem; runs: one record per enumerated mu
+    lam_min, lam_max: problem.stiffness_range of the problem; runs: one record per enumerated mu
     ({"mu", "exact", "suspect", and for a float DD "close_calls", "closest",
     "cancellation" (dd stats), "cond_T" (problem.balanced_2d)}); exact_fallback /
     unresolved: the mu values redone exactly / left suspect; patterns: the 2D sign

@@ -17,7 +17,8 @@ For a supported body (k = 0): x = r, u = K^-1 r.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg as sla
@@ -31,11 +32,13 @@ U_N, F_PLUS, F_MINUS = 0, 1, 2
 @dataclass(frozen=True)
 class ContactProblem:
     """Condensed, block-ordered local stiffness K (n x n, n = dim*m, symmetric PSD)
-    and rigid modes N (n x k, k = 0 for a supported body)."""
+    and rigid modes N (n x k, k = 0 for a supported body). eigenvalues: eigvalsh(K)
+    when the builder has computed it already (else computed once, on first use)."""
 
     dim: int
     K: np.ndarray
     N: np.ndarray
+    eigenvalues: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def m(self) -> int:
@@ -48,6 +51,19 @@ class ContactProblem:
     @property
     def free(self) -> bool:
         return self.N.shape[1] > 0
+
+    @cached_property
+    def spectrum(self) -> np.ndarray:
+        """The eigenvalues of K, ascending (np.linalg.eigvalsh), computed once."""
+        return np.linalg.eigvalsh(self.K) if self.eigenvalues is None else self.eigenvalues
+
+
+def stiffness_range(problem: ContactProblem) -> tuple[float, float]:
+    """(smallest, largest) eigenvalue of K on range(K) = N^perp: the k smallest
+    eigenvalues (the rigid modes, zero up to rounding) left out."""
+    lam = problem.spectrum
+    k = problem.N.shape[1]
+    return (float(lam[k]), float(lam[-1])) if lam.size > k else (1.0, 1.0)
 
 
 @dataclass(frozen=True)
