@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import networkx as nx
 import numpy as np
 
-from .nodesets import bits_to_nodes, masks_to_bits
+from .nodesets import bits_to_nodes, masks_to_bits, pack_rows
 
 
 @dataclass(frozen=True)
@@ -32,8 +32,8 @@ class Cone:
 def cross_complementary(gap_a: np.ndarray, load_a: np.ndarray,
                         gap_b: np.ndarray, load_b: np.ndarray) -> np.ndarray:
     """(A, m) x (B, m) bool masks -> (A, B) bool: the pairwise cross-complementarity."""
-    ga, la = np.packbits(gap_a, axis=1), np.packbits(load_a, axis=1)
-    gb, lb = np.packbits(gap_b, axis=1), np.packbits(load_b, axis=1)
+    ga, la = pack_rows(gap_a), pack_rows(load_a)
+    gb, lb = pack_rows(gap_b), pack_rows(load_b)
     clash = (ga[:, None, :] & lb[None, :, :]) | (gb[None, :, :] & la[:, None, :])
     return ~clash.any(axis=-1)
 
@@ -46,7 +46,7 @@ def maximal_cones(gap: np.ndarray, load: np.ndarray, wedged: np.ndarray) -> list
     if R == 0:
         return []
     sig = np.hstack([gap, load])
-    packed = np.ascontiguousarray(np.packbits(sig, axis=1))        # rows of bytes: a cheap unique
+    packed = np.ascontiguousarray(pack_rows(sig))        # rows of bytes: a cheap unique
     _, first, inverse = np.unique(packed.view(np.dtype((np.void, packed.shape[1]))).ravel(),
                                   return_index=True, return_inverse=True)
     inverse = inverse.ravel()
