@@ -8,7 +8,6 @@ import pytest
 from hpcwedge.conic import FEASIBLE, INFEASIBLE, lp_feasible, pattern_rows
 from hpcwedge.dd import complementary_rays
 from hpcwedge.faces import merge_results, split_faces
-from hpcwedge.nodesets import canonical_order
 from hpcwedge.problem import friction_rows_2d, parametrize
 from instances import random_problem
 
@@ -235,12 +234,3 @@ def test_faces_plug2d_exact(plug2d_rows):
     merged = merge_results([complementary_rays(A, 6, exact=True, face=f) for f in split_faces(6, (5, 2))])
     assert int(merged.wedged().sum()) == 44
     assert set(map(tuple, merged.zero)) == set(map(tuple, full.zero))
-
-
-@pytest.mark.parametrize("R,k", [(0, 6), (7, 0), (200, 3), (500, 60), (500, 64), (500, 65), (300, 130)])
-def test_canonical_order_is_lexsort(R, k):
-    rng = np.random.default_rng(R + k)
-    z = rng.random((R, k)) < 0.3
-    z[R // 2:] = z[:R - R // 2]                       # duplicates: the order must be stable
-    ref = np.lexsort(z.T[::-1]) if k else np.arange(R)
-    assert np.array_equal(canonical_order(z), ref)
