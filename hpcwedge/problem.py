@@ -89,6 +89,12 @@ class Parametrization:
         return self.Uq is not None
 
 
+def blocks(M: np.ndarray, m: int, dim: int) -> tuple[np.ndarray, ...]:
+    """The dim row blocks of M (dim*m rows in the block order of SPEC §1): (normal,
+    tangent) in 2D, (normal, tangent 1, tangent 2) in 3D, m rows each; views of M."""
+    return tuple(M[k * m:(k + 1) * m] for k in range(dim))
+
+
 def lineality_rows(N: np.ndarray, m: int, rtol: float = 1e-9) -> list[int]:
     """Rows of N_n = N[:m] forming a basis of its row space (pivoted QR).
 
@@ -192,10 +198,13 @@ def balanced_2d(param: Parametrization, mu: float, m: int, s: float) -> tuple[Pa
     amplitudes are mixed in; cond(T)).
     """
     U, R = param.U, param.R
-    Q, T = np.linalg.qr(np.vstack([s * U[:m], R[:m], R[m:2 * m] / mu]))
+    (Un, _), (Rn, Rt) = blocks(U, m, 2), blocks(R, m, 2)
+    Q, T = np.linalg.qr(np.vstack([s * Un, Rn, Rt / mu]))
     Up = sla.solve_triangular(T, U.T, trans="T").T
     Rp = sla.solve_triangular(T, R.T, trans="T").T
-    Up[:m], Rp[:m], Rp[m:2 * m] = Q[:m] / s, Q[m:2 * m], mu * Q[2 * m:]
+    Qu, Qn, Qt = blocks(Q, m, 3)
+    (Upn, _), (Rpn, Rpt) = blocks(Up, m, 2), blocks(Rp, m, 2)
+    Upn[...], Rpn[...], Rpt[...] = Qu / s, Qn, mu * Qt
     return Parametrization(U=Up, R=Rp, n_alpha=0), float(np.linalg.cond(T))
 
 
@@ -207,11 +216,11 @@ def friction_rows_2d(param: Parametrization, mu: float, m: int, exact: bool = Fa
     norm; exact rows are primitive integer vectors (object array), same directions.
     """
     if not exact:
-        U, R = param.U, param.R
+        (Un, _), (Rn, Rt) = blocks(param.U, m, 2), blocks(param.R, m, 2)
         A = np.empty((3 * m, param.d))
-        A[U_N::3] = U[:m]
-        A[F_PLUS::3] = mu * R[:m] + R[m:2 * m]
-        A[F_MINUS::3] = mu * R[:m] - R[m:2 * m]
+        A[U_N::3] = Un
+        A[F_PLUS::3] = mu * Rn + Rt
+        A[F_MINUS::3] = mu * Rn - Rt
         return A / np.linalg.norm(A, axis=1, keepdims=True)
     U, R, muq = param.Uq, param.Rq, xq.q_scalar(mu)
     A = xq.to_q(np.zeros((3 * m, param.d)))
