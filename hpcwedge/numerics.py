@@ -38,7 +38,7 @@ COND_SUSPECT = FLOAT_ZERO_TOL / float(np.finfo(float).eps)
 class Numerics:
     """What the run-time checks found (the stats["numerics"] entry, see as_dict).
 
-    lam_min, lam_max: problem.stiffness_range of the problem; runs: one record per enumerated mu
+    lam_min, lam_max: problem.stiffness_range(problem); runs: one record per enumerated mu
     ({"mu", "exact", "suspect", and for a float DD "close_calls", "closest",
     "cancellation" (dd stats), "cond_T" (problem.balanced_2d)}); exact_fallback /
     unresolved: the mu values redone exactly / left suspect; patterns: the 2D sign
