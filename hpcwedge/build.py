@@ -13,7 +13,7 @@ import numpy as np
 
 from . import exact as xq
 from .model import Model
-from .problem import ContactProblem
+from .problem import ContactProblem, stiffness_range
 from .scene import Scene, SceneError, array
 
 SYM_RTOL = 1e-10      # symmetry of a raw K, relative to max |K|
@@ -165,7 +165,6 @@ def check_not_mechanism(problem: ContactProblem) -> None:
     """SceneError if the condensed K is singular beyond the model's rigid modes (a
     mechanism that the geometry's rigid modes do not account for): its smallest
     eigenvalue on range(K) at most MECHANISM_RTOL times its largest."""
-    from .numerics import stiffness_range
     lo, hi = stiffness_range(problem)
     if hi > 0 and lo <= MECHANISM_RTOL * hi:
         raise SceneError(f"model: the condensed stiffness is singular apart from the {problem.N.shape[1]} "
@@ -229,15 +228,15 @@ def raw_stiffness(scene: Scene) -> ContactProblem:
         lam_r = np.linalg.eigvalsh(K + lam[-1] * Q @ Q.T)
         if lam_r[0] <= SINGULAR_RTOL * lam[-1]:
             raise SceneError("model.null_space: K has more null directions than the given null_space")
-        return ContactProblem(scene.dim, K, Q)
+        return ContactProblem(scene.dim, K, Q, eigenvalues=lam)
     if lam[0] > SINGULAR_RTOL * lam[-1]:
-        return ContactProblem(scene.dim, K, np.zeros((n, 0)))
+        return ContactProblem(scene.dim, K, np.zeros((n, 0)), eigenvalues=lam)
     # singular: unambiguous only when the null space is exact (rational rank deficit)
     Kq = xq.to_q(K)
     rank = Kq.rank()
     if rank < n:
         Z = xq.to_float(xq.nullspace(Kq))
-        return ContactProblem(scene.dim, K, np.linalg.qr(Z)[0])
+        return ContactProblem(scene.dim, K, np.linalg.qr(Z)[0], eigenvalues=lam)
     raise SceneError(f"{key}: numerically singular (eigenvalue ratio {lam[0] / lam[-1]:.2e} "
                      f"<= {SINGULAR_RTOL:g}) but of full rank in exact arithmetic: give model.null_space")
 

@@ -1,4 +1,5 @@
-"""Cross-complementarity graph, its maximal cliques (the solution cones), zero sets.
+"""From the complementary rays' zero sets: the cross-complementarity graph, its maximal
+cliques (the solution cones), and the 2D sign patterns the rays imply.
 
 Rays enter as support masks over nodes: gap (u_n,i != 0) and load (r_n,i != 0).
 Two complementary rays are cross-complementary when gap(a) & load(b) and
@@ -12,6 +13,8 @@ from dataclasses import dataclass
 
 import networkx as nx
 import numpy as np
+
+from .nodesets import bits_to_nodes, masks_to_bits, pack_rows
 
 
 @dataclass(frozen=True)
@@ -29,8 +32,8 @@ class Cone:
 def cross_complementary(gap_a: np.ndarray, load_a: np.ndarray,
                         gap_b: np.ndarray, load_b: np.ndarray) -> np.ndarray:
     """(A, m) x (B, m) bool masks -> (A, B) bool: the pairwise cross-complementarity."""
-    ga, la = np.packbits(gap_a, axis=1), np.packbits(load_a, axis=1)
-    gb, lb = np.packbits(gap_b, axis=1), np.packbits(load_b, axis=1)
+    ga, la = pack_rows(gap_a), pack_rows(load_a)
+    gb, lb = pack_rows(gap_b), pack_rows(load_b)
     clash = (ga[:, None, :] & lb[None, :, :]) | (gb[None, :, :] & la[:, None, :])
     return ~clash.any(axis=-1)
 
@@ -43,7 +46,7 @@ def maximal_cones(gap: np.ndarray, load: np.ndarray, wedged: np.ndarray) -> list
     if R == 0:
         return []
     sig = np.hstack([gap, load])
-    packed = np.ascontiguousarray(np.packbits(sig, axis=1))        # rows of bytes: a cheap unique
+    packed = np.ascontiguousarray(pack_rows(sig))        # rows of bytes: a cheap unique
     _, first, inverse = np.unique(packed.view(np.dtype((np.void, packed.shape[1]))).ravel(),
                                   return_index=True, return_inverse=True)
     inverse = inverse.ravel()
@@ -69,3 +72,20 @@ def maximal_cones(gap: np.ndarray, load: np.ndarray, wedged: np.ndarray) -> list
         cones.append(Cone(rays=rays, zero_u=zero_u, zero_r=zero_r))
     cones.sort(key=Cone.key)
     return cones
+
+
+def implied_patterns(ray_zero: np.ndarray, m: int) -> set[tuple[int, ...]]:
+    """The 2D sign patterns the wedged rays imply (SPEC §2): (C, G) is feasible iff some
+    wedged ray has supp(r_n) in C and supp(u_n) in G. ray_zero: (R, 3m) zero flags of the
+    wedged rays (pipeline Run.ray_zero). Returns the contact sets C as sorted tuples."""
+    out: set[int] = set()
+    zu = ray_zero[:, 0::3]
+    zr = ray_zero[:, 1::3] & ray_zero[:, 2::3]
+    for need, free in zip(masks_to_bits(~zr), masks_to_bits(zu & zr)):
+        sub = int(free)
+        while True:                      # every subset of the free nodes
+            out.add(int(need) | sub)
+            if sub == 0:
+                break
+            sub = (sub - 1) & int(free)
+    return {bits_to_nodes(c, m) for c in out}

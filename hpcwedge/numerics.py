@@ -25,33 +25,26 @@ from typing import Callable
 
 import numpy as np
 
+from .cones import implied_patterns
 from .dd import CANCELLATION_MIN, FLOAT_ZERO_TOL, DDResult, complementary_rays
-from .patterns import implied_patterns
-from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d
+from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d, stiffness_range
 
 #: cond(K on range K) above this makes a float enumeration suspect: relative errors of
 #: cond * eps in u reach the DD's zero tolerance
 COND_SUSPECT = FLOAT_ZERO_TOL / float(np.finfo(float).eps)
 
 
-def stiffness_range(problem: ContactProblem) -> tuple[float, float]:
-    """(smallest, largest) eigenvalue of K on range(K) = N^perp: the k smallest
-    eigenvalues (the rigid modes, zero up to rounding) left out."""
-    lam = np.linalg.eigvalsh(problem.K)
-    k = problem.N.shape[1]
-    return (float(lam[k]), float(lam[-1])) if lam.size > k else (1.0, 1.0)
-
-
 @dataclass
 class Numerics:
     """What the run-time checks found (the stats["numerics"] entry, see as_dict).
 
-    lam_min, lam_max: stiffness_range of the problem; runs: one record per enumerated mu
+    lam_min, lam_max: problem.stiffness_range(problem); runs: one record per enumerated mu
     ({"mu", "exact", "suspect", and for a float DD "close_calls", "closest",
     "cancellation" (dd stats), "cond_T" (problem.balanced_2d)}); exact_fallback /
     unresolved: the mu values redone exactly / left suspect; patterns: the 2D sign
     patterns' check (settle_patterns_2d); notes: other findings (mu^c not polished,
-    undecided solves, suspect patterns left as they are), each one line."""
+    undecided solves, suspect patterns left as they are), each one line; cond_suspect:
+    the stiffness condition number above which every float run is suspect."""
 
     lam_min: float
     lam_max: float
@@ -61,6 +54,7 @@ class Numerics:
     unresolved: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     patterns: dict | None = None
+    cond_suspect: float = COND_SUSPECT
 
     @classmethod
     def of(cls, problem: ContactProblem, fallback_max_m: int) -> "Numerics":
@@ -127,7 +121,7 @@ def judge_2d(dd: DDResult, p_mu: Parametrization, cond_T: float, m: int, mu: flo
         return dd, p_mu
     st = dd.stats
     suspect = (st["close_calls"] > 0 or st["cancellation"] < CANCELLATION_MIN
-               or numerics.cond > COND_SUSPECT)
+               or numerics.cond > numerics.cond_suspect)
     record = {"mu": mu, "exact": False, "suspect": suspect, "close_calls": st["close_calls"],
               "closest": st["closest"], "cancellation": st["cancellation"], "cond_T": cond_T}
     numerics.runs.append(record)
@@ -166,7 +160,7 @@ def settle_patterns_2d(numerics: Numerics, m: int, mus, counters: dict, undecide
     solver decided) and m <= the fallback limit, or the scene asks for exact arithmetic.
     None: keep the branch and bound's (a suspect one is noted)."""
     near = int(counters.get("status_near_boundary", 0))
-    suspect = bool(near or undecided or counters.get("undecided", 0) or numerics.cond > COND_SUSPECT)
+    suspect = bool(near or undecided or counters.get("undecided", 0) or numerics.cond > numerics.cond_suspect)
     numerics.patterns = {"suspect": suspect, "near_boundary": near, "undecided": undecided,
                          "exact": False}
     if not (suspect or exact_scene):

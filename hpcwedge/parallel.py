@@ -416,7 +416,7 @@ def face_payloads(n_mu: int, m: int, nodes) -> list[tuple]:
     """The "face" tasks of a split: (mu index, face) for every mu and every face of
     dd.split_faces(m, nodes), face by face (the face where every branching node is in
     contact, usually the largest, first for every mu: big tasks start first)."""
-    from .dd import split_faces
+    from .faces import split_faces
     return [(i, f) for f in split_faces(m, nodes) for i in range(n_mu)]
 
 
@@ -1132,7 +1132,7 @@ def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = N
     mu^c, are those of the unsplit run; the float ray vectors equal them to
     rounding (a ray's floats depend on the DD's path to it: ~1e-13 relative), and
     bit for bit those of any run with the same split, on any number of ranks."""
-    from .dd import merge_results
+    from .faces import merge_results
     engine = engine or Engine()
     nodes = [int(i) for i in nodes]
 

@@ -510,21 +510,3 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
                 break
             best = mu
     return best
-
-
-def implied_patterns(ray_zero: np.ndarray, m: int) -> set[tuple[int, ...]]:
-    """The 2D sign patterns the wedged rays imply (SPEC §2): (C, G) is feasible iff some
-    wedged ray has supp(r_n) in C and supp(u_n) in G. ray_zero: (R, 3m) zero flags of the
-    wedged rays (pipeline Run.ray_zero). Returns the contact sets C as sorted tuples."""
-    out: set[int] = set()
-    zu = ray_zero[:, 0::3]
-    zr = ray_zero[:, 1::3] & ray_zero[:, 2::3]
-    weights = 1 << np.arange(m, dtype=np.int64)
-    for need, free in zip((~zr) @ weights, (zu & zr) @ weights):
-        sub = int(free)
-        while True:                      # every subset of the free nodes
-            out.add(int(need) | sub)
-            if sub == 0:
-                break
-            sub = (sub - 1) & int(free)
-    return {tuple(i for i in range(m) if c >> i & 1) for c in out}

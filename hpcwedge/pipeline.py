@@ -22,10 +22,11 @@ from functools import cache as once, partial
 import numpy as np
 
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
-from .dd import branching_nodes, canonical_order
 from .environment import environment, single_threaded
+from .faces import branching_nodes
 from .model import Model
 from .mu_critical import mu_critical
+from .nodesets import canonical_order
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, ranks_on_host, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical

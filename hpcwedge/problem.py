@@ -17,7 +17,8 @@ For a supported body (k = 0): x = r, u = K^-1 r.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg as sla
@@ -31,11 +32,13 @@ U_N, F_PLUS, F_MINUS = 0, 1, 2
 @dataclass(frozen=True)
 class ContactProblem:
     """Condensed, block-ordered local stiffness K (n x n, n = dim*m, symmetric PSD)
-    and rigid modes N (n x k, k = 0 for a supported body)."""
+    and rigid modes N (n x k, k = 0 for a supported body). eigenvalues: eigvalsh(K)
+    when the builder has computed it already (else computed once, on first use)."""
 
     dim: int
     K: np.ndarray
     N: np.ndarray
+    eigenvalues: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def m(self) -> int:
@@ -48,6 +51,19 @@ class ContactProblem:
     @property
     def free(self) -> bool:
         return self.N.shape[1] > 0
+
+    @cached_property
+    def spectrum(self) -> np.ndarray:
+        """The eigenvalues of K, ascending (np.linalg.eigvalsh), computed once."""
+        return np.linalg.eigvalsh(self.K) if self.eigenvalues is None else self.eigenvalues
+
+
+def stiffness_range(problem: ContactProblem) -> tuple[float, float]:
+    """(smallest, largest) eigenvalue of K on range(K) = N^perp: the k smallest
+    eigenvalues (the rigid modes, zero up to rounding) left out."""
+    lam = problem.spectrum
+    k = problem.N.shape[1]
+    return (float(lam[k]), float(lam[-1])) if lam.size > k else (1.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -71,6 +87,12 @@ class Parametrization:
     @property
     def exact(self) -> bool:
         return self.Uq is not None
+
+
+def blocks(M: np.ndarray, m: int, dim: int) -> tuple[np.ndarray, ...]:
+    """The dim row blocks of M (dim*m rows in the block order of SPEC §1): (normal,
+    tangent) in 2D, (normal, tangent 1, tangent 2) in 3D, m rows each; views of M."""
+    return tuple(M[k * m:(k + 1) * m] for k in range(dim))
 
 
 def lineality_rows(N: np.ndarray, m: int, rtol: float = 1e-9) -> list[int]:
@@ -176,10 +198,13 @@ def balanced_2d(param: Parametrization, mu: float, m: int, s: float) -> tuple[Pa
     amplitudes are mixed in; cond(T)).
     """
     U, R = param.U, param.R
-    Q, T = np.linalg.qr(np.vstack([s * U[:m], R[:m], R[m:2 * m] / mu]))
+    (Un, _), (Rn, Rt) = blocks(U, m, 2), blocks(R, m, 2)
+    Q, T = np.linalg.qr(np.vstack([s * Un, Rn, Rt / mu]))
     Up = sla.solve_triangular(T, U.T, trans="T").T
     Rp = sla.solve_triangular(T, R.T, trans="T").T
-    Up[:m], Rp[:m], Rp[m:2 * m] = Q[:m] / s, Q[m:2 * m], mu * Q[2 * m:]
+    Qu, Qn, Qt = blocks(Q, m, 3)
+    (Upn, _), (Rpn, Rpt) = blocks(Up, m, 2), blocks(Rp, m, 2)
+    Upn[...], Rpn[...], Rpt[...] = Qu / s, Qn, mu * Qt
     return Parametrization(U=Up, R=Rp, n_alpha=0), float(np.linalg.cond(T))
 
 
@@ -191,11 +216,11 @@ def friction_rows_2d(param: Parametrization, mu: float, m: int, exact: bool = Fa
     norm; exact rows are primitive integer vectors (object array), same directions.
     """
     if not exact:
-        U, R = param.U, param.R
+        (Un, _), (Rn, Rt) = blocks(param.U, m, 2), blocks(param.R, m, 2)
         A = np.empty((3 * m, param.d))
-        A[U_N::3] = U[:m]
-        A[F_PLUS::3] = mu * R[:m] + R[m:2 * m]
-        A[F_MINUS::3] = mu * R[:m] - R[m:2 * m]
+        A[U_N::3] = Un
+        A[F_PLUS::3] = mu * Rn + Rt
+        A[F_MINUS::3] = mu * Rn - Rt
         return A / np.linalg.norm(A, axis=1, keepdims=True)
     U, R, muq = param.Uq, param.Rq, xq.q_scalar(mu)
     A = xq.to_q(np.zeros((3 * m, param.d)))

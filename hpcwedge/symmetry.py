@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .nodesets import bit_images
+
 #: blocks equal to this fraction of max |K| (condensation round-off is ~1e-13 of it)
 SYMMETRY_RTOL = 1e-9
 #: larger groups are not used (the identity alone is returned)
@@ -52,9 +54,7 @@ class Symmetry:
 
     def images(self, bits: int) -> np.ndarray:
         """The node sets g(bits) for every element g, as uint64 bit sets (order,)."""
-        mask = ((np.uint64(bits) >> np.arange(self.m, dtype=np.uint64)) & np.uint64(1)).astype(bool)
-        w = np.uint64(1) << self.perms.astype(np.uint64)
-        return np.where(mask[None, :], w, np.uint64(0)).sum(axis=1, dtype=np.uint64)
+        return bit_images(bits, self.perms)
 
     def stabilizer(self, contact: int, gap: int) -> "Symmetry":
         """The elements that map the contact set and the gap set onto themselves."""

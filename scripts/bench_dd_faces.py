@@ -146,7 +146,7 @@ SHM = "/dev/shm" if os.path.isdir("/dev/shm") else None
 def parallel_run(m: int, mu: float, nodes: list[int], workers: int, cost: dict) -> dict:
     """The enumerate stage with the faces on `workers` processes (fork), largest first."""
     import multiprocessing as mp
-    from hpcwedge.dd import merge_results, split_faces
+    from hpcwedge.faces import merge_results, split_faces
     global _A
     t0 = time.perf_counter()
     _A, t_param = _rows(m, mu)
@@ -184,7 +184,7 @@ def main(argv=None) -> int:
     if args.worker:
         print(MARK + json.dumps(worker(args.m[0], args.mu, args.face)), flush=True)
         return 0
-    from hpcwedge.dd import split_faces
+    from hpcwedge.faces import split_faces
     report = []
     for m in args.m:
         if not args.no_full:

@@ -48,7 +48,7 @@ BISECT_RTOL = 1e-6
 def problem(rows: int):
     """(result of the enumeration-free run, parametrisation, m, numerics scale)."""
     import numpy as np
-    from hpcwedge.numerics import stiffness_range
+    from hpcwedge.problem import stiffness_range
     from hpcwedge.pipeline import run_scene
     from hpcwedge.problem import parametrize
     res = run_scene(scene(rows, "none"))

@@ -21,7 +21,7 @@
                user hands it), zero test |a.x| <= dd.FLOAT_ZERO_TOL on unit rows and rays
   brute_lp     one LP per sign pattern, all 2^m of them (reference.brute_force_patterns: HiGHS
                via conic.feasible), compared with the pattern set the exact rays imply
-               (patterns.implied_patterns, SPEC §2)
+               (cones.implied_patterns, SPEC §2)
 mu^c: bench_mu_c's analytic scenes (its --quick list; --quick here: every other one): the
   critical cone / pattern once (bench_mu_c.critical_pattern), then plain bisection (LP in
   2D, SOCP in 3D) to relative width 1e-6 and 1e-9 against our accurate mu^c (2D bracket +
@@ -112,7 +112,7 @@ def _bits(patterns) -> list[int]:
 
 def worker_2d(engine: str, spec: dict, mu: float) -> dict:
     if engine in ("ours_float", "ours_exact"):
-        from hpcwedge.patterns import implied_patterns
+        from hpcwedge.cones import implied_patterns
         out = bench_2d.enumerate_ours(spec, mu, exact=engine == "ours_exact")
         out["patterns"] = _bits(implied_patterns(out.pop("ray_zero"), out["m"]))
         return {**out, "n_patterns": len(out["patterns"])}

@@ -60,10 +60,10 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path[:0] = [ROOT, os.path.join(ROOT, "tests")]
 
+from hpcwedge.cones import implied_patterns                         # noqa: E402
 from hpcwedge.dd import complementary_rays                         # noqa: E402
 from hpcwedge.environment import environment                       # noqa: E402
 from hpcwedge.models.library import plug2d                          # noqa: E402
-from hpcwedge.patterns import implied_patterns                      # noqa: E402
 from hpcwedge.pipeline import run_scene                              # noqa: E402
 from hpcwedge.problem import friction_rows_2d, parametrize          # noqa: E402
 from hpcwedge.scene import parse_scene                               # noqa: E402

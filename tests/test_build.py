@@ -53,3 +53,26 @@ def test_files(tmp_path):
                      "friction": {"mu": [1.0]}}, base_dir=str(tmp_path))
     with pytest.raises(SceneError, match="model.file"):
         raw_stiffness(s)
+
+
+def test_building_imports_no_engine():
+    """Scene -> Model -> ContactProblem imports none of the engines (dd, patterns, numerics,
+    the solvers) nor the parallel layer."""
+    import subprocess
+    import sys
+    code = ("import sys\n"
+            "from hpcwedge.build import build_model, contact_problem\n"
+            "from hpcwedge.scene import parse_scene\n"
+            "s = parse_scene({'name': 's', 'dim': 2, 'model': {'kind': 'plug2d', 'rows': 2},"
+            " 'friction': {'mu': [1.0]}})\n"
+            "contact_problem(s, build_model(s))\n"
+            "print(' '.join(sorted(m for m in sys.modules if m.startswith('hpcwedge.'))))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    engines = {"dd", "adjacency", "faces", "numerics", "patterns", "mu_critical", "conic", "cones", "parallel"}
+    assert not engines & {m.split(".")[1] for m in out}, out
+
+
+def test_raw_K_eigenvalues_computed_once():
+    from hpcwedge.problem import stiffness_range
+    p = raw_stiffness(sc({"K": [[2.0, 0.0], [0.0, 8.0]]}))
+    assert p.spectrum is p.eigenvalues and stiffness_range(p) == (0.25, 1.0)      # K scaled by 2**-3

@@ -16,7 +16,7 @@ import os
 import pytest
 from numpy._core._multiarray_umath import __cpu_features__ as CPU
 
-from hpcwedge.dd import branching_nodes
+from hpcwedge.faces import branching_nodes
 from mpi_helpers import THREADS_1, THREADS_2, THREADS_UNSET, needs_mpirun, run, show_json, write_rays_scene
 
 #: the kernels every run of this module uses (see module doc); the caller's core type wins

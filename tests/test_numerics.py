@@ -14,9 +14,8 @@ import math
 import numpy as np
 import pytest
 
-import hpcwedge.dd as dd
 from hpcwedge import exact as xq
-from hpcwedge.dd import CANCELLATION_MIN, complementary_rays
+from hpcwedge.dd import BASIS_DEPENDENT, CANCELLATION_MIN, complementary_rays
 from hpcwedge.numerics import COND_SUSPECT, Numerics, judge_2d
 from hpcwedge.parallel import strip_exact
 from hpcwedge.problem import Parametrization, friction_rows_2d
@@ -38,7 +37,7 @@ def cancelling_cone(delta: float = DELTA, eps: float = EPS) -> Parametrization:
     return Parametrization(U=U, R=R, n_alpha=0, Uq=xq.to_q(U), Rq=xq.to_q(R))
 
 
-def test_cancelling_step_is_measured_flagged_and_redone_exactly(monkeypatch):
+def test_cancelling_step_is_measured_flagged_and_redone_exactly():
     p = cancelling_cone()
     pf = strip_exact(p)                       # the float parametrisation the DD ran on
     A = friction_rows_2d(pf, 1.0, 1)
@@ -47,8 +46,7 @@ def test_cancelling_step_is_measured_flagged_and_redone_exactly(monkeypatch):
     # the well-posed basis (friction row + u_n row) needs no cancelling step
     good = complementary_rays(A, 1)
     assert good.stats["cancellation"] == 1.0 and good.zero.tolist() == exact.zero.tolist()
-    monkeypatch.setattr(dd, "BASIS_WELL_POSED", dd.BASIS_DEPENDENT)      # basis in order
-    bad = complementary_rays(A, 1)
+    bad = complementary_rays(A, 1, well_posed=BASIS_DEPENDENT)      # basis in order
     want = DELTA * math.sqrt(1 + EPS ** 2) / (EPS * math.sqrt(1 + DELTA ** 2))
     assert bad.stats["cancellation"] == pytest.approx(want, rel=1e-6)
     assert want < CANCELLATION_MIN / 10 and bad.stats["close_calls"] == 0
@@ -69,6 +67,10 @@ def test_cancelling_step_is_measured_flagged_and_redone_exactly(monkeypatch):
     num = Numerics(lam_min=1.0, lam_max=1.0, fallback_max_m=10)
     judge_2d(good, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("not suspect"))
     assert not num.runs[0]["suspect"] and not num.as_dict()["flagged"]
+    # ... unless the stiffness counts as ill-conditioned (cond 4 > cond_suspect 2)
+    num = Numerics(lam_min=1.0, lam_max=4.0, fallback_max_m=0, cond_suspect=2.0)
+    judge_2d(good, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("no exact run above the limit"))
+    assert num.runs[0]["suspect"] and num.unresolved == [1.0]
 
 
 def stress_scenes() -> list[tuple[str, dict, float]]:

@@ -16,8 +16,10 @@ import pytest
 
 from hpcwedge import parallel
 from hpcwedge.checkpoint import CheckpointError, read_checkpoint
-from hpcwedge.dd import branching_nodes, canonical_order, complementary_rays
+from hpcwedge.dd import complementary_rays
+from hpcwedge.faces import branching_nodes
 from hpcwedge.mu_critical import mu_critical
+from hpcwedge.nodesets import canonical_order
 from hpcwedge.patterns import PatternTree, sign_patterns
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import friction_rows_2d, parametrize

@@ -19,8 +19,8 @@ import sys
 import numpy as np
 import pytest
 
+from hpcwedge.cones import implied_patterns
 from hpcwedge.dd import complementary_rays
-from hpcwedge.patterns import implied_patterns
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from hpcwedge.progress import Progress
@@ -227,7 +227,8 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
     degenerate (at m = 16 the face ran > 16 min instead of 0.2 s). Now the basis is
     well conditioned and every ray's zero flags agree with its values."""
     from hpcwedge.build import build_model, contact_problem
-    from hpcwedge.dd import _face_rows, _initial_basis, split_faces
+    from hpcwedge.dd import face_rows, initial_basis
+    from hpcwedge.faces import split_faces
     from hpcwedge.numerics import Numerics
 
     mu = 1.5 * tan(0.1)
@@ -237,7 +238,7 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
     p_mu, _ = balanced_2d(parametrize(problem), mu, m, Numerics.of(problem, 10).scale)
     A = friction_rows_2d(p_mu, mu, m)
     for face in split_faces(m, [5, 6, 7]):
-        basis, _ = _initial_basis(A, m, list(range(m)), False, _face_rows(face, m))
+        basis, _ = initial_basis(A, m, list(range(m)), False, face_rows(face, m))
         assert np.linalg.cond(A[basis]) < 1e3, face
         dd = complementary_rays(A, m, face=face)
         S = dd.X @ A.T
