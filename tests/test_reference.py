@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hpcwedge.dd import FLOAT_ZERO_TOL, complementary_rays
-from hpcwedge.patterns import implied_patterns
+from hpcwedge.cones import implied_patterns
 from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.reference import (bisect, brute_force_patterns, cdd_generators, cdd_zero, complementary_filter,
                                 contact_mask, patterns_of_rays, scip_wedged)
