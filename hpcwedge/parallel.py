@@ -59,16 +59,12 @@ import socket
 import sys
 import time
 import traceback
-from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .checkpoint import CheckpointError, read_checkpoint, write_checkpoint
 from .results import error_reason
-
-if TYPE_CHECKING:
-    from .dd import DDResult
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
 EXIT_INTERRUPTED = 75
@@ -152,14 +148,14 @@ def _run_cancellable(handler, ctx, payload, check):
 # ---------------------------------------------------------------- task kinds
 
 KINDS: dict = {
-    "subtree": "hpcwedge.parallel:explore_task",
-    "mu_c": "hpcwedge.parallel:mu_c_task",
-    "face": "hpcwedge.parallel:face_task",  # the 2D double description split over faces (SPEC §5)
+    "subtree": "hpcwedge.patterns:explore_task",
+    "mu_c": "hpcwedge.mu_critical:mu_c_task",
+    "face": "hpcwedge.faces:face_task",  # the 2D double description split over faces (SPEC §5)
 }
 
 
 #: modules a worker imports before its first task (the engines' heavy imports)
-WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical", "hpcwedge.dd"]
+WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical", "hpcwedge.faces"]
 
 
 def register(kind: str, handler) -> None:
@@ -213,38 +209,6 @@ def world():
 # ---------------------------------------------------------------- sign-pattern subtrees
 
 
-class PatternContext:
-    """What a worker needs to explore subtrees: make_tree(mu) -> a tree with
-    root() and explore(subtree, budget) (patterns.PatternTree), and the mu list."""
-
-    def __init__(self, make_tree, mus):
-        self.make_tree, self.mus = make_tree, list(mus)
-        self._trees = {}
-
-    def tree(self, i: int):
-        if i not in self._trees:
-            self._trees[i] = self.make_tree(self.mus[i])
-        return self._trees[i]
-
-    def __getstate__(self):
-        return {"make_tree": self.make_tree, "mus": self.mus, "_trees": {}}
-
-
-STAT_KEYS = ("nodes", "solves", "skipped", "pruned", "undecided")
-
-
-def explore_task(ctx: PatternContext, payload):
-    """Task "subtree": payload (mu index, Subtree, budget, witness x or None) ->
-    (found, open, stats dict, undecided found, open witnesses). Stopped by the
-    engine (task_stopping), it returns what it found and hands the rest back as open."""
-    i, subtree, budget, x = payload
-    out = ctx.tree(i).explore(subtree, budget, x=x)
-    stats = {k: getattr(out.stats, k) for k in STAT_KEYS}
-    for k, v in (getattr(out.stats, "statuses", None) or {}).items():
-        stats[f"status_{k}"] = v
-    return out.found, out.open, stats, list(getattr(out, "undecided", [])), list(out.open_x)
-
-
 def _bits_to_words(values, words: int) -> np.ndarray:
     out = np.zeros((len(values), words), dtype=np.uint64)
     for r, v in enumerate(values):
@@ -283,6 +247,7 @@ class SubtreeJob:
     kind = "subtree"
 
     def __init__(self, name: str, make_tree, mus, budget: int = DEFAULT_BUDGET):
+        from .patterns import STAT_KEYS, PatternContext     # patterns imports this module
         self.name, self.mus, self.budget = name, [float(v) for v in mus], int(budget)
         self.context = PatternContext(make_tree, self.mus)
         trees = [self.context.tree(i) for i in range(len(self.mus))]
@@ -392,95 +357,16 @@ class Patterns:
 # ---------------------------------------------------------------- independent tasks
 
 
-def mu_c_task(solve, payload) -> dict:
-    """Task "mu_c": payload (zero_u, zero_r, mu_hi) -> MuC fields (mu_c NaN = None)."""
-    zero_u, zero_r, mu_hi = payload
-    r = solve(np.asarray(zero_u, dtype=bool), np.asarray(zero_r, dtype=bool), mu_hi=mu_hi)
-    return {"mu_c": np.nan if r.mu_c is None else float(r.mu_c), "polished": bool(r.polished),
-            "lps": int(r.lps), "undecided": int(r.undecided)}
-
-
-@dataclass
-class FaceContext:
-    """The shared data of "face" tasks: the constraint rows A of every mu
-    (problem.friction_rows_2d: float, or exact integer object arrays), m, and
-    whether the DD runs in exact arithmetic."""
-
-    rows: list
-    m: int
-    exact: bool = False
-    max_memory_gb: float | str = "auto"     # run.max_memory_gb (progress.MemoryGuard)
-
-
-def face_payloads(n_mu: int, m: int, nodes) -> list[tuple]:
-    """The "face" tasks of a split: (mu index, face) for every mu and every face of
-    dd.split_faces(m, nodes), face by face (the face where every branching node is in
-    contact, usually the largest, first for every mu: big tasks start first)."""
-    from .dd import split_faces
-    return [(i, f) for f in split_faces(m, nodes) for i in range(n_mu)]
-
-
-def face_task(ctx: FaceContext, payload: tuple) -> dict:
-    """Task "face": payload (mu index, (contact, gap)) -> the DD of that face
-    (dd.complementary_rays(..., face=...); task_tick() and the memory guard after every
-    step: progress.MemoryLimit when run.max_memory_gb would be exceeded) as a dict
-    of numbers and arrays, so that checkpoints can hold it: mu_index; contact, gap
-    ((m,) bool masks of the face); X (R, d) float64 rays, or exact integers as
-    decimal strings (bytes); zero (R, ceil(3m / 8)) uint8, the zero flags packed
-    along rows (np.packbits); the counters initial_rays, pairs_tested,
-    pairs_adjacent, max_rays and seconds; a float DD's numerics close_calls,
-    cancellation and closest (NaN: no close call). face_result() turns it back into
-    a dd.DDResult."""
-    from .dd import complementary_rays
-    from .progress import MemoryGuard
-    i, (contact, gap) = payload
-    guard = MemoryGuard(ctx.max_memory_gb, ranks_on_host())
-    where = f" of face (contact {list(contact)}, gap {list(gap)})"
-
-    def tick(info):
-        task_tick()
-        guard.dd_step(info, where)
-
-    dd = complementary_rays(ctx.rows[i], ctx.m, exact=ctx.exact, face=(contact, gap), progress=tick)
-    nodes = np.arange(ctx.m)
-    out = {"mu_index": int(i), "contact": np.isin(nodes, list(contact)), "gap": np.isin(nodes, list(gap)),
-           "X": _encode_rays(dd.X), "zero": np.packbits(dd.zero, axis=1)}
-    for key in ("initial_rays", "pairs_tested", "pairs_adjacent", "max_rays"):
-        out[key] = int(dd.stats[key])
-    out["seconds"] = float(dd.stats["seconds"])
-    if not ctx.exact:
-        out["close_calls"] = int(dd.stats["close_calls"])
-        out["cancellation"] = float(dd.stats["cancellation"])
-        closest = dd.stats["closest"]
-        out["closest"] = float("nan") if closest is None else float(closest)
-    return out
-
-
-def face_result(res: dict) -> "DDResult":
-    """The dd.DDResult of a face_task result (as returned, or as read back from a
-    checkpoint); stats["face"] is the face, as dd.merge_results expects."""
-    from .dd import DDResult
-    contact, gap = np.asarray(res["contact"], dtype=bool), np.asarray(res["gap"], dtype=bool)
-    m = len(contact)
-    zero = np.unpackbits(np.asarray(res["zero"], dtype=np.uint8).reshape(-1, -(-3 * m // 8)),
-                         axis=1, count=3 * m).astype(bool)
-    stats = {k: res[k] for k in ("initial_rays", "pairs_tested", "pairs_adjacent", "max_rays", "seconds")}
-    if "close_calls" in res:
-        closest = float(res["closest"])
-        stats.update(close_calls=int(res["close_calls"]), cancellation=float(res["cancellation"]),
-                     closest=None if np.isnan(closest) else closest)
-    stats["face"] = (tuple(np.flatnonzero(contact).tolist()), tuple(np.flatnonzero(gap).tolist()))
-    return DDResult(X=_decode_rays(res["X"]), zero=zero, stats=stats)
-
-
-def _encode_rays(X: np.ndarray) -> np.ndarray:
-    """Float rays as they are; exact ones (object ints) as decimal strings."""
+def encode_rays(X: np.ndarray) -> np.ndarray:
+    """Rays as a checkpoint holds them: float rays as they are; exact ones (object ints)
+    as decimal strings."""
     if X.dtype != object:
         return X
     return X.astype(str).astype("S") if X.size else np.zeros(X.shape, dtype="S1")
 
 
-def _decode_rays(X: np.ndarray) -> np.ndarray:
+def decode_rays(X: np.ndarray) -> np.ndarray:
+    """encode_rays undone: decimal strings back to exact (object int) rays."""
     X = np.asarray(X)
     if X.dtype.kind != "S":
         return X
@@ -1082,32 +968,6 @@ def _probe(comm, source, tag, status) -> bool:
 # ---------------------------------------------------------------- what the pipeline calls
 
 
-def run_patterns(make_tree, mus, engine: Engine | None = None, budget: int = DEFAULT_BUDGET,
-                 name: str = "patterns") -> Patterns:
-    """Feasible sign patterns at every mu in `mus`, through the engine.
-
-    make_tree: a picklable callable, make_tree(mu) -> a tree with root(), m and
-    explore(subtree, budget) -> (found, open, stats[, undecided]) — e.g.
-    functools.partial(patterns.PatternTree, param, m) — for 2D and 3D alike."""
-    engine = engine or Engine()
-    return engine.run(SubtreeJob(name, make_tree, mus, budget)).output()
-
-
-def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> list:
-    """mu^c of every (zero_u, zero_r, mu_hi) in `items`, through the engine.
-
-    solve: a picklable callable solve(zero_u, zero_r, mu_hi=...) -> mu_critical.MuC,
-    e.g. functools.partial(mu_critical.mu_critical, param, m, mu_max=..., method=..., tol=...).
-    Returns the MuC list in the order of items."""
-    from .mu_critical import MuC
-    engine = engine or Engine()
-    payloads = [(np.asarray(zu, dtype=bool), np.asarray(zr, dtype=bool), float(mu_hi))
-                for zu, zr, mu_hi in items]
-    out = engine.run(TaskJob(name, "mu_c", solve, payloads)).output()
-    return [MuC(mu_c=None if math.isnan(r["mu_c"]) else float(r["mu_c"]), polished=bool(r["polished"]),
-                lps=int(r["lps"]), undecided=int(r["undecided"])) for r in out]
-
-
 def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, name: str | None = None,
               layout=None, payloads_for=None) -> list:
     """Results of independent tasks of a registered kind (e.g. "face"), in order.
@@ -1115,48 +975,3 @@ def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, 
     layout, payloads_for: see TaskJob (a resumed run keeps the saved layout)."""
     engine = engine or Engine()
     return engine.run(TaskJob(name or kind, kind, context, payloads, layout, payloads_for)).output()
-
-
-def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = None,
-              nodes=(), name: str = "rays", max_memory_gb: float | str = "auto") -> list["DDResult"]:
-    """The complementary rays at every mu, the double description split over the
-    faces of the branching nodes `nodes` (SPEC §5; the scene's choice,
-    dd.branching_nodes; none: one face, the whole cone), one "face" task per
-    (mu, face), through the engine.
-
-    rows: the constraint rows A of every mu (problem.friction_rows_2d). Returns one
-    dd.DDResult per mu (merge_results of its faces: canonical order, duplicates
-    removed, stats with faces, face_seconds and branching_nodes). A resumed run
-    keeps the split its checkpoint was made with, so finished faces are reused
-    whatever the rank count now is. The zero flags, and so every count, cone and
-    mu^c, are those of the unsplit run; the float ray vectors equal them to
-    rounding (a ray's floats depend on the DD's path to it: ~1e-13 relative), and
-    bit for bit those of any run with the same split, on any number of ranks."""
-    from .dd import merge_results
-    engine = engine or Engine()
-    nodes = [int(i) for i in nodes]
-
-    def payloads_for(layout):
-        return face_payloads(len(rows), m, layout["branching_nodes"])
-
-    layout = {"branching_nodes": nodes}
-    out = run_tasks("face", FaceContext(list(rows), m, exact, max_memory_gb), payloads_for(layout), engine, name,
-                    layout=layout, payloads_for=payloads_for)
-    per_mu: list = [[] for _ in rows]
-    for res in out:
-        per_mu[int(res["mu_index"])].append(face_result(res))
-    merged = []
-    for faces in per_mu:
-        dd = merge_results(faces)
-        split = sorted({i for f in faces for part in f.stats["face"] for i in part})
-        dd.stats["branching_nodes"] = split
-        merged.append(dd)
-    return merged
-
-
-def strip_exact(param):
-    """A parametrisation without its exact (flint) copies: the float engines'
-    context, cheap to pickle."""
-    if getattr(param, "Uq", None) is None and getattr(param, "Rq", None) is None:
-        return param
-    return replace(param, Uq=None, Rq=None)
