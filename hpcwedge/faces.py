@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .dd import DDResult, complementary_rays, merge_results, split_faces
-from .parallel import Engine, decode_rays, encode_rays, ranks_on_host, run_tasks, task_tick
+from .parallel import Engine, decode_rays, encode_rays, ranks_on_host, run_tasks
+from .parallel.tasks import task_tick
 from .progress import MemoryGuard
 
 

@@ -48,7 +48,8 @@ import scipy.linalg as sla
 from .conic import (ATTEMPTS, FEASIBLE, LEAST_NORM_ATTEMPT, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, ConeRows, Rows,
                     _count, _settings, _socp_data, _csc_dense, _csc_zero, decide, feasible, pattern_rows,
                     problem_dim, pyramid_sides_for, violation)
-from .parallel import Engine, TaskJob, task_tick
+from .parallel import Engine, TaskJob
+from .parallel.tasks import task_tick
 from .problem import Parametrization, balanced_2d
 
 BRACKET_RTOL = 1e-7

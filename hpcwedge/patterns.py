@@ -21,7 +21,8 @@ import numpy as np
 from .conic import (FEASIBLE, INFEASIBLE, UNDECIDED, VERIFY_TOL, WedgeMilp, decide, feasible, infeasible_core,
                     lp_violation, node_rows, pattern_rows, problem_dim, violation, wedge_milp)
 from .mu_critical import mu_critical
-from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob, task_stopping, task_tick
+from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
+from .parallel.tasks import task_stopping, task_tick
 from .problem import Parametrization
 from .symmetry import Symmetry
 

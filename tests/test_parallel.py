@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from hpcwedge import parallel
-from hpcwedge.checkpoint import CheckpointError, read_checkpoint
+from hpcwedge.parallel.checkpoint import CheckpointError, read_checkpoint
+from hpcwedge.parallel.jobs import bits_to_words, words_to_bits
 from hpcwedge.dd import branching_nodes, canonical_order, complementary_rays
 from hpcwedge.faces import face_task, run_faces
 from hpcwedge.mu_critical import mu_critical, run_mu_c
@@ -83,7 +84,7 @@ def test_subtree_job_checkpoint_state_round_trip():
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
-def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
+def test_engine_signal_checkpoint_resume_in_process(tmp_path, sig):
     """A signal in the middle of a job (sent by a task to its own process):
     SIGTERM -> Interrupted at the next safe point, checkpoint, a new engine
     resumes; SIGUSR1 -> a checkpoint and the job goes on. Same patterns, every
@@ -100,18 +101,18 @@ def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
             os.kill(os.getpid(), sig)
         return explore_task(ctx, payload)
 
-    monkeypatch.setitem(parallel.KINDS, "subtree", task)
     eng = parallel.Engine()
     eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
     eng.install_signals()
     try:
-        if sig == signal.SIGTERM:
-            with pytest.raises(parallel.Interrupted):
-                run_patterns(make, mus, engine=eng, budget=2)
-            assert eng.write_checkpoint("SIGTERM")
-        else:
-            out = run_patterns(make, mus, engine=eng, budget=2)
-            assert eng.checkpoints_written == 1 and eng.checkpoint_reason == "SIGUSR1"
+        with parallel.registered("subtree", task):
+            if sig == signal.SIGTERM:
+                with pytest.raises(parallel.Interrupted):
+                    run_patterns(make, mus, engine=eng, budget=2)
+                assert eng.write_checkpoint("SIGTERM")
+            else:
+                out = run_patterns(make, mus, engine=eng, budget=2)
+                assert eng.checkpoints_written == 1 and eng.checkpoint_reason == "SIGUSR1"
     finally:
         eng.close()
     if sig == signal.SIGTERM:
@@ -126,10 +127,10 @@ def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
 
 def test_bit_words_beyond_64_nodes():
     vals = [0, 1, (1 << 64) | 5, (1 << 130) - 1, 1 << 127]
-    words = parallel._bits_to_words(vals, 3)
+    words = bits_to_words(vals, 3)
     assert words.shape == (5, 3) and words.dtype == np.uint64
-    assert parallel._words_to_bits(words) == vals
-    assert parallel._words_to_bits(np.zeros((0, 1), dtype=np.uint64)) == []
+    assert words_to_bits(words) == vals
+    assert words_to_bits(np.zeros((0, 1), dtype=np.uint64)) == []
 
 
 def test_run_mu_c_equals_direct_calls():
@@ -181,7 +182,7 @@ def test_branching_nodes():
 
 
 @pytest.mark.parametrize("exact", [False, True])
-def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
+def test_face_tasks_checkpoint_resume_in_process(tmp_path, exact):
     """run_faces gives the unsplit DD's zero flags (and, exact, its rays). SIGTERM
     during the 5th face task: the task is dropped at its first task_tick(), the
     checkpoint holds the 4 finished faces (HDF5 round trip: float rays, exact ones
@@ -210,13 +211,11 @@ def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
             os.kill(os.getpid(), signal.SIGTERM)
         return face_task(ctx, payload)
 
-    monkeypatch.setitem(parallel.KINDS, "face", task)
-    monkeypatch.setattr(parallel, "_TICK_EVERY_S", 0.0)   # cancel at the first tick
-    eng = parallel.Engine()
+    eng = parallel.Engine(tick_every_s=0.0)                # cancel at the first tick
     eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
     eng.install_signals()
     try:
-        with pytest.raises(parallel.Interrupted):
+        with parallel.registered("face", task), pytest.raises(parallel.Interrupted):
             run_faces(rows, m, exact, engine=eng, nodes=nodes)
         assert eng.write_checkpoint("SIGTERM")
     finally:
@@ -230,7 +229,8 @@ def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
     kill_at.clear()
     eng = parallel.Engine()
     assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True) and eng.restored("rays")
-    out = run_faces(rows, m, exact, engine=eng, nodes=[m - 1])
+    with parallel.registered("face", task):
+        out = run_faces(rows, m, exact, engine=eng, nodes=[m - 1])
     assert len(calls) == 2 * 8 - 4
     for a, b in zip(out, ref):
         assert a.stats["branching_nodes"] == nodes and a.stats["faces"] == 8
