@@ -156,7 +156,7 @@ def _condense_together(comm, scene=None):
 
 
 def _run(args) -> int:
-    from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, world
+    from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, serve, world
     try:
         comm = world()
     except ParallelError as e:
@@ -164,9 +164,9 @@ def _run(args) -> int:
     if comm is not None and comm.rank != 0:
         sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
         _condense_together(comm, None)
-        Engine(comm).serve()
+        serve(comm)
         return 0
-    from .checkpoint import CheckpointError, checkpoint_path
+    from .parallel.checkpoint import CheckpointError, checkpoint_path
     from .pipeline import run_scene
     from .progress import Progress
     from .results import write_result

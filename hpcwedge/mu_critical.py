@@ -48,7 +48,8 @@ import scipy.linalg as sla
 from .conic import (ATTEMPTS, FEASIBLE, LEAST_NORM_ATTEMPT, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, ConeRows, Rows,
                     _count, _settings, _socp_data, _csc_dense, _csc_zero, decide, feasible, pattern_rows,
                     problem_dim, pyramid_sides_for, violation)
-from .parallel import task_tick
+from .parallel import Engine, TaskJob
+from .parallel.tasks import task_tick
 from .problem import Parametrization, balanced_2d
 
 BRACKET_RTOL = 1e-7
@@ -658,3 +659,28 @@ def _signed_multipliers(G, rn, E, nrm, nA, nL, mu):
     z = v[nS + nL:nS + nL + 3 * nA].reshape(nA, 3)
     gam = np.concatenate([-mu * z[:, 0], -z[:, 1], -z[:, 2], -nu])
     return lam, gam
+
+
+# ---------------------------------------------------------------- the "mu_c" task of the engine
+
+
+def mu_c_task(solve, payload) -> dict:
+    """Task "mu_c": payload (zero_u, zero_r, mu_hi) -> MuC fields (mu_c NaN = None)."""
+    zero_u, zero_r, mu_hi = payload
+    r = solve(np.asarray(zero_u, dtype=bool), np.asarray(zero_r, dtype=bool), mu_hi=mu_hi)
+    return {"mu_c": np.nan if r.mu_c is None else float(r.mu_c), "polished": bool(r.polished),
+            "lps": int(r.lps), "undecided": int(r.undecided)}
+
+
+def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> list:
+    """mu^c of every (zero_u, zero_r, mu_hi) in `items`, through the engine.
+
+    solve: a picklable callable solve(zero_u, zero_r, mu_hi=...) -> MuC,
+    e.g. functools.partial(mu_critical, param, m, mu_max=..., method=..., tol=...).
+    Returns the MuC list in the order of items."""
+    engine = engine or Engine()
+    payloads = [(np.asarray(zu, dtype=bool), np.asarray(zr, dtype=bool), float(mu_hi))
+                for zu, zr, mu_hi in items]
+    out = engine.run(TaskJob(name, "mu_c", solve, payloads)).output()
+    return [MuC(mu_c=None if math.isnan(r["mu_c"]) else float(r["mu_c"]), polished=bool(r["polished"]),
+                lps=int(r["lps"]), undecided=int(r["undecided"])) for r in out]

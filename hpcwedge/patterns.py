@@ -21,7 +21,8 @@ import numpy as np
 from .conic import (FEASIBLE, INFEASIBLE, UNDECIDED, VERIFY_TOL, WedgeMilp, decide, feasible, infeasible_core,
                     lp_violation, node_rows, pattern_rows, problem_dim, violation, wedge_milp)
 from .mu_critical import mu_critical
-from .parallel import task_stopping, task_tick
+from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
+from .parallel.tasks import task_stopping, task_tick
 from .problem import Parametrization
 from .symmetry import Symmetry
 
@@ -510,3 +511,51 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
                 break
             best = mu
     return best
+
+
+# ---------------------------------------------------------------- the "subtree" task of the engine
+
+
+class PatternContext:
+    """What a worker needs to explore subtrees: make_tree(mu) -> a tree with
+    root() and explore(subtree, budget) (PatternTree), and the mu list."""
+
+    def __init__(self, make_tree, mus):
+        self.make_tree, self.mus = make_tree, list(mus)
+        self._trees = {}
+
+    def tree(self, i: int):
+        """The tree at mus[i], made on first use (each worker makes its own)."""
+        if i not in self._trees:
+            self._trees[i] = self.make_tree(self.mus[i])
+        return self._trees[i]
+
+    def __getstate__(self):
+        return {"make_tree": self.make_tree, "mus": self.mus, "_trees": {}}
+
+
+#: the counters of a subtree task that do not depend on the split of the work
+STAT_KEYS = ("nodes", "solves", "skipped", "pruned", "undecided")
+
+
+def explore_task(ctx: PatternContext, payload):
+    """Task "subtree": payload (mu index, Subtree, budget, witness x or None) ->
+    (found, open, stats dict, undecided found, open witnesses). Stopped by the
+    engine (task_stopping), it returns what it found and hands the rest back as open."""
+    i, subtree, budget, x = payload
+    out = ctx.tree(i).explore(subtree, budget, x=x)
+    stats = {k: getattr(out.stats, k) for k in STAT_KEYS}
+    for k, v in (getattr(out.stats, "statuses", None) or {}).items():
+        stats[f"status_{k}"] = v
+    return out.found, out.open, stats, list(getattr(out, "undecided", [])), list(out.open_x)
+
+
+def run_patterns(make_tree, mus, engine: Engine | None = None, budget: int = DEFAULT_BUDGET,
+                 name: str = "patterns") -> Patterns:
+    """Feasible sign patterns at every mu in `mus`, through the engine.
+
+    make_tree: a picklable callable, make_tree(mu) -> a tree with root(), m and
+    explore(subtree, budget) -> (found, open, stats[, undecided]) — e.g.
+    functools.partial(PatternTree, param, m) — for 2D and 3D alike."""
+    engine = engine or Engine()
+    return engine.run(SubtreeJob(name, make_tree, mus, budget)).output()

@@ -23,14 +23,14 @@ import numpy as np
 
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .environment import environment, single_threaded
-from .faces import branching_nodes
+from .faces import branching_nodes, run_faces
 from .model import Model
-from .mu_critical import mu_critical
+from .mu_critical import mu_critical, run_mu_c
 from .nodesets import canonical_order
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
-from .parallel import Engine, ranks_on_host, run_faces, run_mu_c, run_patterns, strip_exact
-from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
-from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
+from .parallel import Engine, ranks_on_host
+from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical, run_patterns
+from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors, strip_exact
 from .progress import MemoryGuard, Progress, out_of_memory
 from .scene import Scene, SceneError
 from .symmetry import node_symmetries

@@ -17,7 +17,7 @@ For a supported body (k = 0): x = r, u = K^-1 r.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -265,3 +265,11 @@ def ray_vectors(param: Parametrization, X: np.ndarray, m: int,
     V[~wedged, n:] = 0.0
     V /= np.where(wedged, V[:, n:n + m].sum(1), V[:, :m].sum(1))[:, None]
     return wedged, V
+
+
+def strip_exact(param):
+    """A parametrisation without its exact (flint) copies: the float engines'
+    context, cheap to pickle."""
+    if getattr(param, "Uq", None) is None and getattr(param, "Rq", None) is None:
+        return param
+    return replace(param, Uq=None, Rq=None)

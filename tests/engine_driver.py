@@ -13,6 +13,7 @@ import sys
 import time
 
 from hpcwedge import parallel
+from hpcwedge.parallel.tasks import warm_up
 
 
 def spin(ctx, seconds):
@@ -34,14 +35,13 @@ def cpu(pid):
 
 def main(period):
     comm = parallel.world()
-    for mod in parallel.WARM_UP:     # the workers' start-up imports, done before measuring
-        __import__(mod)
+    warm_up()                        # the workers' start-up imports, done before measuring
     pids = comm.gather(os.getpid(), root=0)
-    engine = parallel.Engine(comm)
     if comm.rank:
-        engine.serve()
+        parallel.serve(comm)
         comm.recv(source=0)          # phase C: a blocking receive (busy-polls)
         return
+    engine = parallel.Engine(comm)
     time.sleep(0.3)                  # let the workers settle into their idle wait
     out = {"pids": pids, "period": period}
 
@@ -66,10 +66,10 @@ def cancel():
     import signal
     import threading
     comm = parallel.world()
-    engine = parallel.Engine(comm)
     if comm.rank:
-        engine.serve()
+        parallel.serve(comm)
         return
+    engine = parallel.Engine(comm)
     engine.install_signals()
     threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
     t = time.perf_counter()

@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from hpcwedge.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
+from hpcwedge.parallel.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
 from hpcwedge.parallel import EXIT_INTERRUPTED
 from mpi_helpers import (all_gone, answers, command, damaged, env, interrupt_cycles, launch, needs_mpirun, rank_pids, ray_arrays,
                          rays_answers, run, scene_text, show, show_json, usr1_handled, wait_for_checkpoint,
@@ -593,7 +593,7 @@ def test_failed_write_keeps_the_good_checkpoint(tmp_path, monkeypatch):
         write_checkpoint(path, header, "s", [("a", bad)])
     assert open(path, "rb").read() == good and not os.path.exists(path + ".tmp")
     # a temp file that does not read back (verify fails) never replaces the good one
-    import hpcwedge.checkpoint as ck
+    import hpcwedge.parallel.checkpoint as ck
 
     def broken(p):
         raise CheckpointError("x")

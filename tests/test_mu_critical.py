@@ -235,16 +235,17 @@ def test_3d_mu_c_task_stops_within_one_solve():
     import time
     from functools import partial
 
-    from hpcwedge import parallel
+    from hpcwedge.mu_critical import mu_c_task
+    from hpcwedge.parallel.tasks import TaskCancelled, run_cancellable
     p, m, zu, zr = _plug3d_pattern()
     solve = partial(mu_critical, p, m, mu_max=100.0, method=method, tol=1e-9)
     t = time.perf_counter()
-    whole = parallel.mu_c_task(solve, (zu, zr, 1.0))
+    whole = mu_c_task(solve, (zu, zr, 1.0))
     full = time.perf_counter() - t
     assert whole["mu_c"] > 0 and whole["lps"] >= 3
     t = time.perf_counter()
-    with pytest.raises(parallel.TaskCancelled):
-        parallel._run_cancellable(parallel.mu_c_task, solve, (zu, zr, 1.0), lambda: True)
+    with pytest.raises(TaskCancelled):
+        run_cancellable(mu_c_task, solve, (zu, zr, 1.0), lambda: True)
     stopped = time.perf_counter() - t
     assert stopped < 0.5 * full, (stopped, full)   # the old code ran the whole task (~full); a
     # bound of 0.2 failed once on a loaded machine (1.65 s of 6.8 s: the first solves are the slow ones)

@@ -17,8 +17,7 @@ import pytest
 from hpcwedge import exact as xq
 from hpcwedge.dd import BASIS_DEPENDENT, CANCELLATION_MIN, complementary_rays
 from hpcwedge.numerics import COND_SUSPECT, Numerics, judge_2d
-from hpcwedge.parallel import strip_exact
-from hpcwedge.problem import Parametrization, friction_rows_2d
+from hpcwedge.problem import Parametrization, friction_rows_2d, strip_exact
 from hpcwedge.progress import Progress
 from test_stress import answer, grid, run, tan
 

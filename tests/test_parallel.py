@@ -15,12 +15,13 @@ import numpy as np
 import pytest
 
 from hpcwedge import parallel
-from hpcwedge.checkpoint import CheckpointError, read_checkpoint
 from hpcwedge.dd import complementary_rays
-from hpcwedge.faces import branching_nodes
-from hpcwedge.mu_critical import mu_critical
+from hpcwedge.faces import branching_nodes, face_task, run_faces
+from hpcwedge.mu_critical import mu_critical, run_mu_c
 from hpcwedge.nodesets import canonical_order
-from hpcwedge.patterns import PatternTree, sign_patterns
+from hpcwedge.parallel.checkpoint import CheckpointError, read_checkpoint
+from hpcwedge.parallel.jobs import bits_to_words, words_to_bits
+from hpcwedge.patterns import PatternTree, explore_task, run_patterns, sign_patterns
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.scene import parse_scene
@@ -42,7 +43,7 @@ def _tree_factory(seed, m=5, free=False):
 def test_run_patterns_equals_serial_search(seed, budget):
     make, prob = _tree_factory(700 + seed, free=bool(seed % 2))
     mus = [0.5, 2.0, 8.0]
-    out = parallel.run_patterns(make, mus, budget=budget)
+    out = run_patterns(make, mus, budget=budget)
     for k, mu in enumerate(mus):
         tree = make(mu)
         whole = tree.explore(tree.root())
@@ -63,7 +64,7 @@ def test_subtree_job_checkpoint_state_round_trip():
     finish: the same patterns and node count as one pass."""
     make, _ = _tree_factory(31, m=6)
     mus = [1.0, 4.0]
-    ref = parallel.run_patterns(make, mus, budget=2)
+    ref = run_patterns(make, mus, budget=2)
     job = parallel.SubtreeJob("p", make, mus, budget=2)
     handler = parallel.handler_for("subtree")
     in_flight = []
@@ -83,14 +84,14 @@ def test_subtree_job_checkpoint_state_round_trip():
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
-def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
+def test_engine_signal_checkpoint_resume_in_process(tmp_path, sig):
     """A signal in the middle of a job (sent by a task to its own process):
     SIGTERM -> Interrupted at the next safe point, checkpoint, a new engine
     resumes; SIGUSR1 -> a checkpoint and the job goes on. Same patterns, every
     tree node counted once."""
     make, _ = _tree_factory(41, m=6)
     mus = [1.0, 4.0]
-    ref = parallel.run_patterns(make, mus, budget=2)
+    ref = run_patterns(make, mus, budget=2)
     ckpt = str(tmp_path / "x.ckpt")
     calls = []
 
@@ -98,27 +99,27 @@ def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
         calls.append(1)
         if len(calls) == 5:
             os.kill(os.getpid(), sig)
-        return parallel.explore_task(ctx, payload)
+        return explore_task(ctx, payload)
 
-    monkeypatch.setitem(parallel.KINDS, "subtree", task)
     eng = parallel.Engine()
     eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
     eng.install_signals()
     try:
-        if sig == signal.SIGTERM:
-            with pytest.raises(parallel.Interrupted):
-                parallel.run_patterns(make, mus, engine=eng, budget=2)
-            assert eng.write_checkpoint("SIGTERM")
-        else:
-            out = parallel.run_patterns(make, mus, engine=eng, budget=2)
-            assert eng.checkpoints_written == 1 and eng.checkpoint_reason == "SIGUSR1"
+        with parallel.registered("subtree", task):
+            if sig == signal.SIGTERM:
+                with pytest.raises(parallel.Interrupted):
+                    run_patterns(make, mus, engine=eng, budget=2)
+                assert eng.write_checkpoint("SIGTERM")
+            else:
+                out = run_patterns(make, mus, engine=eng, budget=2)
+                assert eng.checkpoints_written == 1 and eng.checkpoint_reason == "SIGUSR1"
     finally:
         eng.close()
     if sig == signal.SIGTERM:
         assert len(calls) == 5                          # stopped at the safe point after the 5th task
         eng = parallel.Engine()
         assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True)
-        out = parallel.run_patterns(make, mus, engine=eng, budget=2)
+        out = run_patterns(make, mus, engine=eng, budget=2)
         with pytest.raises(CheckpointError, match="another scene"):
             parallel.Engine().use_checkpoint(ckpt, "other", "scene", 1000.0, resume=True)
     assert out.found == ref.found and out.counters["nodes"] == ref.counters["nodes"]
@@ -126,10 +127,10 @@ def test_engine_signal_checkpoint_resume_in_process(tmp_path, monkeypatch, sig):
 
 def test_bit_words_beyond_64_nodes():
     vals = [0, 1, (1 << 64) | 5, (1 << 130) - 1, 1 << 127]
-    words = parallel._bits_to_words(vals, 3)
+    words = bits_to_words(vals, 3)
     assert words.shape == (5, 3) and words.dtype == np.uint64
-    assert parallel._words_to_bits(words) == vals
-    assert parallel._words_to_bits(np.zeros((0, 1), dtype=np.uint64)) == []
+    assert words_to_bits(words) == vals
+    assert words_to_bits(np.zeros((0, 1), dtype=np.uint64)) == []
 
 
 def test_run_mu_c_equals_direct_calls():
@@ -141,7 +142,7 @@ def test_run_mu_c_equals_direct_calls():
     for zu_bits in range(1, 1 << m, 3):
         zu = np.array([(zu_bits >> i) & 1 for i in range(m)], dtype=bool)
         items.append((zu, ~zu, 50.0))
-    got = parallel.run_mu_c(partial(mu_critical, param, m, mu_max=100.0), items)
+    got = run_mu_c(partial(mu_critical, param, m, mu_max=100.0), items)
     for (zu, zr, mu_hi), r in zip(items, got):
         want = mu_critical(param, m, zu, zr, mu_hi=mu_hi, mu_max=100.0)
         assert (r.mu_c, r.polished, r.lps, r.undecided) == (want.mu_c, want.polished, want.lps, want.undecided)
@@ -181,7 +182,7 @@ def test_branching_nodes():
 
 
 @pytest.mark.parametrize("exact", [False, True])
-def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
+def test_face_tasks_checkpoint_resume_in_process(tmp_path, exact):
     """run_faces gives the unsplit DD's zero flags (and, exact, its rays). SIGTERM
     during the 5th face task: the task is dropped at its first task_tick(), the
     checkpoint holds the 4 finished faces (HDF5 round trip: float rays, exact ones
@@ -191,7 +192,7 @@ def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
     rows_n, nodes = (3, [3, 4, 5]) if exact else (5, [7, 8, 9])
     m, mus = 2 * rows_n, [0.65, 1.0]
     rows = _plug_rows(rows_n, mus, exact)
-    ref = parallel.run_faces(rows, m, exact, nodes=nodes)
+    ref = run_faces(rows, m, exact, nodes=nodes)
     for A, dd in zip(rows, ref):
         full = complementary_rays(A, m, exact=exact)
         order = canonical_order(full.zero)
@@ -208,16 +209,14 @@ def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
         calls.append(payload)
         if len(calls) in kill_at:
             os.kill(os.getpid(), signal.SIGTERM)
-        return parallel.face_task(ctx, payload)
+        return face_task(ctx, payload)
 
-    monkeypatch.setitem(parallel.KINDS, "face", task)
-    monkeypatch.setattr(parallel, "_TICK_EVERY_S", 0.0)   # cancel at the first tick
-    eng = parallel.Engine()
+    eng = parallel.Engine(tick_every_s=0.0)                # cancel at the first tick
     eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
     eng.install_signals()
     try:
-        with pytest.raises(parallel.Interrupted):
-            parallel.run_faces(rows, m, exact, engine=eng, nodes=nodes)
+        with parallel.registered("face", task), pytest.raises(parallel.Interrupted):
+            run_faces(rows, m, exact, engine=eng, nodes=nodes)
         assert eng.write_checkpoint("SIGTERM")
     finally:
         eng.close()
@@ -230,7 +229,8 @@ def test_face_tasks_checkpoint_resume_in_process(tmp_path, monkeypatch, exact):
     kill_at.clear()
     eng = parallel.Engine()
     assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True) and eng.restored("rays")
-    out = parallel.run_faces(rows, m, exact, engine=eng, nodes=[m - 1])
+    with parallel.registered("face", task):
+        out = run_faces(rows, m, exact, engine=eng, nodes=[m - 1])
     assert len(calls) == 2 * 8 - 4
     for a, b in zip(out, ref):
         assert a.stats["branching_nodes"] == nodes and a.stats["faces"] == 8

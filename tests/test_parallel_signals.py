@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from hpcwedge.checkpoint import read_checkpoint
+from hpcwedge.parallel.checkpoint import read_checkpoint
 from mpi_helpers import all_gone, launch, needs_mpirun, rank_pids, run, show_json, wait_for_checkpoint, write_scene
 
 #: plug3d, one mu; run.task_budget so large that one task explores a whole tree

@@ -1,0 +1,397 @@
+"""The engine: runs jobs behind one run(job), serially (one process) or as the
+master of a world of workers (SPEC §5), with checkpoints and signals.
+
+One process (no MPI launcher, or size 1): the task loop runs in-process. Under
+mpirun: rank 0 is the master — it holds the pool, hands a task to each worker
+that is free, merges results and alone writes files; ranks >= 1 run
+worker.serve(comm) and only run tasks.
+
+Checkpoints (checkpoint.py: the file and the Checkpointer): every
+``checkpoint_every_s`` seconds, at SIGUSR1 (then the run goes on) and at
+SIGTERM/SIGINT (then the master stops the workers — a task in progress is
+dropped at its next task_tick() — and the command exits with
+EXIT_INTERRUPTED). Signal handlers only set a flag inside the task loop, which
+acts on it between two merges (a task is done only once its result is merged
+into the master's state; tasks in flight are saved as open). Outside the loop,
+SIGTERM raises ``Interrupted`` at once: the state is then the finished jobs.
+
+Resume: a job whose name is in the checkpoint starts from the saved state
+(a finished job returns its saved results at once). The pipeline is
+deterministic, so it asks for the same jobs in the same order.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import time
+
+from . import mpi
+from .checkpoint import Checkpointer, CheckpointError
+from .jobs import TaskJob
+from .tasks import TICK_EVERY_S, Interrupted, TaskCancelled, handler_for, run_cancellable
+
+#: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
+EXIT_INTERRUPTED = 75
+#: the master checks the memory guard (Engine.guard) at most this often (seconds)
+GUARD_EVERY_S = 1.0
+
+
+class SignalState:
+    """The master's signals: SIGUSR1 = checkpoint and go on; SIGTERM/SIGINT = checkpoint
+    and stop. While `defer` (inside a job) a signal only sets a flag that the job loop
+    acts on at a safe point; otherwise SIGTERM/SIGINT raise Interrupted at once."""
+
+    def __init__(self):
+        self.flags: set = set()
+        self.defer = False
+        self.done = False
+        self._old_handlers: dict = {}
+
+    def install(self) -> None:
+        """Install the handlers (main thread only; elsewhere signals stay as they are)."""
+        import threading
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
+            self._old_handlers[sig] = signal.signal(sig, self._on_signal)
+
+    def mark_done(self) -> None:
+        """From now on the three signals change nothing (SIG_IGN, see Engine.mark_done)."""
+        self.done = True
+        for sig in self._old_handlers:
+            signal.signal(sig, signal.SIG_IGN)
+
+    def restore(self) -> None:
+        """The handlers as they were before install()."""
+        for sig, h in self._old_handlers.items():
+            signal.signal(sig, h)
+        self._old_handlers = {}
+
+    def _on_signal(self, signum, frame):
+        name = signal.Signals(signum).name
+        if self.done:
+            return
+        if signum == signal.SIGUSR1:
+            self.flags.add(name)
+            return
+        self.flags.add("STOP:" + name)
+        if not self.defer:
+            self.defer = True        # a second signal must not interrupt the checkpoint write
+            raise Interrupted(name)
+
+    def stop_reason(self) -> str | None:
+        """The name of the SIGTERM/SIGINT received, if any."""
+        return next((f[5:] for f in self.flags if f.startswith("STOP:")), None)
+
+    def take_checkpoint_request(self) -> bool:
+        """True once per SIGUSR1 received."""
+        if "SIGUSR1" in self.flags:
+            self.flags.discard("SIGUSR1")
+            return True
+        return False
+
+
+class Master:
+    """Rank 0's side of the wire: says hello (host, pid) to every worker, sends tasks
+    (with the job's context once per worker and job), stops the workers."""
+
+    def __init__(self, comm):
+        self.comm = comm
+        self.workers = list(range(1, comm.size))
+        self.stopped = False
+        self._ctx_sent: dict = {}        # worker -> job id whose context it holds
+        me = (socket.gethostname(), os.getpid())
+        for w in self.workers:           # small: an eager send, returns at once
+            comm.send(me, dest=w, tag=mpi.HELLO)
+
+    def send_task(self, w: int, job_id: int, job, payload) -> None:
+        fresh = self._ctx_sent.get(w) != job_id
+        self._ctx_sent[w] = job_id
+        self.comm.send((job_id, job.kind, payload, fresh, job.context if fresh else None), dest=w, tag=mpi.TASK)
+
+    def stop(self, waiting, timeout: float, on_answer) -> None:
+        """Once: stop every worker, hand the answers of `waiting` to on_answer (mpi.stop_workers)."""
+        if self.stopped:
+            return
+        self.stopped = True
+        mpi.stop_workers(self.comm, self.workers, waiting, timeout, on_answer)
+
+
+class Engine:
+    """Runs jobs serially (comm None) or as the master of a world of workers.
+
+    checkpoint: set with use_checkpoint(); signals: install_signals() (master,
+    command line only). summary(): how the work was split (depends on the rank
+    count and on resumes, unlike every answer). tick_every_s: how often a task
+    run in-process looks at signals and the checkpoint timer (tasks.run_cancellable)."""
+
+    def __init__(self, comm=None, progress=None, tick_every_s: float = TICK_EVERY_S):
+        self.comm = comm
+        self.size = comm.size if comm is not None else 1
+        self.rank = comm.rank if comm is not None else 0
+        self.progress = progress
+        self.tick_every_s = tick_every_s
+        #: progress.MemoryGuard of the run (run.max_memory_gb), checked after merges (pipeline sets it)
+        self.guard = None
+        self.checkpoints = Checkpointer()
+        self.signals = SignalState()
+        self.master = Master(comm) if comm is not None and self.rank == 0 else None
+        self.tasks_per_rank = [0] * self.size  # this session, merged tasks by the rank that ran them
+        self._jobs: dict = {}            # finished jobs, by name, in order
+        self._current = None             # the job being run
+        self._inflight: dict = {}        # rank -> token of its task in flight
+        self._job_id = 0
+        self._job_start = (time.monotonic(), 0)    # (when, tasks done) as the current job started
+        self._guarded = 0.0
+
+    @property
+    def is_master(self) -> bool:
+        return self.rank == 0
+
+    @property
+    def resumes(self) -> int:
+        return self.checkpoints.resumes
+
+    @property
+    def checkpoints_written(self) -> int:
+        return self.checkpoints.written
+
+    @property
+    def checkpoint_reason(self) -> str | None:
+        return self.checkpoints.reason
+
+    # ---- checkpoints
+
+    def use_checkpoint(self, path: str, scene_hash: str, scene_text: str, every_s: float,
+                       resume: bool, inputs: dict[str, str] | None = None) -> bool:
+        """Write checkpoints to `path`; with resume, continue from it if it exists
+        (Checkpointer.use). Returns True when a checkpoint was loaded."""
+        return self.checkpoints.use(path, scene_hash, scene_text, every_s, resume, inputs)
+
+    def restored(self, name: str) -> bool:
+        """The checkpoint this run resumed from holds a job `name` not run yet in
+        this session (the pipeline then runs that stage as jobs again, so that the
+        saved work is used)."""
+        return name in self.checkpoints.restored
+
+    def elapsed(self) -> float:
+        return self.checkpoints.elapsed()
+
+    def write_checkpoint(self, reason: str = "timer") -> bool:
+        """Write the master's state now (no-op without a checkpoint path); True if written.
+        A write that fails keeps the previous checkpoint (Checkpointer.write)."""
+        if not self.checkpoints.active or not self.is_master:
+            return False
+        jobs = [(name, _state(job, [], finished=True)) for name, job in self._jobs.items()]
+        if self._current is not None and self._current.name not in self._jobs:
+            jobs.append((self._current.name,
+                         _state(self._current, list(self._inflight.values()), finished=False)))
+        return self.checkpoints.write(jobs, self.size, reason)
+
+    def remove_checkpoint(self) -> None:
+        """The result is written: remove the checkpoint (Checkpointer.remove)."""
+        self.checkpoints.remove()
+
+    # ---- signals
+
+    def install_signals(self) -> None:
+        """Master: SIGUSR1 = checkpoint and go on; SIGTERM/SIGINT = checkpoint and stop.
+        (Main thread only; elsewhere signals stay as they are.)"""
+        self.signals.install()
+
+    def mark_done(self) -> None:
+        """Nothing is left to save (the result or the final checkpoint is written):
+        from now on SIGTERM/SIGINT/SIGUSR1 change nothing, up to the process's exit.
+        They are set to SIG_IGN: CPython's finalisation resets signals that have a
+        Python handler to their default action, and a SIGTERM during the seconds
+        of interpreter shutdown would turn a finished run into a killed one."""
+        self.signals.mark_done()
+
+    def _safe_point(self) -> None:
+        """Between merges: act on signals and the checkpoint timer."""
+        stop = self.signals.stop_reason()
+        if stop:
+            raise Interrupted(stop)
+        self._serve_checkpoint()
+
+    def _serve_checkpoint(self) -> None:
+        """Write the checkpoint SIGUSR1 or the timer asks for (tasks in flight saved as open)."""
+        if self.signals.take_checkpoint_request():
+            self.write_checkpoint("SIGUSR1")
+        elif self.checkpoints.due():
+            self.write_checkpoint("timer")
+
+    def _in_task(self) -> bool:
+        """In-process engine, polled inside a task (task_stopping): serves SIGUSR1 and
+        the checkpoint timer there (the running task is saved as open), and says
+        whether a SIGTERM/SIGINT asks the task to stop."""
+        if self.signals.stop_reason():
+            return True
+        self._serve_checkpoint()
+        return False
+
+    # ---- running jobs
+
+    def run(self, job):
+        """Run `job` to the end (resuming it from the checkpoint if it is there); returns it."""
+        if not self.is_master:
+            raise RuntimeError("Engine.run is for the master; workers call parallel.serve(comm)")
+        if job.name in self._jobs:
+            raise ValueError(f"job name {job.name!r} used twice")
+        self.signals.defer = True            # from here on, signals act at safe points only
+        try:
+            state = self.checkpoints.restored.get(job.name)
+            if state is not None:
+                if state["attrs"].get("kind") != job.kind:
+                    raise CheckpointError(f"job {job.name!r}: checkpoint kind {state['attrs'].get('kind')!r}, "
+                                          f"this run {job.kind!r}")
+                job.load(state)
+                job.counters.update(json.loads(state["attrs"]["counters"]))
+            self._job_id += 1
+            self._current, self._inflight = job, {}
+            self._job_start = (time.monotonic(), job.counters.get("tasks", 0))
+            self.checkpoints.restored.pop(job.name, None)
+            if self.signals.stop_reason():
+                raise Interrupted(self.signals.stop_reason())
+            if self.size == 1:
+                self._run_serial(job)
+            else:
+                self._run_master(job)
+            self._jobs[job.name] = job
+            self._current, self._inflight = None, {}
+        finally:
+            self.signals.defer = False
+        if self.signals.stop_reason():
+            raise Interrupted(self.signals.stop_reason())
+        return job
+
+    def _run_serial(self, job) -> None:
+        handler = handler_for(job.kind)
+        last_note = time.monotonic()
+        while True:
+            self._safe_point()
+            taken = job.take(1)
+            if taken is None:
+                return
+            token, payload = taken
+            self._inflight[0] = token
+            try:
+                result = run_cancellable(handler, job.context, payload, self._in_task, self.tick_every_s)
+            except TaskCancelled:
+                raise Interrupted(self.signals.stop_reason()) from None
+            job.merge(token, result)           # done (or stopped, the rest handed back as open)
+            del self._inflight[0]
+            self.tasks_per_rank[0] += 1
+            last_note = self._note(job, last_note)
+
+    def _run_master(self, job) -> None:
+        idle = [w for w in self.master.workers if w not in self._inflight][::-1]
+        n_workers = len(self.master.workers)
+        last_note = time.monotonic()
+        while True:
+            while idle:
+                taken = job.take(n_workers)
+                if taken is None:
+                    break
+                token, payload = taken
+                w = idle.pop()
+                self._inflight[w] = token
+                self.master.send_task(w, self._job_id, job, payload)
+            if not self._inflight:
+                return                         # pool empty, nothing in flight: done
+            got = mpi.wait_any(self.comm, self.checkpoints.next_at, lambda: bool(self.signals.flags))
+            if got is not None:
+                w, tag, msg = got
+                idle.append(w)
+                self._take_result(job, w, tag, msg)
+            try:
+                self._safe_point()
+            except Interrupted:
+                self._stop_workers(job)
+                raise
+            last_note = self._note(job, last_note)
+
+    def _take_result(self, job, w: int, tag: int, msg) -> None:
+        """Merge worker w's answer to its task in flight (done: in the master's state);
+        a cancelled task stays open (not in flight any more: the caller keeps it)."""
+        token = self._inflight.pop(w)
+        if tag == mpi.CANCELLED:
+            self._inflight[w] = token
+            return
+        self.tasks_per_rank[w] += 1
+        if tag == mpi.ERROR and isinstance(msg, mpi.UserFailure):
+            from ..scene import SceneError
+            raise SceneError(msg.line)
+        if tag == mpi.ERROR:
+            raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task:\n{msg}")
+        job.merge(token, msg)
+
+    def _stop_workers(self, job, timeout: float = 60.0) -> None:
+        """SIGTERM/SIGINT on the master, inside a job: stop every worker and collect
+        what is in flight before the checkpoint — a subtree task hands back what it
+        found and its open subtrees (merged, nothing lost), another kind is
+        cancelled (kept as open); a failed one stays open too (the checkpoint must
+        still be written). At most `timeout` seconds; afterwards close() has
+        nothing to do."""
+        def answer(src, tag, msg):
+            if tag != mpi.ERROR:
+                self._take_result(job, src, tag, msg)
+        self.master.stop(set(self._inflight), timeout, answer)
+
+    def _note(self, job, last: float) -> float:
+        """After a merge: the memory guard (at most every GUARD_EVERY_S), and every 10 s a
+        progress line."""
+        now = time.monotonic()
+        if self.guard is not None and now - self._guarded >= GUARD_EVERY_S:
+            self._guarded = now
+            self.guard.check(0, f"the {job.name!r} stage holds its results and {job.pending()} "
+                                f"open tasks after {job.counters.get('tasks', 0)} tasks")
+        if self.progress is None or now - last < 10.0:
+            return last
+        from ..progress import eta
+        done = job.counters.get("tasks", 0)
+        left = ""
+        if isinstance(job, TaskJob):           # a fixed list of tasks: the time left at this session's rate
+            t0, done0 = self._job_start
+            total = len(job.payloads)
+            left = eta(now - t0, done - done0, total - done0)
+        self.progress.note(f"{job.name}: {done} tasks done, {job.pending()} pending, "
+                           f"{len(self._inflight)} running ({self.size} rank(s), {self.elapsed():.0f} s{left})")
+        return now
+
+    def summary(self) -> dict:
+        """How the work was split: depends on ranks and resumes (answers do not)."""
+        return {"ranks": self.size, "resumes": self.resumes, "tasks_per_rank": list(self.tasks_per_rank),
+                "checkpoints_written": self.checkpoints_written,
+                "last_checkpoint_reason": self.checkpoint_reason or "",
+                "elapsed_s_all_sessions": self.elapsed(),
+                "jobs": {name: dict(job.counters) for name, job in self._jobs.items()}}
+
+    def close(self, timeout: float = 60.0, restore_signals: bool = True) -> None:
+        """Master: stop every worker — one in a task that calls task_tick() drops it
+        and says so — and collect what is still in flight (a worker blocked in a
+        large send would never read the stop; at most `timeout` seconds); restore
+        the signal handlers (the command line keeps its own to the end: a signal
+        after mark_done() must not turn a finished run into a failed one)."""
+        if self.master is not None:
+            self.master.stop(set(self._inflight), timeout, lambda src, tag, msg: self._inflight.pop(src, None))
+        if restore_signals:
+            self.signals.restore()
+
+
+def _state(job, in_flight, finished: bool) -> dict:
+    """A job's checkpoint state: its save() with kind, finished and counters."""
+    st = job.save(in_flight)
+    st["attrs"].update({"kind": job.kind, "finished": finished, "counters": json.dumps(job.counters)})
+    return st
+
+
+def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, name: str | None = None,
+              layout=None, payloads_for=None) -> list:
+    """Results of independent tasks of a registered kind (e.g. "face"), in order.
+    Results must be dicts of numbers/bools/arrays (so that checkpoints can hold them).
+    layout, payloads_for: see TaskJob (a resumed run keeps the saved layout)."""
+    engine = engine or Engine()
+    return engine.run(TaskJob(name or kind, kind, context, payloads, layout, payloads_for)).output()

@@ -1,0 +1,70 @@
+"""The worker loop (ranks >= 1 under mpirun): run the tasks the master sends until it
+says stop, and answer each with its result, a cancellation or an error."""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import time
+import traceback
+
+from . import mpi
+from .tasks import TICK_EVERY_S, TaskCancelled, handler_for, run_cancellable, warm_up
+
+
+def serve(comm, tick_every_s: float = TICK_EVERY_S) -> None:
+    """Worker loop (ranks >= 1): run tasks until the master says stop.
+
+    SIGUSR1, SIGTERM and SIGINT are ignored: the master acts on them. (mpirun
+    forwards SIGUSR1 to every rank, whose default action is to die. On
+    SIGTERM, mpirun sends SIGCONT to every rank, SIGTERM 1 s later and
+    SIGKILL ~1 s after that; a worker that died at once would make it kill
+    the master before its checkpoint is written.)
+
+    A worker exits when its parent (mpirun) is gone, or when its master runs
+    on the same host and has died (kill -9): mpirun would otherwise take
+    ~2 s (SIGCONT, SIGTERM, SIGKILL) to tear the job down."""
+    from mpi4py import MPI
+    for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, signal.SIG_IGN)
+    ppid = os.getppid()
+    warm_up()                      # while the master condenses, not at the first task
+    ctx_id, ctx = None, None
+    status = MPI.Status()
+    master_pid, host = None, socket.gethostname()
+    while True:
+        t0 = checked = time.monotonic()
+        while not mpi.probe(comm, 0, MPI.ANY_TAG, status):
+            now = time.monotonic()
+            if now - checked >= mpi.MASTER_CHECK_S:
+                checked = now
+                if os.getppid() != ppid or (master_pid is not None and not mpi.pid_alive(master_pid)):
+                    os._exit(3)
+            time.sleep(mpi.backoff(now - t0, mpi.POLL_MAX))
+        tag = status.Get_tag()
+        msg = comm.recv(source=0, tag=tag)
+        if tag == mpi.STOP:
+            return
+        if tag == mpi.HELLO:
+            master_pid = msg[1] if msg[0] == host else None
+            continue
+        job_id, kind, payload, fresh, new_ctx = msg
+        if fresh:
+            ctx_id, ctx = job_id, new_ctx
+        try:
+            if ctx_id != job_id:
+                raise RuntimeError(f"task of job {job_id} without its context")
+            result = run_cancellable(handler_for(kind), ctx, payload,
+                                     lambda: mpi.probe(comm, 0, mpi.STOP, status), tick_every_s)
+        except TaskCancelled:
+            comm.send(None, dest=0, tag=mpi.CANCELLED)     # the stop is read next
+        except MemoryError:
+            from ..progress import out_of_memory
+            comm.send(mpi.UserFailure(str(out_of_memory(f"a {kind!r} task on rank {comm.rank}"))),
+                      dest=0, tag=mpi.ERROR)
+        except Exception as e:          # noqa: BLE001  (the master reports it)
+            from ..scene import SceneError
+            comm.send(mpi.UserFailure(str(e)) if isinstance(e, SceneError) else traceback.format_exc(),
+                      dest=0, tag=mpi.ERROR)
+        else:
+            comm.send(result, dest=0, tag=mpi.RESULT)
