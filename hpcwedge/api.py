@@ -32,8 +32,8 @@ import tomllib
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
-from .pipeline import Result, Run, run_scene
-from .results import FileError
+from .pipeline import run_scene
+from .results import FileError, Result, Run
 from .scene import COMPUTE_DEFAULTS, RUN_DEFAULTS, Scene, SceneError, array, load_scene, parse_scene
 
 __all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",

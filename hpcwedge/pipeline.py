@@ -16,7 +16,6 @@ branching nodes, at one mu).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from functools import cache as once, partial
 
 import numpy as np
@@ -24,71 +23,15 @@ import numpy as np
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .dd import branching_nodes, canonical_order
 from .environment import environment, single_threaded
-from .model import Model
 from .mu_critical import mu_critical
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, ranks_on_host, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
 from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from .progress import MemoryGuard, Progress, out_of_memory
+from .results import Result, Run
 from .scene import Scene, SceneError
 from .symmetry import node_symmetries
-
-
-@dataclass
-class Run:
-    """The answers at one mu; a field the scene did not ask for is None."""
-
-    mu: float
-    rays: np.ndarray | None = None            # (R, 2n) wedged rays [u, r], sum(r_n) = 1
-    trivial_rays: np.ndarray | None = None    # (T, 2n) rigid lift-offs, sum(u_n) = 1
-    ray_zero: np.ndarray | None = None        # (R, 3m) zero flags of the wedged rays
-    cones: list[dict] | None = None           # {"rays", "trivial_rays", "zero_u", "zero_r", "mu_c"}
-    patterns: list[dict] | None = None        # {"contact", "mu_c"}
-
-    @property
-    def n_wedged_rays(self):
-        return None if self.rays is None else len(self.rays)
-
-    @property
-    def n_trivial_rays(self):
-        return None if self.trivial_rays is None else len(self.trivial_rays)
-
-    @property
-    def n_cones(self):
-        return None if self.cones is None else len(self.cones)
-
-    @property
-    def n_patterns(self):
-        return None if self.patterns is None else len(self.patterns)
-
-
-@dataclass
-class Result:
-    scene: Scene
-    m: int
-    runs: list[Run]
-    mu_c: float | None = None
-    mu_c_status: str | None = None     # "found" | "none_at_any_mu" | "none_up_to_mu_max" | None
-    complete: bool = True
-    stages: list[str] = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
-    stats: dict = field(default_factory=dict)
-    model: Model | None = None
-    problem: ContactProblem | None = None
-
-    def to_dict(self, with_rays: bool = True) -> dict:
-        """The `hpcwedge show --json` object of this result (SPEC §4): written to a temporary
-        result file and read back by results.read_result, the one JSON writer (so the two
-        never differ; it costs a write and a read of the file)."""
-        import os
-        import tempfile
-
-        from .results import read_result, write_result
-        with tempfile.TemporaryDirectory(prefix="hpcwedge-") as folder:
-            path = os.path.join(folder, "result.h5")
-            write_result(path, self)
-            return read_result(path, with_rays=with_rays)
 
 
 def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None,

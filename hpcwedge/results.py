@@ -1,4 +1,5 @@
-"""Result files (SPEC §4): HDF5 layout, atomic checksummed writes, and the JSON of `show`.
+"""Results: the Run and Result records of a solve, and result files (SPEC §4): HDF5 layout,
+atomic checksummed writes, and the JSON of `show`.
 
 Every file write_atomic writes (results and checkpoints) starts with a 512-byte HDF5 user
 block: CHECKSUM_MAGIC, the SHA-256 (hex) of all the bytes after the block, a newline, zeros.
@@ -31,11 +32,68 @@ import sys
 import tempfile
 import time
 from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
 
 from . import __version__
+
+if TYPE_CHECKING:
+    from .model import Model
+    from .problem import ContactProblem
+    from .scene import Scene
+
+
+def _count(name: str) -> property:
+    """A read-only property: len(self.<name>), None while that field is None."""
+    return property(lambda self: None if getattr(self, name) is None else len(getattr(self, name)),
+                    doc=f"len({name}), None when the scene did not ask for it")
+
+
+@dataclass
+class Run:
+    """The answers at one mu; a field the scene did not ask for is None."""
+
+    mu: float
+    rays: np.ndarray | None = None            # (R, 2n) wedged rays [u, r], sum(r_n) = 1
+    trivial_rays: np.ndarray | None = None    # (T, 2n) rigid lift-offs, sum(u_n) = 1
+    ray_zero: np.ndarray | None = None        # (R, 3m) zero flags of the wedged rays
+    cones: list[dict] | None = None           # {"rays", "trivial_rays", "zero_u", "zero_r", "mu_c"}
+    patterns: list[dict] | None = None        # {"contact", "mu_c"}
+
+    n_wedged_rays = _count("rays")
+    n_trivial_rays = _count("trivial_rays")
+    n_cones = _count("cones")
+    n_patterns = _count("patterns")
+
+
+@dataclass
+class Result:
+    """Every answer of one scene (pipeline.run_scene): one Run per listed mu, the global mu^c,
+    the stages run, their timings and the solve's stats (SolveStats.as_dict())."""
+
+    scene: Scene
+    m: int
+    runs: list[Run]
+    mu_c: float | None = None
+    mu_c_status: str | None = None     # "found" | "none_at_any_mu" | "none_up_to_mu_max" | None
+    complete: bool = True
+    stages: list[str] = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+    model: Model | None = None
+    problem: ContactProblem | None = None
+
+    def to_dict(self, with_rays: bool = True) -> dict:
+        """The `hpcwedge show --json` object of this result (SPEC §4): written to a temporary
+        result file and read back by results.read_result, the one JSON writer (so the two
+        never differ; it costs a write and a read of the file)."""
+        with tempfile.TemporaryDirectory(prefix="hpcwedge-") as folder:
+            path = os.path.join(folder, "result.h5")
+            write_result(path, self)
+            return read_result(path, with_rays=with_rays)
 
 
 class FileError(ValueError):
@@ -151,7 +209,7 @@ def compression(arr: np.ndarray) -> str | None:
 
 
 def write_result(path: str, result) -> None:
-    """Store a pipeline.Result (see module doc)."""
+    """Store a Result (see module doc)."""
 
     def fill(f):
         s = result.scene

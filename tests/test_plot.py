@@ -11,9 +11,9 @@ import pytest
 pytest.importorskip("matplotlib")
 
 from hpcwedge.cli import main
-from hpcwedge.pipeline import Result, Run, run_scene
+from hpcwedge.pipeline import run_scene
 from hpcwedge.plot import plot_result
-from hpcwedge.results import seal, write_result
+from hpcwedge.results import Result, Run, seal, write_result
 from hpcwedge.scene import parse_scene
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
