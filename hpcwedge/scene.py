@@ -186,21 +186,13 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     dim = data.get("dim")
     if isinstance(dim, bool) or not isinstance(dim, int) or dim not in (2, 3):
         raise SceneError(f"dim: must be 2 or 3, got {dim!r}")
-    model = data.get("model")
-    if model is not None and not isinstance(model, dict):
-        raise SceneError(f"model: must be a table, got {model!r}")
-    if model is None or "kind" not in model:
-        raise SceneError("model.kind: required")
+    model = _table_with(data, "model", "kind")
     kind = model["kind"]
     if kind not in KINDS:
         raise SceneError(f"model.kind: unknown kind {kind!r} (one of {', '.join(KINDS)})")
     if kind in BUILTIN_DIM and BUILTIN_DIM[kind] != dim:
         raise SceneError(f"dim: {kind} is a {BUILTIN_DIM[kind]}D model, scene says dim = {dim}")
-    friction = data.get("friction")
-    if friction is not None and not isinstance(friction, dict):
-        raise SceneError(f"friction: must be a table, got {friction!r}")
-    if friction is None or "mu" not in friction:
-        raise SceneError("friction.mu: required (one value or a list)")
+    friction = _table_with(data, "friction", "mu", " (one value or a list)")
     _unknown(friction, {"mu"}, "friction.")
     mus = friction["mu"] if isinstance(friction["mu"], list) else [friction["mu"]]
     if not mus:
@@ -299,6 +291,16 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  symmetry=run["symmetry"], face_split=run["face_split"], condense=run["condense"],
                  obstacles=obstacles, obstacle_key=obstacle_key,
                  exact_fallback_max_m=compute["exact_fallback_max_m"], max_memory_gb=run["max_memory_gb"])
+
+
+def _table_with(data: dict, name: str, key: str, hint: str = "") -> dict:
+    """data[name], a table that holds `key`; else a SceneError naming the table or the key."""
+    table = data.get(name)
+    if table is not None and not isinstance(table, dict):
+        raise SceneError(f"{name}: must be a table, got {table!r}")
+    if table is None or key not in table:
+        raise SceneError(f"{name}.{key}: required{hint}")
+    return table
 
 
 def _unknown(table, allowed, prefix):
