@@ -23,13 +23,14 @@ import numpy as np
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .dd import branching_nodes, canonical_order
 from .environment import environment, single_threaded
+from .model import Model
 from .mu_critical import mu_critical
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, ranks_on_host, run_faces, run_mu_c, run_patterns, strip_exact
 from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
 from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from .progress import MemoryGuard, Progress, out_of_memory
-from .results import Result, Run
+from .results import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
 from .scene import Scene, SceneError
 from .symmetry import node_symmetries
 
@@ -84,11 +85,11 @@ def _run_scene(scene: Scene, progress: Progress, engine: Engine,
     param = parametrize(problem, exact=scene.exact)
     result = Result(scene=scene, m=m, runs=[Run(mu=mu) for mu in scene.mu], model=model,
                     problem=problem, stages=stages, timings=timings)
-    stats = {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
+    stats = SolveStats()
     sym = None
     if scene.symmetry and (plan.patterns or plan.mu_c_cones or plan.mu_c_global):
         sym = node_symmetries(problem.K, scene.dim)
-        stats["symmetry"] = {"order": sym.order}
+        stats.symmetry = SymmetryStats(sym.order)
         sym = sym if sym.order > 1 else None
     numerics = Numerics.of(problem, scene.exact_fallback_max_m)
     # the exact parametrisation, made once if a fallback needs it
@@ -114,7 +115,7 @@ def _run_scene(scene: Scene, progress: Progress, engine: Engine,
         e = stiffness_exponent(scene)
         for run, (dd, p_run) in zip(result.runs, done):
             _fill_rays(run, dd, p_run, m, plan.cones, e)
-            stats["dd"].append({"mu": run.mu, **dd.stats})
+            stats.dd.append({"mu": run.mu, **dd.stats})
         timings["enumerate"] = time.perf_counter() - t
         if plan.cones:
             stages.append("cones")
@@ -129,23 +130,22 @@ def _run_scene(scene: Scene, progress: Progress, engine: Engine,
             run.patterns = [{"contact": np.flatnonzero(s.masks(m)[0]).tolist(), "mu_c": None,
                              "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)]
         if sym is not None:
-            stats["symmetry"]["representatives"] = [len(f) for f in pats.found]
+            stats.symmetry.representatives = [len(f) for f in pats.found]
         c = pats.counters
-        stats["patterns_undecided"] = sum(len(u) for u in pats.undecided)
+        stats.patterns_undecided = sum(len(u) for u in pats.undecided)
         if scene.dim == 2:
-            exact_sets = settle_patterns_2d(numerics, m, scene.mu, c, stats["patterns_undecided"],
+            exact_sets = settle_patterns_2d(numerics, m, scene.mu, c, stats.patterns_undecided,
                                             exact_param, scene.exact)
             if exact_sets is not None:
                 for run, sets in zip(result.runs, exact_sets):
                     run.patterns = [{"contact": list(cs), "mu_c": None, "undecided": False}
                                     for cs in sorted(sets, key=lambda cs: sum(1 << i for i in cs))]
-                stats["patterns_undecided"] = 0
-        stats["bnb"] = {k: c.get(k, 0) for k in ("nodes", "solves", "skipped", "pruned", "undecided")}
-        stats["bnb"]["partitions"] = 2 ** m * len(scene.mu)       # what brute force would solve
+                stats.patterns_undecided = 0
+        stats.bnb = TreeStats.of(c, 2 ** m * len(scene.mu))       # partitions: what brute force would solve
         if scene.dim == 3:
-            stats["socp_statuses"] = {k[7:]: v for k, v in c.items() if k.startswith("status_")}
-        if stats["patterns_undecided"]:
-            progress.note(f"warning: {stats['patterns_undecided']} pattern(s) undecided by every "
+            stats.socp_statuses = solver_statuses(c)
+        if stats.patterns_undecided:
+            progress.note(f"warning: {stats.patterns_undecided} pattern(s) undecided by every "
                           "solver (kept, flagged \"undecided\")")
         timings["enumerate"] += time.perf_counter() - t
 
@@ -183,9 +183,7 @@ def _run_scene(scene: Scene, progress: Progress, engine: Engine,
                         method=scene.mu_c_method, tol=scene.mu_c_tol, scale=scale)
         cache = dict(zip(items, run_mu_c(solve, list(items.values()), engine=engine)))
         for r in cache.values():
-            stats["lp_solves"] += r.lps
-            stats["lp_undecided"] += r.undecided
-            stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
+            stats.add(lps=r.lps, undecided=r.undecided, polished=int(r.polished), unpolished=int(not r.polished))
         for entry in entries:
             for key, _, _, item in entry:
                 if plan.mu_c_cones:
@@ -202,23 +200,27 @@ def _run_scene(scene: Scene, progress: Progress, engine: Engine,
                 result.mu_c, result.mu_c_status = global_mu_critical(
                     param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb,
                     symmetry=sym, scale=scale)
-                stats["bnb"] = {"solves": bnb.solves, "skipped": bnb.skipped,
-                                "undecided": bnb.undecided, "nodes": bnb.nodes,
-                                "route": bnb.extra.get("route", "tree"),
-                                "milp_solves": bnb.extra.get("milp_solves", 0),
-                                "milp_nodes": bnb.extra.get("milp_nodes", 0)}
-                stats["mu_c_unpolished"] += bnb.extra.get("mu_c_unpolished", 0)
-                stats["mu_c_polished"] += bnb.extra.get("mu_c_polished", 0)
+                stats.bnb = GlobalRouteStats(solves=bnb.solves, skipped=bnb.skipped, undecided=bnb.undecided,
+                                             nodes=bnb.nodes, route=bnb.extra.get("route", "tree"),
+                                             milp_solves=bnb.extra.get("milp_solves", 0),
+                                             milp_nodes=bnb.extra.get("milp_nodes", 0))
+                stats.add(polished=bnb.extra.get("mu_c_polished", 0), unpolished=bnb.extra.get("mu_c_unpolished", 0))
         timings["mu_c"] = time.perf_counter() - t
-    note_mu_c(numerics, stats["mu_c_unpolished"], stats["lp_undecided"])
+    note_mu_c(numerics, stats.mu_c_unpolished, stats.lp_undecided)
     for line in numerics.warnings():
         progress.note(line)
-    stats["numerics"] = numerics.as_dict()
+    stats.numerics = numerics.as_dict()
     timings["total"] = time.perf_counter() - t0
-    stats["parallel"] = engine.summary()
-    stats["environment"] = environment()
-    result.stats = stats
+    stats.parallel = engine.summary()
+    stats.environment = environment()
+    result.stats = stats.as_dict()
     return result
+
+
+def solver_statuses(counters: dict) -> dict:
+    """{status: count} of a patterns job's counters "status_<status>" (how each solve was
+    decided; the prefix is the engine's, parallel.explore_task), in the counters' order."""
+    return {k[len("status_"):]: v for k, v in counters.items() if k.startswith("status_")}
 
 
 #: the engine job of the 2D rays stage (when split over faces)

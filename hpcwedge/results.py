@@ -1,5 +1,4 @@
-"""Results: the Run and Result records of a solve, and result files (SPEC §4): HDF5 layout,
-atomic checksummed writes, and the JSON of `show`.
+"""Results: Run, Result, SolveStats; result files (SPEC §4): HDF5 layout, atomic writes, `show`'s JSON.
 
 Every file write_atomic writes (results and checkpoints) starts with a 512-byte HDF5 user
 block: CHECKSUM_MAGIC, the SHA-256 (hex) of all the bytes after the block, a newline, zeros.
@@ -32,7 +31,7 @@ import sys
 import tempfile
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass
 from typing import TYPE_CHECKING
 
 import h5py
@@ -94,6 +93,80 @@ class Result:
             path = os.path.join(folder, "result.h5")
             write_result(path, self)
             return read_result(path, with_rays=with_rays)
+
+
+@dataclass
+class TreeStats:
+    """stats.bnb of the patterns stage: a sign-pattern tree's counters summed over every mu
+    (the same for every split of the work) and partitions (2^m per mu: a brute force's solves)."""
+
+    nodes: int = 0
+    solves: int = 0
+    skipped: int = 0
+    pruned: int = 0
+    undecided: int = 0
+    partitions: int = 0
+
+    @classmethod
+    def of(cls, counters: dict, partitions: int) -> TreeStats:
+        """From a patterns job's counters (absent: 0)."""
+        return cls(*(counters.get(f.name, 0) for f in fields(cls)[:-1]), partitions=partitions)
+
+
+@dataclass
+class GlobalRouteStats:
+    """stats.bnb after a global mu^c search (patterns.global_mu_critical's BnBStats, its route
+    "tree" or "milp" and MILP counts); it replaces the patterns stage's TreeStats."""
+
+    solves: int = 0
+    skipped: int = 0
+    undecided: int = 0
+    nodes: int = 0
+    route: str = "tree"
+    milp_solves: int = 0
+    milp_nodes: int = 0
+
+
+@dataclass
+class SymmetryStats:
+    """stats.symmetry: the node symmetry group's order; representatives: the orbit
+    representatives found per mu (patterns stage, order > 1; else None)."""
+
+    order: int
+    representatives: list[int] | None = None
+
+
+@dataclass
+class SolveStats:
+    """The statistics of one solve; Result.stats is as_dict(), the stats object of the result
+    file (SPEC §4). Fields in the file's key order; None: absent from the file."""
+
+    dd: list = field(default_factory=list)   # 2D rays: per mu {"mu", **dd.DDResult.stats}
+    lp_solves: int = 0                       # mu^c stage: LP/SOCP solves
+    mu_c_polished: int = 0                   # mu^c values polished (pencil / KKT)
+    mu_c_unpolished: int = 0                 # ... left at a bisection bracket's end
+    lp_undecided: int = 0                    # mu^c stage solves no solver decided
+    symmetry: SymmetryStats | None = None
+    patterns_undecided: int | None = None    # patterns kept undecided (flagged)
+    bnb: TreeStats | GlobalRouteStats | None = None
+    socp_statuses: dict | None = None        # 3D patterns: {solver status: count}
+    numerics: dict | None = None             # numerics.Numerics.as_dict()
+    parallel: dict | None = None             # Engine.summary()
+    environment: dict | None = None          # environment.environment()
+
+    def add(self, lps: int = 0, undecided: int = 0, polished: int = 0, unpolished: int = 0) -> None:
+        """Count mu^c computations: LP/SOCP solves, undecided solves, values (un)polished."""
+        self.lp_solves += lps
+        self.lp_undecided += undecided
+        self.mu_c_polished += polished
+        self.mu_c_unpolished += unpolished
+
+    def as_dict(self) -> dict:
+        """The stats object: the fields that are not None, records as dicts (theirs likewise)."""
+        def plain(r):
+            return {f.name: plain(v) if is_dataclass(v) else v for f in fields(r)
+                    if (v := getattr(r, f.name)) is not None}
+        return plain(self)
 
 
 class FileError(ValueError):
