@@ -58,6 +58,18 @@ class Plan:
     mu_c_cones: bool     # mu^c of every cone / pattern
     mu_c_global: bool
 
+    def steps(self) -> tuple[str, ...]:
+        """The stages after condensation, in order (pipeline.run_scene loops over them; every
+        scene is condensed first: `condense` says whether a model is, else a raw K is read):
+        "rays", "cones", "patterns", "mu_c" (per cone / pattern: of every listed mu with
+        mu_c_cones, else of the first that lists any, for the global value), "global_mu_c"."""
+        wanted = (self.rays, self.cones, self.patterns, self.mu_c_cones or self.mu_c_global, self.mu_c_global)
+        return tuple(name for name, on in zip(STEPS, wanted) if on)
+
+
+#: every stage a plan can hold after condensation, in the order they run (Plan.steps)
+STEPS = ("rays", "cones", "patterns", "mu_c", "global_mu_c")
+
 
 @dataclass(frozen=True)
 class Scene:
