@@ -100,12 +100,12 @@ class TreeStats:
     """stats.bnb of the patterns stage: a sign-pattern tree's counters summed over every mu
     (the same for every split of the work) and partitions (2^m per mu: a brute force's solves)."""
 
-    nodes: int = 0
-    solves: int = 0
-    skipped: int = 0
-    pruned: int = 0
-    undecided: int = 0
-    partitions: int = 0
+    nodes: int
+    solves: int
+    skipped: int
+    pruned: int
+    undecided: int
+    partitions: int
 
     @classmethod
     def of(cls, counters: dict, partitions: int) -> TreeStats:
