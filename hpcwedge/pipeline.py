@@ -195,9 +195,11 @@ def _run_plan(scene: Scene, progress: Progress, engine: Engine, condensed: Conde
             for run, r in zip(result.runs, found):
                 run.rays, run.trivial_rays, run.ray_zero = r.rays, r.trivial_rays, r.ray_zero
                 stats.dd.append({"mu": r.mu, **r.stats})
+            found = found if plan.cones else None         # every ray's zero flags: the cones' input
         elif step == "cones":
             for run, r in zip(result.runs, found):
                 run.cones = cones(r).items
+            found = None
         elif step == "patterns":
             _file_patterns(patterns(ctx), result.runs, stats)
         elif step == "mu_c":
