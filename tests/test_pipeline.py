@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from hpcwedge.pipeline import run_scene
+from hpcwedge.pipeline import condense, mu_c_keys, orbit_key, run_scene
+from hpcwedge.results import GlobalRouteStats, Run, SolveStats, SymmetryStats, TreeStats
 from hpcwedge.scene import parse_scene
 
 
@@ -301,7 +302,6 @@ def test_unit_moduli_are_not_rescaled():
 # ------------------------------------------------------------------------ stages and records
 
 def test_condense_stage_record():
-    from hpcwedge.pipeline import condense
     raw = condense(scene({"kind": "stiffness", "K": [[2.0, 0.5], [0.5, 1.0]]}))
     assert raw.model is None and raw.seconds == 0.0 and raw.problem.m == 1
     built = condense(scene({"kind": "plug2d", "rows": 2}))
@@ -310,7 +310,6 @@ def test_condense_stage_record():
 
 def test_solve_stats_as_dict_is_the_file_object():
     """SolveStats.as_dict: the fields that are set, in the result file's key order."""
-    from hpcwedge.results import GlobalRouteStats, SolveStats, SymmetryStats, TreeStats
     s = SolveStats()
     assert s.as_dict() == {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
     s.add(lps=3, undecided=1, polished=1)
@@ -339,8 +338,6 @@ def test_stats_keys_of_a_patterns_run():
 def test_orbit_keys_give_one_mu_c_task_per_orbit():
     """orbit_key: bit words of (zero_u, zero_r), canonical under the symmetry; mu_c_keys: a
     run's cones then patterns (a pattern's zero_r: the nodes not in contact)."""
-    from hpcwedge.pipeline import mu_c_keys, orbit_key
-    from hpcwedge.results import Run
 
     class Swap:                    # nodes 0 and 1 exchanged: the least pair of the orbit
         def canonical(self, c, g):
