@@ -114,17 +114,18 @@ def _broken_pipe() -> int:
 
 def _run(args) -> int:
     from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, world
-    from .pipeline import condense, run_scene
     try:
         comm = world()
     except ParallelError as e:
         raise _UserError(str(e)) from None
     if comm is not None and comm.rank != 0:
         sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
+        from .pipeline import condense
         condense(None, comm)                    # the master's run_scene: the collective condense stage
         Engine(comm).serve()
         return 0
     from .checkpoint import CheckpointError, checkpoint_path
+    from .pipeline import run_scene
     from .progress import Progress
     from .results import write_result
     from .scene import SceneError, load_scene
