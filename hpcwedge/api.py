@@ -32,8 +32,9 @@ import tomllib
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
-from .pipeline import Result, Run, run_scene
 from .files import FileError
+from .pipeline import run_scene
+from .results import Result, Run
 from .scene import COMPUTE_DEFAULTS, RUN_DEFAULTS, Scene, SceneError, array, load_scene, parse_scene
 
 __all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
@@ -306,7 +307,7 @@ def solve(scene: Scene | str | os.PathLike | Mapping, *, progress: bool = False)
 def write_result(result: Result, path: str | os.PathLike) -> None:
     """Write `result` as a result file (SPEC §4; atomic, checksummed: results.write_result),
     which ``hpcwedge show``, ``plot`` and ``export`` read like one written by ``hpcwedge run``."""
-    from .results import write_result as write
+    from .resultfile import write_result as write
     write(os.fspath(path), result)
 
 
@@ -323,7 +324,7 @@ def read_result(path: str | os.PathLike, *, with_rays: bool = True) -> dict:
     ...     read_result(os.path.join(d, "r.h5")) == r.to_dict()
     True
     """
-    from .results import read_result as read
+    from .resultfile import read_result as read
     return read(os.fspath(path), with_rays=with_rays)
 
 

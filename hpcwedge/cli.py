@@ -112,49 +112,6 @@ def _broken_pipe() -> int:
     return 128 + signal.SIGPIPE
 
 
-#: run.condense = "auto" condenses collectively over all ranks from this many model DOFs on
-DISTRIBUTED_MIN_DOFS = 2_000_000
-
-
-def _condense_together(comm, scene=None):
-    """The distributed condensation of an MPI run (run.condense, SCENE §run): collective over
-    `comm`, called by every rank before the task engine starts; the master passes the loaded
-    scene, workers None. Every rank builds the model from the scene the master broadcasts and
-    condenses it with condense.condense_distributed when run.condense = "distributed", or
-    "auto" and the model has >= DISTRIBUTED_MIN_DOFS DOFs. Returns (model, problem, seconds)
-    on the master if it did, else None (then the master condenses alone, as serially, and
-    reports any error in the scene or model there). A singular K_ii is found on every rank
-    alike: SceneError on the master, None on the workers. Ranks never wait on each other for
-    ever: a model that fails to build on any rank sends everyone on."""
-    import time
-
-    from mpi4py import MPI
-
-    from .build import build_model, contact_problem
-    from .scene import SceneError
-    if comm.rank == 0 and (not scene.plan().condense or scene.condense == "serial"):
-        scene = None
-    scene = comm.bcast(scene, root=0)
-    if scene is None:
-        return None
-    t = time.perf_counter()
-    try:
-        model = build_model(scene)
-    except Exception:                            # noqa: BLE001  (the master's own run reports it)
-        model = None
-    if not comm.allreduce(model is not None, op=MPI.LAND):
-        return None
-    if scene.condense == "auto" and model.n_dofs < DISTRIBUTED_MIN_DOFS:
-        return None
-    try:
-        problem = contact_problem(scene, model, comm)
-    except SceneError:
-        if comm.rank == 0:
-            raise
-        return None
-    return (model, problem, time.perf_counter() - t) if comm.rank == 0 else None
-
-
 def _run(args) -> int:
     from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, serve, world
     try:
@@ -163,13 +120,14 @@ def _run(args) -> int:
         raise _UserError(str(e)) from None
     if comm is not None and comm.rank != 0:
         sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
-        _condense_together(comm, None)
+        from .pipeline import condense
+        condense(None, comm)                    # the master's run_scene: the collective condense stage
         serve(comm)
         return 0
     from .parallel.checkpoint import CheckpointError, checkpoint_path
     from .pipeline import run_scene
     from .progress import Progress
-    from .results import write_result
+    from .resultfile import write_result
     from .scene import SceneError, load_scene
     progress = Progress(quiet=args.quiet)
     engine = Engine(comm, progress=None if args.quiet else progress)
@@ -182,8 +140,6 @@ def _run(args) -> int:
             scene = load_scene(args.scene)
             check_output(args.output, (args.scene, *scene.input_files))
             lock = OutputLock(args.output)
-            # collective (under mpirun): after the signal handlers, before anything is written
-            condensed = _condense_together(comm, scene) if comm is not None else None
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
                                      inputs=scene.input_digests):
                 progress.note(f"resuming from {ckpt}")
@@ -191,7 +147,9 @@ def _run(args) -> int:
                 print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
                       f"({'it is missing' if args.resume else 'use --resume to continue from it'})",
                       file=sys.stderr)
-            result = run_scene(scene, progress, engine=engine, condensed=condensed)
+            # its condense stage is collective under mpirun (the workers' call above); after
+            # the signal handlers, before anything is written
+            result = run_scene(scene, progress, engine=engine, comm=comm)
             try:
                 write_result(args.output, result)
             except (OSError, RuntimeError) as e:     # h5py: RuntimeError for some failed writes
@@ -327,7 +285,7 @@ class OutputLock:
 
 def _read(path: str, with_rays: bool = True) -> dict:
     from .files import FileError
-    from .results import read_result
+    from .resultfile import read_result
     try:
         return read_result(path, with_rays=with_rays)
     except FileError as e:
@@ -337,7 +295,7 @@ def _read(path: str, with_rays: bool = True) -> dict:
 def _show(args) -> int:
     if args.json:
         from .files import FileError
-        from .results import dump_result_json
+        from .resultfile import dump_result_json
         _read(args.result, with_rays=False)
         try:
             dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)

@@ -1,22 +1,29 @@
-"""scene -> model -> condensation -> enumeration -> mu^c -> Result.
+"""The pipeline: scene -> model -> condensation -> enumeration -> mu^c -> Result.
 
-Runs only the stages the scene's plan asks for, times each, and returns a
-Result whose lists are in canonical order (SPEC §4).
+run_scene loops over the scene's plan (Scene.plan().steps()), one function per stage, each
+returning a typed record that the loop files into the Result and its SolveStats:
 
-2D: rays (double description), cones, mu^c per cone and global; float decisions too
-close to call are detected and, on small problems, redone exactly (numerics.py).
-3D: feasible sign patterns per listed mu (branch and bound over SOCPs),
-mu^c per pattern and global (2D too with enumerate = "patterns"). The units
-of work the parallel layer distributes (parallel.run_patterns: budgeted
-PatternTree.explore calls over subtrees; parallel.run_mu_c: mu^c of one
-cone or pattern) are the same in both dimensions; under mpirun the 2D double
-description is split too (parallel.run_faces: the DD of one face of a few
-branching nodes, at one mu).
+  condense     -> Condensed      the model and its contact problem (serially, or collective
+                                 over the ranks of an MPI run: run.condense)
+  rays         -> list[Rays]     2D: the complementary extreme rays per listed mu
+  cones        -> Cones          2D: the maximal cross-complementary cones of one mu's rays
+  patterns     -> PatternSets    feasible sign patterns per listed mu (3D; 2D with
+                                 enumerate = "patterns")
+  mu_c         -> MuCValues      mu^c per cone / pattern, one task per orbit (mu_c_keys)
+  global_mu_c  -> GlobalMuC      the least mu with a wedged configuration
+
+Lists are in canonical order (SPEC §4). 2D float decisions too close to call are detected
+and, on small problems, redone exactly (numerics.py). The units of work the parallel layer
+distributes (parallel.run_patterns: budgeted PatternTree.explore calls over subtrees;
+parallel.run_mu_c: mu^c of one cone or pattern) are the same in both dimensions; the 2D
+double description is split over faces when the scene asks (parallel.run_faces: the DD of
+one face of a few branching nodes, at one mu).
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 from functools import cache as once, partial
 
 import numpy as np
@@ -25,280 +32,311 @@ from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .environment import environment, single_threaded
 from .faces import branching_nodes, run_faces
 from .model import Model
-from .mu_critical import mu_critical, run_mu_c
+from .mu_critical import MuC, mu_critical, run_mu_c
 from .nodesets import canonical_order
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, ranks_on_host
 from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical, run_patterns
-from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors, strip_exact
+from .problem import (ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize,
+                      ray_vectors, strip_exact)
 from .progress import MemoryGuard, Progress, out_of_memory
-from .scene import Scene, SceneError
-from .symmetry import node_symmetries
+from .results import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
+from .scene import Plan, Scene, SceneError
+from .symmetry import Symmetry, node_symmetries
+
+#: the engine job of the 2D rays stage (when split over faces)
+RAYS_JOB = "rays"
+#: run.condense = "auto" condenses collectively over all ranks from this many model DOFs on
+DISTRIBUTED_MIN_DOFS = 2_000_000
+#: a plan step -> (its name in Result.stages, its timings key)
+STEP_REPORT = {"condense": ("condense", "condense"), "rays": ("enumerate", "enumerate"),
+               "cones": ("cones", "enumerate"), "patterns": ("enumerate", "enumerate"),
+               "mu_c": ("mu_c", "mu_c"), "global_mu_c": ("mu_c", "mu_c")}
+
+OrbitKey = tuple[int, int]
+
+
+# ---------------------------------------------------------------------------- records
+
+@dataclass
+class Condensed:
+    """The condense stage: the model (None: a raw K scene), its contact problem, the seconds
+    the condensation took (0 for a raw K)."""
+
+    model: Model | None
+    problem: ContactProblem
+    seconds: float = 0.0
 
 
 @dataclass
-class Run:
-    """The answers at one mu; a field the scene did not ask for is None."""
+class Context:
+    """What the stages after condensation share."""
 
-    mu: float
-    rays: np.ndarray | None = None            # (R, 2n) wedged rays [u, r], sum(r_n) = 1
-    trivial_rays: np.ndarray | None = None    # (T, 2n) rigid lift-offs, sum(u_n) = 1
-    ray_zero: np.ndarray | None = None        # (R, 3m) zero flags of the wedged rays
-    cones: list[dict] | None = None           # {"rays", "trivial_rays", "zero_u", "zero_r", "mu_c"}
-    patterns: list[dict] | None = None        # {"contact", "mu_c"}
-
-    @property
-    def n_wedged_rays(self):
-        return None if self.rays is None else len(self.rays)
-
-    @property
-    def n_trivial_rays(self):
-        return None if self.trivial_rays is None else len(self.trivial_rays)
-
-    @property
-    def n_cones(self):
-        return None if self.cones is None else len(self.cones)
-
-    @property
-    def n_patterns(self):
-        return None if self.patterns is None else len(self.patterns)
-
-
-@dataclass
-class Result:
     scene: Scene
     m: int
-    runs: list[Run]
-    mu_c: float | None = None
-    mu_c_status: str | None = None     # "found" | "none_at_any_mu" | "none_up_to_mu_max" | None
-    complete: bool = True
-    stages: list[str] = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
-    stats: dict = field(default_factory=dict)
-    model: Model | None = None
-    problem: ContactProblem | None = None
+    param: Parametrization
+    numerics: Numerics
+    exact_param: Callable[[], Parametrization]   # the exact parametrisation, made on first call
+    symmetry: Symmetry | None                    # the node symmetries (order > 1), or None
+    engine: Engine
+    progress: Progress
 
-    def to_dict(self, with_rays: bool = True) -> dict:
-        """The `hpcwedge show --json` object of this result (SPEC §4): written to a temporary
-        result file and read back by results.read_result, the one JSON writer (so the two
-        never differ; it costs a write and a read of the file)."""
-        import os
-        import tempfile
+    @property
+    def scale(self) -> float | None:
+        """mu^c's coordinates: 2D the balanced scale (numerics.Numerics.scale), 3D None."""
+        return self.numerics.scale if self.scene.dim == 2 else None
 
-        from .results import read_result, write_result
-        with tempfile.TemporaryDirectory(prefix="hpcwedge-") as folder:
-            path = os.path.join(folder, "result.h5")
-            write_result(path, self)
-            return read_result(path, with_rays=with_rays)
 
+@dataclass
+class Rays:
+    """The rays stage at one mu: the wedged rays (u in the scene's units), the trivial ones,
+    the wedged rays' zero flags (canonical order); zero, wedged: every ray's zero flags and
+    which rays are wedged (the cones stage's input); stats: the double description's."""
+
+    mu: float
+    rays: np.ndarray
+    trivial_rays: np.ndarray
+    ray_zero: np.ndarray
+    zero: np.ndarray
+    wedged: np.ndarray
+    stats: dict
+
+
+@dataclass
+class Cones:
+    """The cones stage at one mu: result items {"rays", "trivial_rays" (indices into the
+    run's lists), "zero_u", "zero_r" (nodes), "mu_c": None}."""
+
+    items: list[dict]
+
+
+@dataclass
+class PatternSets:
+    """The patterns stage: per mu the result items {"contact", "mu_c": None, "undecided"}
+    (canonical order), how many are undecided, the tree's counters, the 3D solver statuses
+    (2D: None) and per mu the orbit representatives found (no symmetry: None)."""
+
+    items: list[list[dict]]
+    undecided: int
+    tree: TreeStats
+    statuses: dict | None
+    representatives: list[int] | None
+
+
+@dataclass
+class MuCValues:
+    """The mu_c stage: the MuC of every orbit key (one task each); keyed: per run asked
+    (mu_c_keys) its (key, item) pairs; first: the keys of the first run that lists any cone
+    or pattern (None: no run does)."""
+
+    by_key: dict[OrbitKey, MuC]
+    keyed: list[list[tuple[OrbitKey, dict]]]
+    first: list[OrbitKey] | None
+
+
+@dataclass
+class GlobalMuC:
+    """The global_mu_c stage: mu^c (None: none) and its status; search: the global route's
+    stats when it searched (None: the least listed value), with its mu^c counts."""
+
+    mu_c: float | None
+    status: str | None
+    search: GlobalRouteStats | None = None
+    polished: int = 0
+    unpolished: int = 0
+
+
+# ---------------------------------------------------------------------------- the loop
 
 def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None,
-              condensed: tuple[Model, ContactProblem, float] | None = None) -> Result:
-    """Every answer the scene asks for (see Scene.plan). Sign patterns and mu^c
-    run as tasks of `engine` (parallel.py: in-process by default; the master of
-    an MPI run, with checkpoints, from the command line). The 2D rays run as one
-    double description per mu, or split over the faces the scene asks for
-    (run.face_split; "auto": 3 nodes from m = 16 on) as "face" tasks
-    (parallel.run_faces) — the split, and so every bit of the result, depends on
-    the scene, not on the rank count; a resumed run keeps its checkpoint's split.
-    `condensed`: (model, problem, seconds) of this scene condensed already (the
-    command line's distributed condensation under mpirun); None: built and
-    condensed here. Runs under the thread policy (environment.single_threaded);
+              comm=None) -> Result:
+    """Every answer the scene asks for: its plan's stages in order (Scene.plan). Sign
+    patterns and mu^c run as tasks of `engine` (parallel.py: in-process by default; the
+    master of an MPI run, with checkpoints, from the command line). The 2D rays run as one
+    double description per mu, or split over the faces the scene asks for (run.face_split;
+    "auto": 3 nodes from m = 16 on) as "face" tasks (parallel.run_faces) — the split, and so
+    every bit of the result, depends on the scene, not on the rank count; a resumed run keeps
+    its checkpoint's split. `comm`: the master's communicator of an MPI run (the command
+    line), for the collective condense stage (the workers call condense(None, comm)); None:
+    condensed here alone. Runs under the thread policy (environment.single_threaded);
     stats["environment"] records what it ran on (environment.environment).
 
     Memory: progress.MemoryGuard (run.max_memory_gb) checks every double description step
     and the engine's merges (sign patterns, mu^c: Engine.guard), and a MemoryError that
     still happens becomes one line (progress.MemoryLimit, a SceneError: exit status 2,
     nothing written)."""
+    condensed = None if comm is None else condense(scene, comm)    # collective: first, as every rank
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
     progress.guard = engine.guard = MemoryGuard(scene.max_memory_gb, ranks_on_host())
     try:
         with single_threaded():
-            return _run_scene(scene, progress, engine, condensed)
+            return _run_plan(scene, progress, engine, condensed)
     except MemoryError:
         raise out_of_memory("this run") from None
 
 
-def _run_scene(scene: Scene, progress: Progress, engine: Engine,
-               condensed: tuple[Model, ContactProblem, float] | None) -> Result:
+def _run_plan(scene: Scene, progress: Progress, engine: Engine, condensed: Condensed | None) -> Result:
+    """run_scene under its thread policy: condense, then the plan's steps, their records filed."""
     t0 = time.perf_counter()
     plan = scene.plan()
-    timings = {"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0}
-    stages = []
-    model = None
-    t = time.perf_counter()
-    if plan.condense and condensed is not None:
-        model, problem, timings["condense"] = condensed
-        stages.append("condense")
-    elif plan.condense:
-        model = build_model(scene)
-        problem = contact_problem(scene, model)
-        timings["condense"] = time.perf_counter() - t
-        stages.append("condense")
-    else:
-        problem = contact_problem(scene)
-    m = problem.m
-    param = parametrize(problem, exact=scene.exact)
-    result = Result(scene=scene, m=m, runs=[Run(mu=mu) for mu in scene.mu], model=model,
-                    problem=problem, stages=stages, timings=timings)
-    stats = {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
-    sym = None
-    if scene.symmetry and (plan.patterns or plan.mu_c_cones or plan.mu_c_global):
-        sym = node_symmetries(problem.K, scene.dim)
-        stats["symmetry"] = {"order": sym.order}
-        sym = sym if sym.order > 1 else None
-    numerics = Numerics.of(problem, scene.exact_fallback_max_m)
-    # the exact parametrisation, made once if a fallback needs it
-    exact_param = (lambda: param) if scene.exact else once(lambda: parametrize(problem, exact=True))
-
-    if plan.rays:
+    condensed = condensed or condense(scene)
+    result = Result(scene=scene, m=condensed.problem.m, runs=[Run(mu=mu) for mu in scene.mu],
+                    model=condensed.model, problem=condensed.problem,
+                    timings={"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0})
+    if plan.condense:
+        _report(result, "condense", condensed.seconds)
+    stats = SolveStats()
+    ctx = _context(scene, plan, condensed.problem, engine, progress, stats)
+    found = values = None
+    for step in plan.steps():
         t = time.perf_counter()
-        stages.append("enumerate")
-        nodes = branching_nodes(m, scene.face_split)
-        if nodes or engine.restored(RAYS_JOB):
-            # split over faces, one task per (mu, face) (SPEC §5); resumed: the saved split.
-            # Float: in each mu's balanced coordinates, the merged rays judged as a whole
-            # (numerics.judge_2d: redone exactly when suspect and small)
-            coords = [(param, None) if scene.exact else balanced_2d(param, run.mu, m, numerics.scale)
-                      for run in result.runs]
-            rows = [friction_rows_2d(p, run.mu, m, exact=scene.exact) for (p, _), run in zip(coords, result.runs)]
-            dds = run_faces(rows, m, exact=scene.exact, engine=engine, nodes=nodes, name=RAYS_JOB,
-                            max_memory_gb=scene.max_memory_gb)
-            done = [judge_2d(dd, p, cond_T, m, run.mu, numerics, exact_param, progress)
-                    for dd, (p, cond_T), run in zip(dds, coords, result.runs)]
-        else:
-            done = (_rays_whole(param, m, run.mu, numerics, exact_param, progress) for run in result.runs)
-        e = stiffness_exponent(scene)
-        for run, (dd, p_run) in zip(result.runs, done):
-            _fill_rays(run, dd, p_run, m, plan.cones, e)
-            stats["dd"].append({"mu": run.mu, **dd.stats})
-        timings["enumerate"] = time.perf_counter() - t
-        if plan.cones:
-            stages.append("cones")
-
-    if plan.patterns:
-        t = time.perf_counter()
-        stages.append("enumerate")
-        make_tree = partial(PatternTree, strip_exact(param), m, symmetry=sym)
-        pats = run_patterns(make_tree, scene.mu, engine=engine, budget=scene.task_budget)
-        for run, found, doubt in zip(result.runs, pats.found, pats.undecided):
-            found, doubt = expand_orbits(found, sym, m), set(expand_orbits(doubt, sym, m))
-            run.patterns = [{"contact": np.flatnonzero(s.masks(m)[0]).tolist(), "mu_c": None,
-                             "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)]
-        if sym is not None:
-            stats["symmetry"]["representatives"] = [len(f) for f in pats.found]
-        c = pats.counters
-        stats["patterns_undecided"] = sum(len(u) for u in pats.undecided)
-        if scene.dim == 2:
-            exact_sets = settle_patterns_2d(numerics, m, scene.mu, c, stats["patterns_undecided"],
-                                            exact_param, scene.exact)
-            if exact_sets is not None:
-                for run, sets in zip(result.runs, exact_sets):
-                    run.patterns = [{"contact": list(cs), "mu_c": None, "undecided": False}
-                                    for cs in sorted(sets, key=lambda cs: sum(1 << i for i in cs))]
-                stats["patterns_undecided"] = 0
-        stats["bnb"] = {k: c.get(k, 0) for k in ("nodes", "solves", "skipped", "pruned", "undecided")}
-        stats["bnb"]["partitions"] = 2 ** m * len(scene.mu)       # what brute force would solve
-        if scene.dim == 3:
-            stats["socp_statuses"] = {k[7:]: v for k, v in c.items() if k.startswith("status_")}
-        if stats["patterns_undecided"]:
-            progress.note(f"warning: {stats['patterns_undecided']} pattern(s) undecided by every "
-                          "solver (kept, flagged \"undecided\")")
-        timings["enumerate"] += time.perf_counter() - t
-
-    if plan.mu_c_cones or plan.mu_c_global:
-        t = time.perf_counter()
-        stages.append("mu_c")
-
-        def mask(nodes):
-            z = np.zeros(m, dtype=bool)
-            z[list(nodes)] = True
-            return z
-
-        def orbit_key(zu, zr):    # the same for every pattern of an orbit: one mu^c task each
-            bits = (sum(1 << i for i in zu), sum(1 << i for i in zr))
-            return bits if sym is None else sym.canonical(*bits)
-
-        def keyed(run):       # (key, zero_u nodes, zero_r nodes, item) of the run's cones and patterns
-            for c in run.cones or []:
-                yield orbit_key(c["zero_u"], c["zero_r"]), c["zero_u"], c["zero_r"], c
-            for p in run.patterns or []:
-                gap = sorted(set(range(m)).difference(p["contact"]))
-                yield orbit_key(p["contact"], gap), p["contact"], gap, p
-
-        listed = [r for r in result.runs if r.cones or r.patterns]
-        wanted = result.runs if plan.mu_c_cones else listed[:1]
-        # the keys once per run (the master works alone here: workers wait for the tasks)
-        entries = [list(keyed(run)) for run in wanted]
-        items: dict = {}      # one task per zero-set pair, at the least mu that lists it
-        for run, entry in zip(wanted, entries):
-            for key, zu, zr, _ in entry:
-                if key not in items:
-                    items[key] = (mask(zu), mask(zr), run.mu)
-        scale = numerics.scale if scene.dim == 2 else None       # 2D: balanced coordinates
-        solve = partial(mu_critical, strip_exact(param), m, mu_max=scene.mu_max,
-                        method=scene.mu_c_method, tol=scene.mu_c_tol, scale=scale)
-        cache = dict(zip(items, run_mu_c(solve, list(items.values()), engine=engine)))
-        for r in cache.values():
-            stats["lp_solves"] += r.lps
-            stats["lp_undecided"] += r.undecided
-            stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
-        for entry in entries:
-            for key, _, _, item in entry:
-                if plan.mu_c_cones:
-                    item["mu_c"] = cache[key].mu_c
-        if plan.mu_c_global:
-            if listed:
-                # any pattern feasible below the smallest such mu lies in one of its cones/patterns
-                first = next(e for r, e in zip(wanted, entries) if r is listed[0])
-                values = [cache[key].mu_c for key, *_ in first]
-                values = [v for v in values if v is not None]
-                result.mu_c, result.mu_c_status = (min(values), "found") if values else (None, None)
-            if result.mu_c is None:
-                bnb = BnBStats()
-                result.mu_c, result.mu_c_status = global_mu_critical(
-                    param, m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol, stats=bnb,
-                    symmetry=sym, scale=scale)
-                stats["bnb"] = {"solves": bnb.solves, "skipped": bnb.skipped,
-                                "undecided": bnb.undecided, "nodes": bnb.nodes,
-                                "route": bnb.extra.get("route", "tree"),
-                                "milp_solves": bnb.extra.get("milp_solves", 0),
-                                "milp_nodes": bnb.extra.get("milp_nodes", 0)}
-                stats["mu_c_unpolished"] += bnb.extra.get("mu_c_unpolished", 0)
-                stats["mu_c_polished"] += bnb.extra.get("mu_c_polished", 0)
-        timings["mu_c"] = time.perf_counter() - t
-    note_mu_c(numerics, stats["mu_c_unpolished"], stats["lp_undecided"])
-    for line in numerics.warnings():
+        if step == "rays":
+            found = rays(ctx)
+            for run, r in zip(result.runs, found):
+                run.rays, run.trivial_rays, run.ray_zero = r.rays, r.trivial_rays, r.ray_zero
+                stats.dd.append({"mu": r.mu, **r.stats})
+            found = found if plan.cones else None         # every ray's zero flags: the cones' input
+        elif step == "cones":
+            for run, r in zip(result.runs, found):
+                run.cones = cones(r).items
+            found = None
+        elif step == "patterns":
+            _file_patterns(patterns(ctx), result.runs, stats)
+        elif step == "mu_c":
+            values = mu_c(ctx, result.runs, every_run=plan.mu_c_cones)
+            for r in values.by_key.values():
+                stats.add(lps=r.lps, undecided=r.undecided, polished=int(r.polished),
+                          unpolished=int(not r.polished))
+            if plan.mu_c_cones:
+                for key, item in (pair for pairs in values.keyed for pair in pairs):
+                    item["mu_c"] = values.by_key[key].mu_c
+        elif step == "global_mu_c":
+            g = global_mu_c(ctx, values)
+            result.mu_c, result.mu_c_status = g.mu_c, g.status
+            if g.search is not None:
+                stats.bnb = g.search
+                stats.add(polished=g.polished, unpolished=g.unpolished)
+        _report(result, step, time.perf_counter() - t)
+    note_mu_c(ctx.numerics, stats.mu_c_unpolished, stats.lp_undecided)
+    for line in ctx.numerics.warnings():
         progress.note(line)
-    stats["numerics"] = numerics.as_dict()
-    timings["total"] = time.perf_counter() - t0
-    stats["parallel"] = engine.summary()
-    stats["environment"] = environment()
-    result.stats = stats
+    stats.numerics = ctx.numerics.as_dict()
+    result.timings["total"] = time.perf_counter() - t0
+    stats.parallel = engine.summary()
+    stats.environment = environment()
+    result.stats = stats.as_dict()
     return result
 
 
-#: the engine job of the 2D rays stage (when split over faces)
-RAYS_JOB = "rays"
+def _report(result: Result, step: str, seconds: float) -> None:
+    """A step's name into result.stages (once for consecutive steps of one name) and its
+    seconds into result.timings (STEP_REPORT)."""
+    name, clock = STEP_REPORT[step]
+    if not result.stages or result.stages[-1] != name:
+        result.stages.append(name)
+    result.timings[clock] += seconds
 
 
-def _rays_whole(param, m: int, mu: float, numerics: Numerics, exact_param, progress: Progress):
+def _context(scene: Scene, plan: Plan, problem: ContactProblem, engine: Engine, progress: Progress,
+             stats: SolveStats) -> Context:
+    """The stages' shared context: the parametrisation (exact when the scene asks), the node
+    symmetries when a stage uses them (their order into stats.symmetry), the numerics."""
+    param = parametrize(problem, exact=scene.exact)
+    sym = None
+    if scene.symmetry and (plan.patterns or plan.mu_c_cones or plan.mu_c_global):
+        sym = node_symmetries(problem.K, scene.dim)
+        stats.symmetry = SymmetryStats(sym.order)
+        sym = sym if sym.order > 1 else None
+    numerics = Numerics.of(problem, scene.exact_fallback_max_m)
+    exact_param = (lambda: param) if scene.exact else once(lambda: parametrize(problem, exact=True))
+    return Context(scene, problem.m, param, numerics, exact_param, sym, engine, progress)
+
+
+# ---------------------------------------------------------------------------- the stages
+
+def condense(scene: Scene | None, comm=None) -> Condensed | None:
+    """The condense stage. Serially (comm None): the scene's model built and condensed
+    (build.build_model, build.contact_problem), or a raw K read (no model, 0 s).
+
+    Given `comm` (an MPI run, run.condense): collective over it, called by every rank before
+    the task engine's work; the master passes the scene, workers None. Every rank builds the
+    model from the scene the master broadcasts and condenses it with
+    condense.condense_distributed when run.condense = "distributed", or "auto" and the model
+    has >= DISTRIBUTED_MIN_DOFS DOFs. Returns the Condensed on the master if it did, else
+    None (then the master condenses alone, as serially, and reports any error in the scene
+    or model there). A singular K_ii is found on every rank alike: SceneError on the master,
+    None on the workers. Ranks never wait on each other for ever: a model that fails to
+    build on any rank sends everyone on."""
+    if comm is None:
+        if not scene.plan().condense:
+            return Condensed(None, contact_problem(scene))
+        t = time.perf_counter()
+        model = build_model(scene)
+        problem = contact_problem(scene, model)
+        return Condensed(model, problem, time.perf_counter() - t)
+    if comm.rank == 0 and (not scene.plan().condense or scene.condense == "serial"):
+        scene = None
+    scene = comm.bcast(scene, root=0)
+    if scene is None:
+        return None
+    t = time.perf_counter()
+    try:
+        model = build_model(scene)
+    except Exception:                            # noqa: BLE001  (the master's own run reports it)
+        model = None
+    if comm.allreduce(int(model is None)):      # a sum: on any rank
+        return None
+    if scene.condense == "auto" and model.n_dofs < DISTRIBUTED_MIN_DOFS:
+        return None
+    try:
+        problem = contact_problem(scene, model, comm)
+    except SceneError:
+        if comm.rank == 0:
+            raise
+        return None
+    return Condensed(model, problem, time.perf_counter() - t) if comm.rank == 0 else None
+
+
+def rays(ctx: Context) -> list[Rays]:
+    """The 2D rays stage: per listed mu, the complementary extreme rays of P(mu). One double
+    description per mu on the master, or split over the faces of the scene's branching
+    nodes (faces.branching_nodes; resumed: the checkpoint's split), one "face" task per (mu,
+    face), the merged rays judged as a whole in each mu's balanced coordinates (float:
+    numerics.judge_2d, redone exactly when suspect and small)."""
+    scene, m, param, numerics = ctx.scene, ctx.m, ctx.param, ctx.numerics
+    e = stiffness_exponent(scene)
+    nodes = branching_nodes(m, scene.face_split)
+    if nodes or ctx.engine.restored(RAYS_JOB):
+        coords = [(param, None) if scene.exact else balanced_2d(param, mu, m, numerics.scale)
+                  for mu in scene.mu]
+        rows = [friction_rows_2d(p, mu, m, exact=scene.exact) for (p, _), mu in zip(coords, scene.mu)]
+        dds = run_faces(rows, m, exact=scene.exact, engine=ctx.engine, nodes=nodes, name=RAYS_JOB,
+                        max_memory_gb=scene.max_memory_gb)
+        done = [judge_2d(dd, p, cond_T, m, mu, numerics, ctx.exact_param, ctx.progress)
+                for dd, (p, cond_T), mu in zip(dds, coords, scene.mu)]
+    else:                                        # one mu at a time: each DD dropped once filed
+        done = (_rays_whole(ctx, mu) for mu in scene.mu)
+    return [_rays_of(dd, p_run, m, mu, e) for mu, (dd, p_run) in zip(scene.mu, done)]
+
+
+def _rays_whole(ctx: Context, mu: float):
     """One double description of P(mu) on the master, unsplit (numerics.enumerate_2d):
     (rays, the parametrisation they are expressed in)."""
-    progress.stage(f"rays mu={mu:g}")
-    dd, p_run = enumerate_2d(param, m, mu, numerics, exact_param, progress)
-    progress.close()
+    ctx.progress.stage(f"rays mu={mu:g}")
+    dd, p_run = enumerate_2d(ctx.param, ctx.m, mu, ctx.numerics, ctx.exact_param, ctx.progress)
+    ctx.progress.close()
     dd.stats.update(faces=1, branching_nodes=[])
     return dd, p_run
 
 
-def _fill_rays(run: Run, dd, param, m: int, want_cones: bool, e: int = 0) -> None:
-    """The run's rays (canonical order; a wedged ray's u back in the scene's units:
-    build.unscale_u with the stiffness exponent e) and cones."""
+def _rays_of(dd, param: Parametrization, m: int, mu: float, e: int = 0) -> Rays:
+    """The Rays of one mu's double description: canonical order, a wedged ray's u back in
+    the scene's units (build.unscale_u with the stiffness exponent e)."""
     order = canonical_order(dd.zero)
     zero = dd.zero[order]
     wedged = ~(zero[:, 1::3] & zero[:, 2::3]).all(axis=1)
+    out = {}
     for name, sel in (("rays", wedged), ("trivial_rays", ~wedged)):
         _, V = ray_vectors(param, dd.X[order[sel]], m, np.full(int(sel.sum()), sel is wedged))
         if sel is wedged:                      # trivial rays: sum u_n = 1, no scale to undo
@@ -308,20 +346,138 @@ def _fill_rays(run: Run, dd, param, m: int, want_cones: bool, e: int = 0) -> Non
                 raise SceneError(f"model: the stiffness is so small (~2^{e}) that the wedged rays' "
                                  "displacements u (sum r_n = 1) overflow a double; give K or the "
                                  "moduli in other units")
-        setattr(run, name, V)
-    run.ray_zero = zero[wedged]
-    if not want_cones:
-        return
+        out[name] = V
+    return Rays(mu, out["rays"], out["trivial_rays"], zero[wedged], zero, wedged, dd.stats)
+
+
+def cones(r: Rays) -> Cones:
+    """The 2D cones stage at one mu: the maximal cones of cross-complementary rays
+    (cones.maximal_cones), their rays as indices into the run's wedged and trivial lists."""
     from .cones import maximal_cones     # networkx: imported only by the 2D cone stage (~0.15 s)
+    zero, wedged = r.zero, r.wedged
     gap = ~zero[:, 0::3]
     load = ~(zero[:, 1::3] & zero[:, 2::3])
     widx = np.cumsum(wedged) - 1
     tidx = np.cumsum(~wedged) - 1
-    run.cones = []
+    items = []
     for cone in maximal_cones(gap, load, wedged):
-        rays = np.asarray(cone.rays, dtype=int)
-        run.cones.append({"rays": widx[rays[wedged[rays]]].tolist(),
-                          "trivial_rays": tidx[rays[~wedged[rays]]].tolist(),
-                          "zero_u": np.flatnonzero(cone.zero_u).tolist(),
-                          "zero_r": np.flatnonzero(cone.zero_r).tolist(),
-                          "mu_c": None})
+        ids = np.asarray(cone.rays, dtype=int)
+        items.append({"rays": widx[ids[wedged[ids]]].tolist(),
+                      "trivial_rays": tidx[ids[~wedged[ids]]].tolist(),
+                      "zero_u": np.flatnonzero(cone.zero_u).tolist(),
+                      "zero_r": np.flatnonzero(cone.zero_r).tolist(),
+                      "mu_c": None})
+    return Cones(items)
+
+
+def patterns(ctx: Context) -> PatternSets:
+    """The sign-patterns stage: the feasible patterns at every listed mu, branch and bound
+    over subtrees as engine tasks (parallel.run_patterns; with a symmetry, over orbit
+    representatives, expanded here). 2D: redone from the exact rays when the LP decisions
+    are suspect and m small (numerics.settle_patterns_2d). A warning for undecided ones."""
+    scene, m, sym = ctx.scene, ctx.m, ctx.symmetry
+    make_tree = partial(PatternTree, strip_exact(ctx.param), m, symmetry=sym)
+    pats = run_patterns(make_tree, scene.mu, engine=ctx.engine, budget=scene.task_budget)
+    items = []
+    for found, doubt in zip(pats.found, pats.undecided):
+        found, doubt = expand_orbits(found, sym, m), set(expand_orbits(doubt, sym, m))
+        items.append([{"contact": np.flatnonzero(s.masks(m)[0]).tolist(), "mu_c": None,
+                       "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)])
+    reps = None if sym is None else [len(f) for f in pats.found]
+    c = pats.counters
+    undecided = sum(len(u) for u in pats.undecided)
+    if scene.dim == 2:
+        exact_sets = settle_patterns_2d(ctx.numerics, m, scene.mu, c, undecided, ctx.exact_param, scene.exact)
+        if exact_sets is not None:
+            exact = [[{"contact": list(cs), "mu_c": None, "undecided": False}
+                      for cs in sorted(sets, key=lambda cs: sum(1 << i for i in cs))] for sets in exact_sets]
+            items = exact + items[len(exact):]
+            undecided = 0
+    tree = TreeStats.of(c, 2 ** m * len(scene.mu))        # partitions: what brute force would solve
+    statuses = solver_statuses(c) if scene.dim == 3 else None
+    if undecided:
+        ctx.progress.note(f"warning: {undecided} pattern(s) undecided by every "
+                          "solver (kept, flagged \"undecided\")")
+    return PatternSets(items, undecided, tree, statuses, reps)
+
+
+def _file_patterns(found: PatternSets, runs: list[Run], stats: SolveStats) -> None:
+    """The patterns stage's record into the runs and the stats."""
+    for run, items in zip(runs, found.items):
+        run.patterns = items
+    if found.representatives is not None:
+        stats.symmetry.representatives = found.representatives
+    stats.patterns_undecided, stats.bnb, stats.socp_statuses = found.undecided, found.tree, found.statuses
+
+
+def solver_statuses(counters: dict) -> dict:
+    """{status: count} of a patterns job's counters "status_<status>" (how each solve was
+    decided; the prefix is the engine's, parallel.explore_task), in the counters' order."""
+    return {k[len("status_"):]: v for k, v in counters.items() if k.startswith("status_")}
+
+
+def orbit_key(zero_u, zero_r, symmetry: Symmetry | None) -> OrbitKey:
+    """The key of a pair of node sets (zero_u, zero_r: node indices): their bit words (bit i:
+    node i), canonical under `symmetry` (Symmetry.canonical; None: the pair's own words).
+    Every pair of an orbit has the same key; mu^c is invariant, so one task serves a key."""
+    bits = (sum(1 << i for i in zero_u), sum(1 << i for i in zero_r))
+    return bits if symmetry is None else symmetry.canonical(*bits)
+
+
+def mu_c_keys(run: Run, m: int, symmetry: Symmetry | None) -> list[tuple[OrbitKey, list, list, dict]]:
+    """(key, zero_u, zero_r, item) of every cone (its zero sets) then every pattern (zero_u:
+    its contact nodes, zero_r: the others) of the run, in the run's order."""
+    out = [(orbit_key(c["zero_u"], c["zero_r"], symmetry), c["zero_u"], c["zero_r"], c)
+           for c in run.cones or []]
+    for p in run.patterns or []:
+        gap = sorted(set(range(m)).difference(p["contact"]))
+        out.append((orbit_key(p["contact"], gap, symmetry), p["contact"], gap, p))
+    return out
+
+
+def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
+    """The mu_c stage: mu^c of the cones / patterns of every run (every_run), or of the first
+    run that lists any (for the global value), one task per orbit key (mu_c_keys) at the
+    least mu that lists it (runs in increasing mu), through the engine (parallel.run_mu_c)."""
+    m = ctx.m
+    listed = [r for r in runs if r.cones or r.patterns]
+    wanted = runs if every_run else listed[:1]
+    # the keys once per run (the master works alone here: workers wait for the tasks)
+    entries = [mu_c_keys(run, m, ctx.symmetry) for run in wanted]
+    tasks: dict = {}
+    for run, entry in zip(wanted, entries):
+        for key, zu, zr, _ in entry:
+            if key not in tasks:
+                tasks[key] = (_mask(zu, m), _mask(zr, m), run.mu)
+    solve = partial(mu_critical, strip_exact(ctx.param), m, mu_max=ctx.scene.mu_max,
+                    method=ctx.scene.mu_c_method, tol=ctx.scene.mu_c_tol, scale=ctx.scale)
+    by_key = dict(zip(tasks, run_mu_c(solve, list(tasks.values()), engine=ctx.engine)))
+    keyed = [[(key, item) for key, _, _, item in entry] for entry in entries]
+    first = next((ks for r, ks in zip(wanted, keyed) if r is listed[0]), None) if listed else None
+    return MuCValues(by_key, keyed, None if first is None else [key for key, _ in first])
+
+
+def _mask(nodes, m: int) -> np.ndarray:
+    z = np.zeros(m, dtype=bool)
+    z[list(nodes)] = True
+    return z
+
+
+def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:
+    """The global mu^c: the least of the first listed mu's cone / pattern values (any
+    pattern feasible below that mu lies in one of its cones / patterns); when no mu lists
+    any, or none of them has a value, the global search (patterns.global_mu_critical: tree
+    or MILP route, below mu_max)."""
+    if values.first is not None:
+        found = [v for v in (values.by_key[key].mu_c for key in values.first) if v is not None]
+        if found:
+            return GlobalMuC(min(found), "found")
+    scene, bnb = ctx.scene, BnBStats()
+    mu_c, status = global_mu_critical(ctx.param, ctx.m, scene.mu_max, method=scene.mu_c_method,
+                                      tol=scene.mu_c_tol, stats=bnb, symmetry=ctx.symmetry, scale=ctx.scale)
+    search = GlobalRouteStats(solves=bnb.solves, skipped=bnb.skipped, undecided=bnb.undecided,
+                              nodes=bnb.nodes, route=bnb.extra.get("route", "tree"),
+                              milp_solves=bnb.extra.get("milp_solves", 0),
+                              milp_nodes=bnb.extra.get("milp_nodes", 0))
+    return GlobalMuC(mu_c, status, search, polished=bnb.extra.get("mu_c_polished", 0),
+                     unpolished=bnb.extra.get("mu_c_unpolished", 0))

@@ -23,7 +23,7 @@ import os
 import numpy as np
 
 from .files import replace_atomic
-from .results import (RangeError, check_items, index, index_range, open_result, read_items, read_model, read_rays,
+from .resultfile import (RangeError, check_items, index, index_range, open_result, read_items, read_model, read_rays,
                       read_run, text)
 
 DISP_FRACTION = 0.10     # largest drawn displacement / body size

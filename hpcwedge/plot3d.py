@@ -22,7 +22,7 @@ import numpy as np
 
 from .plot import (ARROW_FRACTION, AXIAL_LABEL, DISP_FRACTION, WALL_FRACTION, axial_colours, bars_panel,
                    checked_model, configuration_of, item_index, message, mu_c_attr, mu_c_panel, run_group)
-from .results import check_items, read_counts, read_items, stored_scene, text
+from .resultfile import check_items, read_counts, read_items, stored_scene, text
 
 VON_MISES_PERCENTILE = 95  # the colour scale ends here (point contacts concentrate the stress)
 #: boundary faces of the 3D cells (meshio / VTK node order), for the drawn surface

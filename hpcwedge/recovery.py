@@ -132,7 +132,7 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     whose feasibility point the solvers cannot give.
     """
     from .files import FileError
-    from .results import (RangeError, check_items, index, index_range, open_result, read_items, read_model,
+    from .resultfile import (RangeError, check_items, index, index_range, open_result, read_items, read_model,
                           read_rays, read_run, stored_scene)
     chosen = [(k, v) for k, v in (("ray", ray), ("cone", cone), ("pattern", pattern)) if v is not None]
     if len(chosen) != 1:

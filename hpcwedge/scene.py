@@ -58,6 +58,18 @@ class Plan:
     mu_c_cones: bool     # mu^c of every cone / pattern
     mu_c_global: bool
 
+    def steps(self) -> tuple[str, ...]:
+        """The stages after condensation, in order (pipeline.run_scene loops over them; every
+        scene is condensed first: `condense` says whether a model is, else a raw K is read):
+        "rays", "cones", "patterns", "mu_c" (per cone / pattern: of every listed mu with
+        mu_c_cones, else of the first that lists any, for the global value), "global_mu_c"."""
+        wanted = (self.rays, self.cones, self.patterns, self.mu_c_cones or self.mu_c_global, self.mu_c_global)
+        return tuple(name for name, on in zip(STEPS, wanted) if on)
+
+
+#: every stage a plan can hold after condensation, in the order they run (Plan.steps)
+STEPS = ("rays", "cones", "patterns", "mu_c", "global_mu_c")
+
 
 @dataclass(frozen=True)
 class Scene:
@@ -186,21 +198,13 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     dim = data.get("dim")
     if isinstance(dim, bool) or not isinstance(dim, int) or dim not in (2, 3):
         raise SceneError(f"dim: must be 2 or 3, got {dim!r}")
-    model = data.get("model")
-    if model is not None and not isinstance(model, dict):
-        raise SceneError(f"model: must be a table, got {model!r}")
-    if model is None or "kind" not in model:
-        raise SceneError("model.kind: required")
+    model = _table_with(data, "model", "kind")
     kind = model["kind"]
     if kind not in KINDS:
         raise SceneError(f"model.kind: unknown kind {kind!r} (one of {', '.join(KINDS)})")
     if kind in BUILTIN_DIM and BUILTIN_DIM[kind] != dim:
         raise SceneError(f"dim: {kind} is a {BUILTIN_DIM[kind]}D model, scene says dim = {dim}")
-    friction = data.get("friction")
-    if friction is not None and not isinstance(friction, dict):
-        raise SceneError(f"friction: must be a table, got {friction!r}")
-    if friction is None or "mu" not in friction:
-        raise SceneError("friction.mu: required (one value or a list)")
+    friction = _table_with(data, "friction", "mu", " (one value or a list)")
     _unknown(friction, {"mu"}, "friction.")
     mus = friction["mu"] if isinstance(friction["mu"], list) else [friction["mu"]]
     if not mus:
@@ -299,6 +303,16 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  symmetry=run["symmetry"], face_split=run["face_split"], condense=run["condense"],
                  obstacles=obstacles, obstacle_key=obstacle_key,
                  exact_fallback_max_m=compute["exact_fallback_max_m"], max_memory_gb=run["max_memory_gb"])
+
+
+def _table_with(data: dict, name: str, key: str, hint: str = "") -> dict:
+    """data[name], a table that holds `key`; else a SceneError naming the table or the key."""
+    table = data.get(name)
+    if table is not None and not isinstance(table, dict):
+        raise SceneError(f"{name}: must be a table, got {table!r}")
+    if table is None or key not in table:
+        raise SceneError(f"{name}.{key}: required{hint}")
+    return table
 
 
 def _unknown(table, allowed, prefix):

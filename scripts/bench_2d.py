@@ -159,7 +159,7 @@ def worker_mpirun(rows: int, mu: float, workers: int = 2) -> dict:
     import shutil
     import tempfile
     import h5py
-    from hpcwedge.results import read_result
+    from hpcwedge.resultfile import read_result
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         raise SystemExit(3)

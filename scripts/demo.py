@@ -25,7 +25,7 @@ sys.path.insert(0, ROOT)
 
 from hpcwedge.pipeline import run_scene  # noqa: E402
 from hpcwedge.progress import Progress  # noqa: E402
-from hpcwedge.results import write_result  # noqa: E402
+from hpcwedge.resultfile import write_result  # noqa: E402
 from hpcwedge.scene import load_scene  # noqa: E402
 
 sys.path.insert(0, os.path.join(ROOT, "scripts"))

@@ -149,7 +149,7 @@ def test_sigterm_to_mpirun(tmp_path):
     got = _finish(scene, out)                           # resumed serially
     assert got["stats"]["parallel"]["resumes"] == 1
     from hpcwedge.pipeline import run_scene             # the uninterrupted answers, in-process
-    from hpcwedge.results import write_result
+    from hpcwedge.resultfile import write_result
     from hpcwedge.scene import load_scene
     ref = str(tmp_path / "ref.h5")
     write_result(ref, run_scene(load_scene(scene)))

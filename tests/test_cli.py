@@ -162,7 +162,7 @@ def test_export_stiffness_scene_and_missing_file(tmp_path, capsys):
 def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monkeypatch, chunk):
     """`show --json` streams the rays in chunks; the object equals read_result's (ray
     vectors to the last bit: repr round-trips floats) whatever the chunk size."""
-    from hpcwedge import results
+    from hpcwedge import resultfile as results
     monkeypatch.setattr(results, "RAY_CHUNK", chunk)
     out, got = run_show_json(tmp_path, capsys, 'name = "p"\ndim = 2\n[model]\nkind = "plug2d"\n'
                              'rows = 3\n[friction]\nmu = [0.65, 2.0]\n[compute]\nmu_c = "cones"\n')

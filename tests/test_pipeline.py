@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from hpcwedge.pipeline import run_scene
+from hpcwedge.pipeline import condense, mu_c_keys, orbit_key, run_scene
+from hpcwedge.results import GlobalRouteStats, Run, SolveStats, SymmetryStats, TreeStats
 from hpcwedge.scene import parse_scene
 
 
@@ -296,3 +297,59 @@ def test_unit_moduli_are_not_rescaled():
         assert stiffness_exponent(scene(model)) == 0
     assert stiffness_exponent(scene({"kind": "block2d", "E": 2.0 ** 40})) == 40
     assert stiffness_exponent(scene({"kind": "vgroove_bar", "EA": 3e-7, "eps": 1e-9})) == -22
+
+
+# ------------------------------------------------------------------------ stages and records
+
+def test_condense_stage_record():
+    raw = condense(scene({"kind": "stiffness", "K": [[2.0, 0.5], [0.5, 1.0]]}))
+    assert raw.model is None and raw.seconds == 0.0 and raw.problem.m == 1
+    built = condense(scene({"kind": "plug2d", "rows": 2}))
+    assert built.model is not None and built.problem.m == 4 and built.seconds > 0
+
+
+def test_solve_stats_as_dict_is_the_file_object():
+    """SolveStats.as_dict: the fields that are set, in the result file's key order."""
+    s = SolveStats()
+    assert s.as_dict() == {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
+    s.add(lps=3, undecided=1, polished=1)
+    s.add(unpolished=2)
+    s.symmetry = SymmetryStats(2)
+    s.bnb = TreeStats.of({"solves": 4, "status_optimal": 1}, partitions=8)
+    s.numerics = {}
+    d = s.as_dict()
+    assert list(d) == ["dd", "lp_solves", "mu_c_polished", "mu_c_unpolished", "lp_undecided", "symmetry", "bnb",
+                       "numerics"]
+    assert (d["lp_solves"], d["lp_undecided"], d["mu_c_polished"], d["mu_c_unpolished"]) == (3, 1, 1, 2)
+    assert d["symmetry"] == {"order": 2}
+    assert d["bnb"] == {"nodes": 0, "solves": 4, "skipped": 0, "pruned": 0, "undecided": 0, "partitions": 8}
+    s.bnb = GlobalRouteStats(solves=1, nodes=2, route="milp")
+    assert list(s.as_dict()["bnb"]) == ["solves", "skipped", "undecided", "nodes", "route", "milp_solves",
+                                        "milp_nodes"]
+
+
+def test_stats_keys_of_a_patterns_run():
+    r = run_scene(scene({"kind": "plug2d", "rows": 2}, enumerate="patterns"))
+    assert list(r.stats) == ["dd", "lp_solves", "mu_c_polished", "mu_c_unpolished", "lp_undecided", "symmetry",
+                             "patterns_undecided", "bnb", "numerics", "parallel", "environment"]
+    assert r.stats["bnb"]["partitions"] == 2 ** 4 and r.stages == ["condense", "enumerate", "mu_c"]
+
+
+def test_orbit_keys_give_one_mu_c_task_per_orbit():
+    """orbit_key: bit words of (zero_u, zero_r), canonical under the symmetry; mu_c_keys: a
+    run's cones then patterns (a pattern's zero_r: the nodes not in contact)."""
+
+    class Swap:                    # nodes 0 and 1 exchanged: the least pair of the orbit
+        def canonical(self, c, g):
+            def swap(b):
+                return (b & ~3) | ((b & 1) << 1) | ((b >> 1) & 1)
+            return min((c, g), (swap(c), swap(g)))
+    assert orbit_key([0, 2], [1], None) == (0b101, 0b010)
+    run = Run(mu=1.0, cones=[{"zero_u": [0], "zero_r": [1, 2]}],
+              patterns=[{"contact": [1]}, {"contact": [0, 2]}])
+    keys = mu_c_keys(run, 3, None)
+    assert [(k, zu, zr) for k, zu, zr, _ in keys] == [((1, 6), [0], [1, 2]), ((2, 5), [1], [0, 2]),
+                                                      ((5, 2), [0, 2], [1])]
+    assert [item for *_, item in keys] == run.cones + run.patterns
+    sym = [k for k, *_ in mu_c_keys(run, 3, Swap())]
+    assert sym[0] == sym[1] == (1, 6) and sym[2] == (5, 2)

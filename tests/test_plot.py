@@ -11,10 +11,11 @@ import pytest
 pytest.importorskip("matplotlib")
 
 from hpcwedge.cli import main
-from hpcwedge.pipeline import Result, Run, run_scene
+from hpcwedge.pipeline import run_scene
 from hpcwedge.plot import plot_result
 from hpcwedge.files import seal
-from hpcwedge.results import write_result
+from hpcwedge.results import Result, Run
+from hpcwedge.resultfile import write_result
 from hpcwedge.scene import parse_scene
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

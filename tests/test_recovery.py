@@ -17,7 +17,7 @@ from hpcwedge.recovery import (AXIAL_FORCE, VON_MISES, ConfigurationError, eleme
 from hpcwedge.models import block2d, plug2d, q4_stiffness
 from hpcwedge.models.elements import lame
 from hpcwedge.pipeline import run_scene
-from hpcwedge.results import write_result
+from hpcwedge.resultfile import write_result
 from hpcwedge.scene import load_scene
 
 PLUG2D = 'name = "plug2d"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 3\n[friction]\nmu = [0.65]\n'

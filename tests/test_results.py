@@ -13,7 +13,7 @@ import pytest
 
 from hpcwedge.cli import main
 from hpcwedge.files import CHECKSUM_MAGIC, FileError, seal, verify_checksum
-from hpcwedge.results import read_result
+from hpcwedge.resultfile import read_result
 from mpi_helpers import ROOT, damaged, run, show_json, write_scene
 
 SCENE = 'name = "plug"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 2\n[friction]\nmu = [0.65]\n'
@@ -97,7 +97,7 @@ def test_damage_in_the_ray_values_is_found(result, tmp_path, capsys):
 def test_verified_once_until_the_file_changes(result, tmp_path, monkeypatch):
     """A stable result is hashed once per process however often it is opened, and again as
     soon as it changes (then the damage is found)."""
-    import hpcwedge.results as R
+    import hpcwedge.resultfile as R
     path = str(tmp_path / "r.h5")
     shutil.copy(result, path)
     monkeypatch.setattr(R, "STABLE_S", 0.2)

@@ -142,3 +142,17 @@ def test_valid_tables_of_every_kind_still_parse():
     assert parse_scene(scene(model=MESH, contact=MESH_CONTACT)).kind == "mesh"
     assert parse_scene(scene(model={"kind": "plug2d", "rows": 3, "taper_deg": 5})).kind == "plug2d"
     assert parse_scene(scene(run={"checkpoint_every_s": 1e9}, compute={"enumerate": "rays"})).checkpoint_every_s == 1e9
+
+
+def test_plan_steps_in_the_order_they_run():
+    """Plan.steps: the stages after condensation that pipeline.run_scene loops over."""
+    base = {"name": "p", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": 1.0}}
+
+    def steps(**over):
+        return parse_scene({**base, **over}).plan().steps()
+    assert steps() == ("rays", "cones", "mu_c", "global_mu_c")
+    assert steps(compute={"enumerate": "rays", "mu_c": "none"}) == ("rays",)
+    assert steps(compute={"enumerate": False, "mu_c": "global"}) == ("mu_c", "global_mu_c")
+    assert steps(compute={"enumerate": "patterns", "mu_c": "cones"}) == ("patterns", "mu_c", "global_mu_c")
+    assert steps(compute={"enumerate": False, "mu_c": "none"}) == ()
+    assert steps(dim=3, model={"kind": "plug3d"}) == ("patterns", "mu_c", "global_mu_c")

@@ -38,7 +38,7 @@ import numpy as np
 
 from .. import __version__
 from ..files import FileError, error_reason, verify_checksum, write_atomic
-from ..results import compression
+from ..resultfile import compression
 
 FORMAT = "hpcwedge-checkpoint"
 #: 2: checksummed (files.write_atomic), with the scene's input digests
