@@ -45,9 +45,9 @@ import math
 import numpy as np
 import scipy.linalg as sla
 
-from .conic import (ATTEMPTS, FEASIBLE, LEAST_NORM_ATTEMPT, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, ConeRows, Rows,
-                    _count, _settings, _socp_data, _csc_dense, _csc_zero, decide, feasible, pattern_rows,
-                    problem_dim, pyramid_sides_for, violation)
+from .feasibility import DEFAULT_OPTIONS, PYRAMID_SIDES, SolverOptions, count, decide, pyramid_sides_for
+from .rows import ConeRows, Rows, Status, pattern_rows, problem_dim
+from .socp import ConicProblem, attempts, pattern_socp, solve, violation
 from .parallel import task_tick
 from .problem import Parametrization, balanced_2d
 
@@ -90,7 +90,8 @@ class MuC:
 
 def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
                 mu_hi: float | None = None, mu_max: float = 100.0,
-                method: str = "accurate", tol: float = 1e-6, scale: float | None = None) -> MuC:
+                method: str = "accurate", tol: float = 1e-6, scale: float | None = None,
+                options: SolverOptions = DEFAULT_OPTIONS) -> MuC:
     """Least mu at which the pattern (zero_u, zero_r) admits a solution with r != 0.
 
     mu_hi: a mu known feasible (e.g. the run's mu for a cone found there); else
@@ -103,12 +104,12 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
     if problem_dim(param, m) == 3 or scale is None:
         rows = pattern_rows(param, m, zero_u, zero_r)
         if isinstance(rows, ConeRows):
-            return _mu_critical_3d(param, m, zero_u, zero_r, mu_hi, mu_max, method, tol, MuC(None))
-        return mu_critical_rows(rows, mu_hi, mu_max, method, tol)
+            return _mu_critical_3d(param, m, zero_u, zero_r, mu_hi, mu_max, method, tol, MuC(None), options)
+        return mu_critical_rows(rows, mu_hi, mu_max, method, tol, options=options)
 
     def solve(ref: float, hi: float | None, lo: float | None = None) -> MuC:
         return mu_critical_rows(pattern_rows(balanced_2d(param, ref, m, scale)[0], m, zero_u, zero_r),
-                                hi, mu_max, method, tol, mu_lo=lo)
+                                hi, mu_max, method, tol, mu_lo=lo, options=options)
 
     ref = mu_max if mu_hi is None else mu_hi
     out = solve(ref, mu_hi)
@@ -124,7 +125,7 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
 
 def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100.0,
                      method: str = "accurate", tol: float = 1e-6, out: MuC | None = None,
-                     mu_lo: float | None = None) -> MuC:
+                     mu_lo: float | None = None, options: SolverOptions = DEFAULT_OPTIONS) -> MuC:
     """mu^c of an LP pattern problem given by its rows (2D patterns; also any
     polyhedral problem of the same form, e.g. a 3D pattern with pyramids).
     mu_lo: a guess of an infeasible mu below mu^c; the bisection starts from it when an
@@ -133,10 +134,11 @@ def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100
 
     def feasible_at(mu: float):
         out.lps += 1
-        status, x = feasible(rows, mu, out.statuses)
-        if status not in (FEASIBLE, INFEASIBLE):
+        d = decide(rows, mu, options, out.statuses)
+        status, x = d.status, d.x
+        if status not in (Status.FEASIBLE, Status.INFEASIBLE):
             out.undecided += 1       # conservative: treat as feasible (keeps the bracket valid above)
-        return status != INFEASIBLE, x
+        return status != Status.INFEASIBLE, x
 
     if mu_hi is None:
         ok, _ = feasible_at(mu_max)
@@ -227,34 +229,35 @@ def _verified(rows: Rows, act: np.ndarray, mu: float) -> bool:
 
 # ------------------------------------------------------------------------ 3D
 def _mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
-                    mu_hi: float | None, mu_max: float, method: str, tol: float, out: MuC) -> MuC:
+                    mu_hi: float | None, mu_max: float, method: str, tol: float, out: MuC,
+                    options: SolverOptions) -> MuC:
     """mu^c of a 3D pattern (module doc, 3D routes)."""
     rows = pattern_rows(param, m, zero_u, zero_r)
 
     def feasible_at(rows, mu: float, sides: tuple[int, ...] = PYRAMID_SIDES):
         out.lps += 1
-        d = decide(rows, mu, out.statuses, pyramid_sides=sides)
-        if d.status == UNDECIDED:
+        d = decide(rows, mu, options, out.statuses, pyramid_sides=sides)
+        if d.status == Status.UNDECIDED:
             out.undecided += 1       # conservative: taken as feasible
         return d
 
     hi = float(mu_max if mu_hi is None else mu_hi)
     first = feasible_at(rows, hi)
-    if first.status != FEASIBLE and hi < mu_max:
+    if first.status != Status.FEASIBLE and hi < mu_max:
         # mu_hi was not confirmed (a pattern taken as feasible there on a tolerance
         # or an undecided status): start from mu_max instead
         alt = feasible_at(rows, mu_max)
-        if alt.status == INFEASIBLE:
+        if alt.status == Status.INFEASIBLE:
             return out
-        if first.status == INFEASIBLE or alt.status == FEASIBLE:
+        if first.status == Status.INFEASIBLE or alt.status == Status.FEASIBLE:
             first, hi = alt, float(mu_max)
-    if first.status == INFEASIBLE:
+    if first.status == Status.INFEASIBLE:
         return out
     if method != "accurate":
-        out.mu_c = _bisect(lambda mu, _: feasible_at(rows, mu).status != INFEASIBLE, 0.0, hi, tol)[1]
+        out.mu_c = _bisect(lambda mu, _: feasible_at(rows, mu).status != Status.INFEASIBLE, 0.0, hi, tol)[1]
         return out
     mu, polished, x = _accurate_3d(param, m, np.asarray(zero_u, bool), np.asarray(zero_r, bool), rows,
-                                   hi, first, feasible_at, out, depth=0)
+                                   hi, first, feasible_at, out, depth=0, options=options)
     out.mu_c, out.polished, out.x = mu, polished, x
     return out
 
@@ -273,7 +276,7 @@ def _bisect(ok, lo: float, hi: float, rtol: float) -> tuple[float, float]:
     return lo, hi
 
 
-def _accurate_3d(param, m, zu, zr, rows, hi, first, feasible_at, out, depth):
+def _accurate_3d(param, m, zu, zr, rows, hi, first, feasible_at, out, depth, options):
     """(mu^c, polished) of the pattern given a decision `first` that is not
     infeasible at hi: Dinkelbach + KKT polish; if the polish does not verify,
     bisection to BRACKET_RTOL and again from the bracket's upper point (that
@@ -287,16 +290,16 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, feasible_at, out, depth):
     pol = None
     x = first.x
     if x is not None:
-        mu, x = dinkelbach(rows, x, hi, out)
+        mu, x = dinkelbach(rows, x, hi, out, options)
         if mu == 0.0:
             return 0.0, True, x
-        pol = kkt_polish(rows, x, mu)
+        pol = kkt_polish(rows, x, mu, options=options)
     if pol is None:
         state = {"x": x}
 
         def ok(mu, spread):
             d = feasible_at(rows, mu, pyramid_sides_for(spread))
-            if d.status != INFEASIBLE:
+            if d.status != Status.INFEASIBLE:
                 state["x"] = d.x if d.x is not None else state["x"]
                 return True
             return False
@@ -305,8 +308,8 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, feasible_at, out, depth):
         x = state["x"]
         if x is None:
             return hi, False, None
-        mu, x = dinkelbach(rows, x, hi, out)
-        pol = kkt_polish(rows, x, mu)
+        mu, x = dinkelbach(rows, x, hi, out, options)
+        pol = kkt_polish(rows, x, mu, options=options)
         if pol is None:
             return hi, False, None
     mu_s, support, x_s, signed = pol
@@ -316,18 +319,18 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, feasible_at, out, depth):
     zr_sub[rows.nodes[support]] = True
     sub = pattern_rows(param, m, zu, zr_sub)
     d = feasible_at(sub, mu_s * (1 + 1e-12))
-    if d.status == INFEASIBLE:
+    if d.status == Status.INFEASIBLE:
         if signed:
             return mu_s, True, x_s
         return _fallback_3d(rows, hi, feasible_at, out)
     mu_sub, polished_sub, x_sub = _accurate_3d(param, m, zu, zr_sub, sub, mu_s * (1 + 1e-12), d,
-                                               feasible_at, out, depth + 1)
-    _count(out.statuses, "polish_support_recursions")
+                                               feasible_at, out, depth + 1, options)
+    count(out.statuses, "polish_support_recursions")
     if signed:
         return (mu_sub, polished_sub, x_sub) if mu_sub < mu_s else (mu_s, True, x_s)
     # unsigned apex point: accepted when the sub-pattern (apex cones unloaded) has
     # the same value, polished
-    _count(out.statuses, "polish_apex_by_subpattern")
+    count(out.statuses, "polish_apex_by_subpattern")
     if polished_sub and abs(mu_sub - mu_s) <= 1e-10 * mu_s:
         return min(mu_s, mu_sub), True, x_s
     if mu_sub < mu_s:
@@ -337,8 +340,8 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, feasible_at, out, depth):
 
 def _fallback_3d(rows, hi, feasible_at, out):
     """Bisection to BRACKET_RTOL: (upper end, False, None)."""
-    _count(out.statuses, "mu_c_unpolished")
-    lo, hi = _bisect(lambda mu, _: feasible_at(rows, mu).status != INFEASIBLE, 0.0, hi, BRACKET_RTOL)
+    count(out.statuses, "mu_c_unpolished")
+    lo, hi = _bisect(lambda mu, _: feasible_at(rows, mu).status != Status.INFEASIBLE, 0.0, hi, BRACKET_RTOL)
     return hi, False, None
 
 
@@ -357,7 +360,8 @@ def max_ratio(rows: ConeRows, x: np.ndarray) -> float:
     return float((rt / rn).max())
 
 
-def dinkelbach(rows: ConeRows, x: np.ndarray, mu_hi: float, out: MuC) -> tuple[float, np.ndarray]:
+def dinkelbach(rows: ConeRows, x: np.ndarray, mu_hi: float, out: MuC,
+               options: SolverOptions = DEFAULT_OPTIONS) -> tuple[float, np.ndarray]:
     """Scaled Dinkelbach iterations (module doc) from a feasible x: (mu, x) with
     mu = max_ratio(x) the least upper bound reached."""
     mu = max_ratio(rows, x)
@@ -373,7 +377,7 @@ def dinkelbach(rows: ConeRows, x: np.ndarray, mu_hi: float, out: MuC) -> tuple[f
         # ratio converges as slowly as its weight); a cone that must unload
         # completely to go lower is caught by the support recursion of the polish
         weights = np.maximum(weights, DINKELBACH_WEIGHT_FLOOR)
-        y = _dinkelbach_step(rows, mu, weights, out)
+        y = _dinkelbach_step(rows, mu, weights, out, options)
         if y is None:
             break
         mu_y = max_ratio(rows, y)
@@ -386,29 +390,23 @@ def dinkelbach(rows: ConeRows, x: np.ndarray, mu_hi: float, out: MuC) -> tuple[f
     return mu, x
 
 
-def _dinkelbach_step(rows: ConeRows, mu: float, weights: np.ndarray, out: MuC) -> np.ndarray | None:
+def _dinkelbach_step(rows: ConeRows, mu: float, weights: np.ndarray, out: MuC,
+                     options: SolverOptions) -> np.ndarray | None:
     """argmin of min s s.t. (mu rn_i x + weights_i s, rt_i x) in SOC, pattern rows;
     None unless Clarabel solves it and x verifies on the non-friction rows."""
-    import clarabel
-    A, b, cones = _socp_data(rows, mu)
+    base = pattern_socp(rows, mu)
     p = rows.Z.shape[1]
-    col = np.zeros((A.shape[0], 1))
-    n_lin = rows.lin.shape[0]
-    first_cone = 1 + n_lin
+    col = np.zeros((base.A.shape[0], 1))
+    first_cone = 1 + base.n_lin
     col[first_cone::3, 0] = -weights
-    A = np.hstack([A, col])
     q = np.zeros(p + 1)
     q[-1] = 1.0
-    for attempt in range(ATTEMPTS):
-        if attempt == LEAST_NORM_ATTEMPT:
-            continue
-        sol = clarabel.DefaultSolver(_csc_zero(p + 1), q, _csc_dense(A), b, cones, _settings(attempt)).solve()
+    problem = ConicProblem(np.hstack([base.A, col]), base.b, base.n_zero, base.n_lin, base.n_soc, q)
+    for attempt, sol in attempts(problem, options.tight):
         out.lps += 1
-        name = str(sol.status)
-        _count(out.statuses, ("dinkelbach_" if not attempt else f"dinkelbach_retry{attempt}_") + name)
-        if name == "Solved":
-            w = np.asarray(sol.x)
-            x = rows.Z @ w[:p]
+        count(out.statuses, ("dinkelbach_" if not attempt else f"dinkelbach_retry{attempt}_") + sol.status)
+        if sol.status == "Solved":
+            x = rows.Z @ sol.x[:p]
             nr = rows.norm @ x
             if nr > 0:
                 x = x / nr
@@ -419,7 +417,8 @@ def _dinkelbach_step(rows: ConeRows, mu: float, weights: np.ndarray, out: MuC) -
 
 
 def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
-               taus: tuple[float, ...] = (1e-6, 1e-4, 1e-8, 1e-3, 1e-2)) -> tuple | None:
+               taus: tuple[float, ...] = (1e-6, 1e-4, 1e-8, 1e-3, 1e-2),
+               options: SolverOptions = DEFAULT_OPTIONS) -> tuple | None:
     """Newton's method on the KKT system of min mu over the active set at x (module
     doc): (mu*, support, x*, True) verified, or None. support: the cone nodes (indices
     into rows.nodes) with a positive multiplier — below mu* no point loads any of them.
@@ -461,7 +460,7 @@ def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
             _, sv, vt = np.linalg.svd(act, full_matrices=False)
             V = vt[:int((sv > 1e-12 * sv[0]).sum())].T
             w_perp = w0 - V @ (V.T @ w0)
-            res = _kkt_newton(a @ V, T @ V, L @ V, nrm @ V, V.T @ w0, mu, S, Ap, Lin)
+            res = _kkt_newton(a @ V, T @ V, L @ V, nrm @ V, V.T @ w0, mu, S, Ap, Lin, options)
             if res is None:
                 break
             c, mu_s, support, signed, drop_s, drop_l = res
@@ -477,7 +476,7 @@ def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
     return unsigned
 
 
-def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, iters: int = 40):
+def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
     """Newton on F(w, mu, lam, gam, eta) = 0 (see kkt_polish); (w, mu) when it
     converges with multipliers of the right signs, else None."""
     p = len(w0)
@@ -583,7 +582,7 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, iters: int = 40):
         # multipliers are not unique where the active rows are dependent: look for
         # signed ones at the converged point (a small conic feasibility problem)
         Tw, nt, t, G = parts(w, mu)
-        y = _signed_multipliers(G, a[S] @ w, E, nrm, nA, len(Lin), mu)
+        y = _signed_multipliers(G, a[S] @ w, E, nrm, nA, len(Lin), mu, options)
         if y is not None:
             support = _signed_support(y[0], y[1], S, Ap, nA, len(Lin), mu)
         if support is None:
@@ -610,12 +609,11 @@ def _signed_support(lam, gam, S, Ap, nA, nL, mu, rtol: float = SIGN_RTOL):
     return np.array(sorted(support), dtype=int)
 
 
-def _signed_multipliers(G, rn, E, nrm, nA, nL, mu):
+def _signed_multipliers(G, rn, E, nrm, nA, nL, mu, options):
     """Multipliers (lam >= 0, gam) with G^T lam + E^T gam + eta nrm = 0 and
     lam . rn = 1, gam's u_n part <= 0, apex parts -(mu zeta_0, zeta_t), zeta in the
     second-order cone; found by Clarabel, accepted when the equations hold to
     1e-10 relative. None if there are none."""
-    import clarabel
     nS, p = G.shape
     nE = E.shape[0]
     # variables v = [lam (nS), nu (nL) >= 0, zeta (3 nA), eta]; gam = [-mu z0, -z1, -z2, -nu]
@@ -643,14 +641,10 @@ def _signed_multipliers(G, rn, E, nrm, nA, nL, mu):
         sel[nS + nL + 3 * k:nS + nL + 3 * k + 3, c:c + 3] = -np.eye(3)
     A = np.vstack([Aeq, sel])
     b = np.concatenate([beq, np.zeros(sel.shape[0])])
-    cones = [clarabel.ZeroConeT(p + 1)]
-    if nS + nL:
-        cones.append(clarabel.NonnegativeConeT(nS + nL))
-    cones += [clarabel.SecondOrderConeT(3) for _ in range(nA)]
-    sol = clarabel.DefaultSolver(_csc_zero(nv), np.zeros(nv), _csc_dense(A), b, cones, _settings(0)).solve()
-    if str(sol.status) != "Solved":
+    sol = solve(ConicProblem(A, b, p + 1, nS + nL, nA), 0, options.tight)
+    if sol.status != "Solved":
         return None
-    v = np.asarray(sol.x)
+    v = sol.x
     if np.abs(Aeq @ v - beq).max() > 1e-10 * max(1.0, np.abs(v).max()):
         return None
     lam = v[:nS]

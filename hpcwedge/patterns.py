@@ -6,7 +6,7 @@ relaxation keeps u_n >= 0, r_n >= 0 (and friction) for the others. A child
 whose condition the parent's solution already meets is feasible without a
 solve (2D: the LP vertex meets it to MEETS_TOL; 3D: the interior-point
 solution meets it to NEAR_TOL, and its projection onto the child's equalities
-verifies on every row of the child, conic.VERIFY_TOL). Undecided statuses keep
+verifies on every row of the child, socp.VERIFY_TOL). Undecided statuses keep
 the subtree (never pruned on doubt); an undecided full pattern is reported in
 `found` and listed again in `Explored.undecided`.
 """
@@ -18,8 +18,12 @@ from functools import partial
 
 import numpy as np
 
-from .conic import (FEASIBLE, INFEASIBLE, UNDECIDED, VERIFY_TOL, WedgeMilp, decide, feasible, infeasible_core,
-                    lp_violation, node_rows, pattern_rows, problem_dim, violation, wedge_milp)
+from .cores import infeasible_core
+from .feasibility import count, decide
+from .lp import lp_violation
+from .milp import WedgeMilp, wedge_milp
+from .rows import Status, node_rows, pattern_rows, problem_dim
+from .socp import VERIFY_TOL, violation
 from .mu_critical import mu_critical
 from .parallel import task_stopping, task_tick
 from .problem import Parametrization
@@ -50,7 +54,7 @@ class BnBStats:
     besides (3D: screens and pyramid fallbacks); skipped: tree nodes decided by the
     parent's solution; pruned: tree nodes ruled out by a learnt infeasible core
     (Cores), without a solve; undecided: solves that decided nothing (kept); nodes: tree
-    nodes visited; statuses: how each solve was decided (conic.feasible counts)."""
+    nodes visited; statuses: how each solve was decided (feasibility.decide counts)."""
 
     solves: int = 0
     skipped: int = 0
@@ -197,12 +201,12 @@ class PatternTree:
                 zu, zr = node.masks(m)
                 steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
                 rows = pattern_rows(param, m, zu, zr, self.friction)
-                dec = decide(rows, mu, stats.statuses, steer)
-                if dec.status == INFEASIBLE:
+                dec = decide(rows, mu, counts=stats.statuses, objective=steer)
+                if dec.status == Status.INFEASIBLE:
                     if dec.farkas is not None and self._cores is not None:
                         self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
                     continue
-                if dec.status == UNDECIDED:
+                if dec.status == Status.UNDECIDED:
                     stats.undecided += 1
                     doubt = True
                 x, no_contact = dec.x, dec.positive
@@ -213,7 +217,7 @@ class PatternTree:
                 if doubt:
                     undecided.append(node)
                 elif self.dim == 2 and self.friction and self._near_boundary(node, x, mu):
-                    _bump(stats.statuses, "near_boundary")
+                    count(stats.statuses, "near_boundary")
                 if first_only:
                     stack.clear()
                     break
@@ -224,7 +228,7 @@ class PatternTree:
             kids = []
             for contact in (True, False):
                 if contact and no_contact:
-                    _bump(stats.statuses, "contact_child_infeasible_by_parent")
+                    count(stats.statuses, "contact_child_infeasible_by_parent")
                     continue
                 fixed = [i] if contact else orbit
                 bits = sum(1 << j for j in fixed)
@@ -295,7 +299,7 @@ def expand_orbits(found: list[Subtree], symmetry: Symmetry | None, m: int) -> li
 
 class Cores:
     """Partial patterns proven infeasible by a certificate that uses only their
-    fixings (conic.infeasible_core): a tree node fixing at least one core's nodes
+    fixings (cores.infeasible_core): a tree node fixing at least one core's nodes
     the same way is infeasible without a solve. A core is kept only when it is
     smaller than the node it came from (two nodes of one tree never extend each
     other unless one is below the other, whose subtree is gone anyway). Bit sets
@@ -350,10 +354,6 @@ def _absorb(stats: BnBStats, r) -> None:
         stats.statuses[k] = stats.statuses.get(k, 0) + v
     key = "mu_c_polished" if r.polished else "mu_c_unpolished"
     stats.extra[key] = stats.extra.get(key, 0) + 1
-
-
-def _bump(counts: dict, key: str) -> None:
-    counts[key] = counts.get(key, 0) + 1
 
 
 def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool,
@@ -431,7 +431,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
 
 def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, stats: BnBStats,
                         scale: float | None = None, dive: int = DIVE_NODES) -> float | None:
-    """2D global mu^c by MILPs (conic.wedge_milp, valid big-M): the least certified
+    """2D global mu^c by MILPs (milp.wedge_milp, valid big-M): the least certified
     pattern mu^c `best` found; None when in doubt (the caller runs the tree instead).
     solve(zero_u, zero_r, mu_hi): the certified mu^c of one pattern (mu_critical).
 
@@ -454,16 +454,16 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
             out = tree.explore(Subtree(0), budget=dive * m + 1, first_only=True)
             stats.add(out.stats)
             if out.found and not out.undecided:
-                _bump(stats.statuses, "dive_feasible")
+                count(stats.statuses, "dive_feasible")
                 zu, zr = out.found[0].masks(m)
-                return WedgeMilp(FEASIBLE, math.nan, 0, zu, zr)
+                return WedgeMilp(Status.FEASIBLE, math.nan, 0, zu, zr)
             if not (out.found or out.open or out.stopped or out.stats.undecided):
-                _bump(stats.statuses, "dive_infeasible")
-                return WedgeMilp(INFEASIBLE, 0.0, 0)
+                count(stats.statuses, "dive_infeasible")
+                return WedgeMilp(Status.INFEASIBLE, 0.0, 0)
         ans = wedge_milp(param, m, mu, s)
         stats.extra["milp_solves"] = stats.extra.get("milp_solves", 0) + 1
         stats.extra["milp_nodes"] = stats.extra.get("milp_nodes", 0) + ans.nodes
-        _bump(stats.statuses, "milp_" + ans.status)
+        count(stats.statuses, "milp_" + ans.status)
         return ans
 
     seen: dict = {}
@@ -471,7 +471,7 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     def certified(ans: WedgeMilp, bound: float) -> float | None:
         key = (ans.zero_u.tobytes(), ans.zero_r.tobytes())
         if key in seen:                   # a pattern met again (blurred): its value is known
-            _bump(stats.statuses, "milp_pattern_again")
+            count(stats.statuses, "milp_pattern_again")
             return seen[key]
         seen[key] = _certified(ans, bound)
         return seen[key]
@@ -479,7 +479,7 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     def _certified(ans: WedgeMilp, bound: float) -> float | None:
         rows = pattern_rows(param, m, ans.zero_u, ans.zero_r)
         stats.lps += 1
-        ok = np.isfinite(bound) and feasible(rows, bound, stats.statuses)[0] == FEASIBLE
+        ok = np.isfinite(bound) and decide(rows, bound, counts=stats.statuses).status == Status.FEASIBLE
         r = solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None)
         _absorb(stats, r)
         return r.mu_c
@@ -487,7 +487,7 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     best = None
     for mu in (np.inf, mu_max):
         ans = milp(mu)
-        if ans.status != FEASIBLE:
+        if ans.status != Status.FEASIBLE:
             return None                   # no wedge, or undecided: the tree decides
         best = certified(ans, mu)
         if best is not None:
@@ -499,9 +499,9 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
             task_tick()
             bound = best * (1 - delta)
             ans = milp(bound)
-            if ans.status == UNDECIDED:
+            if ans.status == Status.UNDECIDED:
                 return None
-            if ans.status == INFEASIBLE:
+            if ans.status == Status.INFEASIBLE:
                 break
             mu = certified(ans, bound)
             if mu is None:

@@ -20,11 +20,12 @@ import time
 import numpy as np
 
 from hpcwedge.build import contact_problem
-from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
+from hpcwedge.feasibility import decide
 from hpcwedge.environment import environment
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.patterns import BnBStats, PatternTree, Subtree, global_mu_critical
 from hpcwedge.problem import parametrize
+from hpcwedge.rows import Status, pattern_rows
 from hpcwedge.scene import parse_scene
 
 
@@ -66,7 +67,7 @@ def main():
             brute = []
             for bits in range(1 << m):
                 zu = Subtree(m, contact=bits).masks(m)[0]
-                if feasible(pattern_rows(p, m, zu, ~zu), mu, counts)[0] == FEASIBLE:
+                if decide(pattern_rows(p, m, zu, ~zu), mu, counts=counts).status == Status.FEASIBLE:
                     brute.append(bits)
             row["brute_seconds"] = round(time.perf_counter() - t, 3)
             row["brute_statuses"] = counts

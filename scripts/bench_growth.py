@@ -69,15 +69,15 @@ def _timed(module, name: str, acc: dict, key: str) -> None:
 
 def worker_3d(engine: str, ring: int) -> dict:
     import scipy.optimize
-    from hpcwedge import conic, patterns
+    from hpcwedge import patterns, socp
     from hpcwedge.patterns import PatternTree
     from bench_socp_count import brute, plug
     t0 = time.perf_counter()
     p, m, group = plug(LEVELS, ring, symmetry=True)
     setup = time.perf_counter() - t0
     acc: dict = {}
-    _timed(conic, "_clarabel", acc, "socp")
-    _timed(scipy.optimize, "linprog", acc, "lp")     # (conic imports it when it solves)
+    _timed(socp, "solve", acc, "socp")
+    _timed(scipy.optimize, "linprog", acc, "lp")     # (lp.py imports it when it solves)
     _timed(patterns, "infeasible_core", acc, "cores")
     t0 = time.perf_counter()
     if engine == "brute":

@@ -26,10 +26,11 @@ import time
 import numpy as np
 
 from hpcwedge.build import contact_problem
-from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
+from hpcwedge.feasibility import decide
 from hpcwedge.environment import environment
 from hpcwedge.patterns import PatternTree, Subtree
 from hpcwedge.problem import parametrize
+from hpcwedge.rows import Status, pattern_rows
 from hpcwedge.scene import parse_scene
 from hpcwedge.symmetry import node_symmetries
 
@@ -48,7 +49,7 @@ def brute(p, m, mu):
     out = []
     for bits in range(1 << m):
         zu = Subtree(m, contact=bits).masks(m)[0]
-        if feasible(pattern_rows(p, m, zu, ~zu), mu)[0] == FEASIBLE:
+        if decide(pattern_rows(p, m, zu, ~zu), mu).status == Status.FEASIBLE:
             out.append(bits)
     return out
 

@@ -1,4 +1,4 @@
-"""The pattern problems (conic.py): 3D feasible sign patterns by the branch and
+"""The pattern problems (rows.py, feasibility.py): 3D feasible sign patterns by the branch and
 bound == brute force over all 2^m partitions by the SOCP == an independent
 route (a different formulation, in (u, r) with K u = r, and a different solver:
 HiGHS on inscribed / circumscribed pyramids of the friction cones); the status
@@ -6,8 +6,10 @@ policy's answers are verified; the 2D dispatch is the LP."""
 import numpy as np
 import pytest
 
-from hpcwedge.conic import (FEASIBLE, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, VERIFY_TOL, ConeRows, Rows, decide,
-                            feasible, lp_feasible, pattern_rows, pyramid_rows, pyramid_sides_for, violation)
+from hpcwedge.feasibility import PYRAMID_SIDES, decide, pyramid_sides_for
+from hpcwedge.lp import lp_feasible
+from hpcwedge.rows import ConeRows, Rows, Status, pattern_rows, pyramid_rows
+from hpcwedge.socp import VERIFY_TOL, violation
 from hpcwedge.mu_critical import mu_critical, mu_critical_rows
 from hpcwedge.patterns import PatternTree
 from hpcwedge.problem import parametrize
@@ -32,16 +34,17 @@ def test_3d_patterns_bnb_equals_brute_force_and_independent_route(seed, m, free)
     counts = {}
     brute, undecided_indep = set(), 0
     for bits, zu in full_patterns(m):
-        status, x = feasible(pattern_rows(p, m, zu, ~zu), mu, counts)
-        assert status != UNDECIDED
-        if status == FEASIBLE:
+        d = decide(pattern_rows(p, m, zu, ~zu), mu, counts=counts)
+        status, x = d.status, d.x
+        assert status != Status.UNDECIDED
+        if status == Status.FEASIBLE:
             brute.add(bits)
             assert violation(pattern_rows(p, m, zu, ~zu), mu, x) <= VERIFY_TOL
         indep = ur_sandwich(prob, zu, mu)
         if indep is None:
             undecided_indep += 1
         else:
-            assert (indep == FEASIBLE) == (status == FEASIBLE), (bits, status, indep)
+            assert (indep == Status.FEASIBLE) == (status == Status.FEASIBLE), (bits, status, indep)
     assert undecided_indep <= 1
     tree = PatternTree(p, m, mu)
     out = tree.explore(tree.root())
@@ -66,13 +69,13 @@ def test_pyramids_sandwich_the_cone():
     for _ in range(40):
         rows = _random_partial_rows(rng)
         for mu in (0.5, 1.5):
-            s = feasible(rows, mu)[0]
+            s = decide(rows, mu).status
             si = lp_feasible(pyramid_rows(rows, 8, inner=True), mu)[0]
             so = lp_feasible(pyramid_rows(rows, 8, inner=False), mu)[0]
-            if si == FEASIBLE:
-                assert s == FEASIBLE
-            if s == FEASIBLE:
-                assert so == FEASIBLE
+            if si == Status.FEASIBLE:
+                assert s == Status.FEASIBLE
+            if s == Status.FEASIBLE:
+                assert so == Status.FEASIBLE
             n_checked += 1
     assert n_checked == 80
 
@@ -120,7 +123,7 @@ def test_decide_without_pyramids_decides_what_clarabel_decides():
         rows = _random_partial_rows(rng)
         for mu in (0.5, 1.5):
             full, bare = decide(rows, mu), decide(rows, mu, pyramid_sides=())
-            assert bare.status == full.status or bare.status == UNDECIDED
+            assert bare.status == full.status or bare.status == Status.UNDECIDED
 
 
 def test_decide_objective_proves_the_contact_child():
@@ -134,11 +137,11 @@ def test_decide_objective_proves_the_contact_child():
         zu, zr = np.zeros(m, bool), np.zeros(m, bool)
         obj = p.U[0] / np.linalg.norm(p.U[0])
         d = decide(pattern_rows(p, m, zu, zr), 2.0, objective=obj)
-        if d.status != FEASIBLE:
+        if d.status != Status.FEASIBLE:
             continue
-        child = feasible(pattern_rows(p, m, np.array([True, False, False]), zr), 2.0)[0]
+        child = decide(pattern_rows(p, m, np.array([True, False, False]), zr), 2.0).status
         if d.positive:
-            assert child == INFEASIBLE
+            assert child == Status.INFEASIBLE
         agree += 1
     assert agree > 10
 
@@ -160,5 +163,4 @@ def test_2d_dispatch_is_the_lp():
     rows = pattern_rows(p, 3, zu, ~zu)
     assert isinstance(rows, Rows)
     for mu in (0.3, 3.0, 30.0):
-        a, b = feasible(rows, mu), lp_feasible(rows, mu)
-        assert a[0] == b[0]
+        assert decide(rows, mu).status == lp_feasible(rows, mu)[0]

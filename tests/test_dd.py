@@ -5,9 +5,10 @@ import itertools
 import numpy as np
 import pytest
 
-from hpcwedge.conic import FEASIBLE, INFEASIBLE, lp_feasible, pattern_rows
+from hpcwedge.lp import lp_feasible
 from hpcwedge.dd import canonical_order, complementary_rays, merge_results, split_faces
 from hpcwedge.problem import friction_rows_2d, parametrize
+from hpcwedge.rows import Status, pattern_rows
 from instances import random_problem
 
 
@@ -78,8 +79,8 @@ def test_patterns_lp_per_pattern(seed, m, free):
     for bits in itertools.product((False, True), repeat=m):
         zu = np.array(bits)
         status, _ = lp_feasible(pattern_rows(p, m, zu, ~zu), mu)
-        assert status in (FEASIBLE, INFEASIBLE)
-        if status == FEASIBLE:
+        assert status in (Status.FEASIBLE, Status.INFEASIBLE)
+        if status == Status.FEASIBLE:
             lp.add(tuple(np.flatnonzero(zu)))
     assert patterns_from_rays(dd.zero, m) == lp
 

@@ -111,11 +111,12 @@ def test_3d_skip_rule_and_steering_save_solves():
 
 def _brute_3d(p, m, mu):
     """Feasible full patterns by one SOCP per partition (contact bits)."""
-    from hpcwedge.conic import FEASIBLE, feasible, pattern_rows
+    from hpcwedge.feasibility import decide
+    from hpcwedge.rows import Status, pattern_rows
     out = set()
     for bits in range(1 << m):
         zu = Subtree(m, contact=bits).masks(m)[0]
-        if feasible(pattern_rows(p, m, zu, ~zu), mu)[0] == FEASIBLE:
+        if decide(pattern_rows(p, m, zu, ~zu), mu).status == Status.FEASIBLE:
             out.add(bits)
     return out
 
