@@ -397,7 +397,7 @@ def mu_c_task(solve, payload) -> dict:
     zero_u, zero_r, mu_hi = payload
     r = solve(np.asarray(zero_u, dtype=bool), np.asarray(zero_r, dtype=bool), mu_hi=mu_hi)
     return {"mu_c": np.nan if r.mu_c is None else float(r.mu_c), "polished": bool(r.polished),
-            "lps": int(r.lps), "undecided": int(r.undecided)}
+            "lps": int(r.solves), "undecided": int(r.undecided)}
 
 
 @dataclass
@@ -1105,7 +1105,7 @@ def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> 
                 for zu, zr, mu_hi in items]
     out = engine.run(TaskJob(name, "mu_c", solve, payloads)).output()
     return [MuC(mu_c=None if math.isnan(r["mu_c"]) else float(r["mu_c"]), polished=bool(r["polished"]),
-                lps=int(r["lps"]), undecided=int(r["undecided"])) for r in out]
+                solves=int(r["lps"]), undecided=int(r["undecided"])) for r in out]
 
 
 def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, name: str | None = None,

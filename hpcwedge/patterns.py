@@ -348,7 +348,7 @@ def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = Tr
 
 def _absorb(stats: BnBStats, r) -> None:
     """Count a mu^c computation (mu_critical.MuC) into the search statistics."""
-    stats.solves += r.lps
+    stats.solves += r.solves
     stats.undecided += r.undecided
     for k, v in r.statuses.items():
         stats.statuses[k] = stats.statuses.get(k, 0) + v

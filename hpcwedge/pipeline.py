@@ -240,7 +240,7 @@ def _run_scene(scene: Scene, progress: Progress, engine: Engine,
                         method=scene.mu_c_method, tol=scene.mu_c_tol, scale=scale)
         cache = dict(zip(items, run_mu_c(solve, list(items.values()), engine=engine)))
         for r in cache.values():
-            stats["lp_solves"] += r.lps
+            stats["lp_solves"] += r.solves
             stats["lp_undecided"] += r.undecided
             stats["mu_c_polished" if r.polished else "mu_c_unpolished"] += 1
         for entry in entries:

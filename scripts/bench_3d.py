@@ -84,7 +84,7 @@ def main():
         zu = Subtree(m, contact=bits).masks(m)[0]
         r = mu_critical(p, m, zu, ~zu, mu_hi=mu)
         polished += r.polished
-        lps += r.lps
+        lps += r.solves
         values.append(r.mu_c)
     t_muc = time.perf_counter() - t
     t = time.perf_counter()

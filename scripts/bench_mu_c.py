@@ -114,7 +114,7 @@ def main() -> None:
                                                options=options), repeat)
             err = abs(r.mu_c - want) / want
             rows.append({"scene": label, "dim": dim, "m": m, "method": name, "tol": tol, "seconds": sec,
-                         "lps": r.lps, "mu_c": r.mu_c, "analytic": want, "rel_error": err,
+                         "lps": r.solves, "mu_c": r.mu_c, "analytic": want, "rel_error": err,
                          "polished": r.polished})
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "bench_mu_c.csv"), "w", newline="") as f:

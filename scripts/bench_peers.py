@@ -142,7 +142,7 @@ def worker_muc(index: int, quick: bool) -> dict:
     out = {"label": label, "dim": dim, "m": m, "analytic": want, "methods": {}}
     for name, method, tol in MUC_METHODS:
         sec, r = bench_mu_c.timed(lambda: mu_critical(param, m, zu, zr, mu_hi=mu, method=method, tol=tol), 3)
-        out["methods"][name] = {"seconds": sec, "mu_c": r.mu_c, "solves": r.lps,
+        out["methods"][name] = {"seconds": sec, "mu_c": r.mu_c, "solves": r.solves,
                                 "rel_error": abs(r.mu_c - want) / want if r.mu_c is not None else None}
     return out
 

@@ -78,7 +78,7 @@ import math                                                          # noqa: E40
 from hpcwedge.feasibility import decide                             # noqa: E402
 from hpcwedge.rows import Status, pattern_rows                     # noqa: E402
 from hpcwedge.socp import violation                                # noqa: E402
-from hpcwedge.mu_critical import max_ratio                           # noqa: E402
+from hpcwedge.dinkelbach import max_ratio                            # noqa: E402
 from hpcwedge.patterns import sign_patterns                          # noqa: E402
 from instances import frames_3d, random_problem_3d                   # noqa: E402
 
