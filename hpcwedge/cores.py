@@ -3,10 +3,15 @@ verified infeasibility certificate really uses (`infeasible_core`), and the set 
 cores that rules tree nodes out without a solve (`Cores`)."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .rows import ConeRows, NodeRows
 from .socp import CERT_TOL
+
+if TYPE_CHECKING:
+    from .patterns import Subtree
 
 
 def infeasible_core(nr: NodeRows, rows: ConeRows, mu: float, zu: np.ndarray, zr: np.ndarray,
@@ -93,3 +98,35 @@ def _soc_project(v: np.ndarray) -> np.ndarray:
     out[mid, 1:] = w[mid] * (a / nw[mid])[:, None]
     return out
 
+
+class Cores:
+    """Partial patterns proven infeasible by a certificate that uses only their
+    fixings (infeasible_core): a tree node fixing at least one core's nodes
+    the same way is infeasible without a solve. A core is kept only when it is
+    smaller than the node it came from (two nodes of one tree never extend each
+    other unless one is below the other, whose subtree is gone anyway). Bit sets
+    in uint64 words, so m <= MAX_M."""
+
+    MAX_M = 64
+
+    def __init__(self, m: int):
+        self.m = m
+        self._c = np.zeros(64, dtype=np.uint64)
+        self._g = np.zeros(64, dtype=np.uint64)
+        self.n = 0
+
+    def add(self, node: Subtree, core_u: np.ndarray, core_r: np.ndarray) -> None:
+        w = np.uint64(1) << np.arange(self.m, dtype=np.uint64)
+        c, g = int(w[core_u].sum()), int(w[core_r].sum())
+        if (c, g) == (node.contact, node.gap):
+            return
+        if self.n == len(self._c):
+            self._c, self._g = np.resize(self._c, 2 * self.n), np.resize(self._g, 2 * self.n)
+        self._c[self.n], self._g[self.n] = c, g
+        self.n += 1
+
+    def covers(self, node: Subtree) -> bool:
+        if not self.n:
+            return False
+        c, g = np.uint64(node.contact), np.uint64(node.gap)
+        return bool(((self._c[:self.n] & ~c) | (self._g[:self.n] & ~g)).min() == 0)

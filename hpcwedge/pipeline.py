@@ -28,7 +28,8 @@ from .model import Model
 from .mu_critical import mu_critical
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, ranks_on_host, run_faces, run_mu_c, run_patterns, strip_exact
-from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical
+from .global_mu_c import global_mu_critical
+from .patterns import BnBStats, PatternTree, expand_orbits
 from .problem import ContactProblem, balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from .progress import MemoryGuard, Progress, out_of_memory
 from .scene import Scene, SceneError

@@ -20,10 +20,11 @@ import time
 import numpy as np
 
 from hpcwedge.build import contact_problem
-from hpcwedge.feasibility import decide
 from hpcwedge.environment import environment
+from hpcwedge.feasibility import decide
+from hpcwedge.global_mu_c import global_mu_critical
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import BnBStats, PatternTree, Subtree, global_mu_critical
+from hpcwedge.patterns import BnBStats, PatternTree, Subtree
 from hpcwedge.problem import parametrize
 from hpcwedge.rows import Status, pattern_rows
 from hpcwedge.scene import parse_scene

@@ -8,11 +8,11 @@ Scenes: plug2d rows R (m = 2 R contact nodes, taper 10 deg, free body; global mu
 tan(10 deg) analytically), `enumerate = false`, `mu_c = "global"`.
 Engines, each in its own process with a time limit (bench_2d.run_script):
   ours         `hpcwedge run`'s route (pipeline.run_scene): in 2D the MILP bracket
-               (patterns.global_bracket_milp: milp.wedge_milp by HiGHS, each pattern's
+               (global_mu_c.global_bracket_milp: milp.wedge_milp by HiGHS, each pattern's
                mu^c certified by mu_critical), tree fallback on doubt
   ours_milp    the same MILP bracket without the tree's dive (global_bracket_milp(dive=0)):
                every step a MILP
-  ours_tree    patterns.global_mu_critical(route="tree"): the sign-pattern branch and bound
+  ours_tree    global_mu_c.global_mu_critical(route="tree"): the sign-pattern branch and bound
                with an incumbent (the route before issue 13)
   highs_bisect the MILP of milp.wedge_milp at fixed mu (valid big-M from the
                normalisation sum r_n + s sum u_n = 1), bisection on mu to 1e-6 relative
@@ -112,7 +112,8 @@ def worker(engine: str, rows: int) -> dict:
     """One engine on one scene: {"mu_c", "seconds", counts...}."""
     from hpcwedge.milp import wedge_milp
     from hpcwedge.rows import Status
-    from hpcwedge.patterns import BnBStats, global_mu_critical
+    from hpcwedge.global_mu_c import global_mu_critical
+    from hpcwedge.patterns import BnBStats
     from hpcwedge.pipeline import run_scene
     if engine == "ours":
         t = time.perf_counter()
@@ -132,7 +133,7 @@ def worker(engine: str, rows: int) -> dict:
     if engine == "ours_milp":
         from functools import partial
         from hpcwedge.mu_critical import mu_critical
-        from hpcwedge.patterns import global_bracket_milp
+        from hpcwedge.global_mu_c import global_bracket_milp
         st = BnBStats()
         t = time.perf_counter()
         mu = global_bracket_milp(param, m, MU_MAX, partial(mu_critical, param, m, mu_max=MU_MAX, scale=s),

@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from hpcwedge.build import contact_problem
-from hpcwedge.feasibility import decide
 from hpcwedge.environment import environment
+from hpcwedge.feasibility import decide
 from hpcwedge.patterns import PatternTree, Subtree
 from hpcwedge.problem import parametrize
 from hpcwedge.rows import Status, pattern_rows

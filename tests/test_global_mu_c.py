@@ -1,4 +1,4 @@
-"""The 2D global mu^c by the MILP route (patterns.global_bracket_milp, milp.wedge_milp)
+"""The 2D global mu^c by the MILP route (global_mu_c.global_bracket_milp, milp.wedge_milp)
 against analytic values, the tree route and the public scenes' expected answers."""
 import json
 import math
@@ -14,7 +14,8 @@ import pytest
 from hpcwedge.feasibility import decide
 from hpcwedge.milp import wedge_milp
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import MILP_FROM_M, BnBStats, global_bracket_milp, global_mu_critical
+from hpcwedge.global_mu_c import MILP_FROM_M, global_bracket_milp, global_mu_critical
+from hpcwedge.patterns import BnBStats
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
 from hpcwedge.rows import Status, pattern_rows
@@ -138,7 +139,8 @@ from functools import partial
 import numpy as np
 from instances import random_problem
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import BnBStats, global_bracket_milp
+from hpcwedge.global_mu_c import global_bracket_milp
+from hpcwedge.patterns import BnBStats
 from hpcwedge.problem import parametrize
 for seed in range(100, 106):
     prob = random_problem(np.random.default_rng(seed), 6, free=seed % 2 == 0)

@@ -6,7 +6,7 @@ import pytest
 from hpcwedge.cones import maximal_cones
 from hpcwedge.dd import complementary_rays
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import global_mu_critical
+from hpcwedge.global_mu_c import global_mu_critical
 from hpcwedge.problem import ContactProblem, friction_rows_2d, parametrize
 from instances import random_problem
 
