@@ -75,10 +75,6 @@ class ConeRows:
     Z: np.ndarray
     lin_nodes: np.ndarray
 
-    @property
-    def d(self) -> int:
-        return self.eq.shape[1]
-
 
 def problem_dim(param: Parametrization, m: int) -> int:
     """2 or 3, from the parametrisation's row count (dim * m)."""
@@ -171,9 +167,9 @@ def pyramid_rows(rows: ConeRows, sides: int, inner: bool, phase: np.ndarray | No
     ph = np.full(c, np.pi / sides) if phase is None else np.asarray(phase, float)
     th = ph[:, None] + base[None, :]                                  # (c, k)
     dirs = np.stack([np.cos(th), np.sin(th)], axis=2)                 # (c, k, 2)
-    f0 = -np.einsum("cka,cad->ckd", dirs, rows.rt).reshape(-1, rows.d)   # -(t . r_t)
+    d = rows.norm.shape[0]
+    f0 = -np.einsum("cka,cad->ckd", dirs, rows.rt).reshape(-1, d)        # -(t . r_t)
     f1 = np.repeat((math.cos(math.pi / sides) if inner else 1.0) * rows.rn, sides, axis=0)
-    d = rows.d
     a0 = np.vstack([rows.eq, rows.lin, f0])
     a1 = np.vstack([np.zeros((rows.eq.shape[0] + rows.lin.shape[0], d)), f1])
     eq = np.concatenate([np.ones(rows.eq.shape[0], bool), np.zeros(a0.shape[0] - rows.eq.shape[0], bool)])
