@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from hpcwedge.feasibility import decide
+from hpcwedge.global_mu_c import MILP_FROM_M, global_bracket_milp, global_mu_critical
 from hpcwedge.milp import wedge_milp
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.global_mu_c import MILP_FROM_M, global_bracket_milp, global_mu_critical
 from hpcwedge.patterns import BnBStats
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize

@@ -5,8 +5,8 @@ import pytest
 
 from hpcwedge.cones import maximal_cones
 from hpcwedge.dd import complementary_rays
-from hpcwedge.mu_critical import mu_critical
 from hpcwedge.global_mu_c import global_mu_critical
+from hpcwedge.mu_critical import mu_critical
 from hpcwedge.problem import ContactProblem, friction_rows_2d, parametrize
 from instances import random_problem
 
@@ -75,11 +75,11 @@ def test_bisection_method_tolerance():
 # ------------------------------------------------------------------------ 3D
 import math                                                          # noqa: E402
 
-from hpcwedge.feasibility import decide                             # noqa: E402
+from hpcwedge.dinkelbach import max_ratio                          # noqa: E402
+from hpcwedge.feasibility import decide                            # noqa: E402
+from hpcwedge.patterns import sign_patterns                        # noqa: E402
 from hpcwedge.rows import Status, pattern_rows                     # noqa: E402
 from hpcwedge.socp import violation                                # noqa: E402
-from hpcwedge.dinkelbach import max_ratio                            # noqa: E402
-from hpcwedge.patterns import sign_patterns                          # noqa: E402
 from instances import frames_3d, random_problem_3d                   # noqa: E402
 
 
