@@ -1,28 +1,28 @@
-"""Sign-pattern branch and bound (2D: LP relaxations, 3D: SOCP relaxations) and
-the global mu^c route that needs no enumeration.
+"""Sign-pattern branch and bound (2D: LP relaxations, 3D: SOCP relaxations): the tree
+(PatternTree), its unit of work (Subtree) and counters (BnBStats).
 
 A node of the tree fixes some nodes to contact (u_n = 0) or gap (r = 0); the
 relaxation keeps u_n >= 0, r_n >= 0 (and friction) for the others. A child
 whose condition the parent's solution already meets is feasible without a
 solve (2D: the LP vertex meets it to MEETS_TOL; 3D: the interior-point
 solution meets it to NEAR_TOL, and its projection onto the child's equalities
-verifies on every row of the child, conic.VERIFY_TOL). Undecided statuses keep
+verifies on every row of the child, socp.VERIFY_TOL). Undecided statuses keep
 the subtree (never pruned on doubt); an undecided full pattern is reported in
 `found` and listed again in `Explored.undecided`.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from functools import partial
 
 import numpy as np
 
-from .conic import (FEASIBLE, INFEASIBLE, UNDECIDED, VERIFY_TOL, WedgeMilp, decide, feasible, infeasible_core,
-                    lp_violation, node_rows, pattern_rows, problem_dim, violation, wedge_milp)
-from .mu_critical import mu_critical
+from .cores import Cores, infeasible_core
+from .feasibility import count, decide
+from .lp import lp_violation
 from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
-from .parallel.tasks import task_stopping, task_tick
+from .parallel.tasks import task_stopping
+from .rows import Status, node_rows, pattern_rows, problem_dim
+from .socp import VERIFY_TOL, violation
 from .problem import Parametrization
 from .symmetry import Symmetry
 
@@ -34,15 +34,6 @@ NEAR_BOUNDARY_TOL = 1e-14
 #: 3D: a child's condition counts as nearly met by the parent's x below this
 #: (relative to max |u|, |r|); the projected point must then verify
 NEAR_TOL = 1e-6
-#: 2D MILP route (global_bracket_milp): the relative steps below the best mu^c found at
-#: which the MILP is asked again; the last is HiGHS's MIP feasibility tolerance
-MILP_STEPS = (1e-2, 1e-4, 1e-6)
-#: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
-DIVE_NODES = 2
-#: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
-#: which sees every pattern within 1e-9 of the answer (the MILP route can miss one within
-#: ~1e-6 below it, HiGHS's tolerance) and finishes in seconds there (m = 20: ~6 s)
-MILP_FROM_M = 25
 
 
 @dataclass
@@ -51,7 +42,7 @@ class BnBStats:
     besides (3D: screens and pyramid fallbacks); skipped: tree nodes decided by the
     parent's solution; pruned: tree nodes ruled out by a learnt infeasible core
     (Cores), without a solve; undecided: solves that decided nothing (kept); nodes: tree
-    nodes visited; statuses: how each solve was decided (conic.feasible counts)."""
+    nodes visited; statuses: how each solve was decided (feasibility.decide counts)."""
 
     solves: int = 0
     skipped: int = 0
@@ -198,12 +189,12 @@ class PatternTree:
                 zu, zr = node.masks(m)
                 steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
                 rows = pattern_rows(param, m, zu, zr, self.friction)
-                dec = decide(rows, mu, stats.statuses, steer)
-                if dec.status == INFEASIBLE:
+                dec = decide(rows, mu, counts=stats.statuses, objective=steer)
+                if dec.status == Status.INFEASIBLE:
                     if dec.farkas is not None and self._cores is not None:
                         self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
                     continue
-                if dec.status == UNDECIDED:
+                if dec.status == Status.UNDECIDED:
                     stats.undecided += 1
                     doubt = True
                 x, no_contact = dec.x, dec.positive
@@ -214,7 +205,7 @@ class PatternTree:
                 if doubt:
                     undecided.append(node)
                 elif self.dim == 2 and self.friction and self._near_boundary(node, x, mu):
-                    _bump(stats.statuses, "near_boundary")
+                    count(stats.statuses, "near_boundary")
                 if first_only:
                     stack.clear()
                     break
@@ -225,7 +216,7 @@ class PatternTree:
             kids = []
             for contact in (True, False):
                 if contact and no_contact:
-                    _bump(stats.statuses, "contact_child_infeasible_by_parent")
+                    count(stats.statuses, "contact_child_infeasible_by_parent")
                     continue
                 fixed = [i] if contact else orbit
                 bits = sum(1 << j for j in fixed)
@@ -294,39 +285,6 @@ def expand_orbits(found: list[Subtree], symmetry: Symmetry | None, m: int) -> li
     return [Subtree(m, c, g) for c, g in symmetry.expand([(s.contact, s.gap) for s in found])]
 
 
-class Cores:
-    """Partial patterns proven infeasible by a certificate that uses only their
-    fixings (conic.infeasible_core): a tree node fixing at least one core's nodes
-    the same way is infeasible without a solve. A core is kept only when it is
-    smaller than the node it came from (two nodes of one tree never extend each
-    other unless one is below the other, whose subtree is gone anyway). Bit sets
-    in uint64 words, so m <= MAX_M."""
-
-    MAX_M = 64
-
-    def __init__(self, m: int):
-        self.m = m
-        self._c = np.zeros(64, dtype=np.uint64)
-        self._g = np.zeros(64, dtype=np.uint64)
-        self.n = 0
-
-    def add(self, node: Subtree, core_u: np.ndarray, core_r: np.ndarray) -> None:
-        w = np.uint64(1) << np.arange(self.m, dtype=np.uint64)
-        c, g = int(w[core_u].sum()), int(w[core_r].sum())
-        if (c, g) == (node.contact, node.gap):
-            return
-        if self.n == len(self._c):
-            self._c, self._g = np.resize(self._c, 2 * self.n), np.resize(self._g, 2 * self.n)
-        self._c[self.n], self._g[self.n] = c, g
-        self.n += 1
-
-    def covers(self, node: Subtree) -> bool:
-        if not self.n:
-            return False
-        c, g = np.uint64(node.contact), np.uint64(node.gap)
-        return bool(((self._c[:self.n] & ~c) | (self._g[:self.n] & ~g)).min() == 0)
-
-
 def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = True,
                   first_only: bool = False, stats: BnBStats | None = None,
                   order: list[int] | None = None, symmetry: Symmetry | None = None,
@@ -343,174 +301,12 @@ def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = Tr
     return [node.masks(m) for node in found]
 
 
-def _absorb(stats: BnBStats, r) -> None:
-    """Count a mu^c computation (mu_critical.MuC) into the search statistics."""
-    stats.solves += r.lps
-    stats.undecided += r.undecided
-    for k, v in r.statuses.items():
-        stats.statuses[k] = stats.statuses.get(k, 0) + v
-    key = "mu_c_polished" if r.polished else "mu_c_unpolished"
-    stats.extra[key] = stats.extra.get(key, 0) + 1
-
-
-def _bump(counts: dict, key: str) -> None:
-    counts[key] = counts.get(key, 0) + 1
-
-
 def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool,
            tol: float = MEETS_TOL, dim: int = 2) -> bool:
     scale = max(np.abs(param.U @ x).max(), np.abs(param.R @ x).max(), 1e-300)
     if contact:
         return abs(param.U[i] @ x) <= tol * scale
     return max(abs(param.R[a * m + i] @ x) for a in range(dim)) <= tol * scale
-
-
-def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: str = "accurate",
-                       tol: float = 1e-6, stats: BnBStats | None = None,
-                       symmetry: Symmetry | None = None,
-                       scale: float | None = None, route: str = "auto") -> tuple[float | None, str]:
-    """Least mu with any solution (2D and 3D alike; with a symmetry, over orbit
-    representatives). scale: passed to mu_critical (2D balanced coordinates).
-
-    Two stages. The bracket: an upper value `best` (the certified mu^c of a pattern) with no
-    pattern feasible below best (1 - 1e-7), found by
-      route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D);
-      route "milp" (2D; 3D runs the tree): `global_bracket_milp`, per step a short dive of
-        the tree and, where it does not settle the step, one MILP (HiGHS); each pattern
-        it returns checked by our LP and its mu^c computed by our certified route; any doubt
-        (an undecided MILP, a pattern our LP rejects at every mu, no wedge at all) falls back
-        to the tree;
-      route "auto": "milp" in 2D from MILP_FROM_M contact nodes on, else "tree".
-    The tree route then settles: every pattern (one per orbit) feasible at best (1 + 1e-9)
-    gets its certified mu^c; the least is the answer. The MILP route skips that enumeration
-    (exponential in m: 635 tree nodes on plug2d m = 16): its answer is the certified mu^c of
-    the last pattern it found, the least to the MILP's tolerance (a pattern whose mu^c lies
-    within ~1e-6 relative below it can go unseen). stats.extra["route"] says which route
-    ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"].
-
-    Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
-    r_t free has no solution) or "none_up_to_mu_max".
-    """
-    if route not in ("auto", "tree", "milp"):
-        raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
-    stats = stats if stats is not None else BnBStats()
-    search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry)
-    solve = partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale)
-    best = None
-    if (route == "milp" or (route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
-        best = global_bracket_milp(param, m, mu_max, solve, stats, scale)
-        if best is not None:
-            return best, "found"
-    if best is None:
-        stats.extra["route"] = "tree"
-        if not search(np.inf, friction=False, first_only=True):
-            return None, "none_at_any_mu"
-        bound = mu_max
-        while True:
-            leaf = search(bound, first_only=True)
-            if not leaf:
-                break
-            zu, zr = leaf[0]
-            r = solve(zu, zr, mu_hi=bound)
-            _absorb(stats, r)
-            if r.mu_c is None or (best is not None and r.mu_c >= best):
-                break
-            best = r.mu_c
-            bound = best * (1 - 1e-7)
-        if best is None:
-            return None, "none_up_to_mu_max"
-    # patterns whose mu^c lies within the last step below `best`: settle them all
-    # (one per orbit: mu^c is invariant under the symmetry)
-    top = best * (1 + 1e-9)
-    for zu, zr in search(top, representatives=True):
-        r = solve(zu, zr, mu_hi=top)
-        _absorb(stats, r)
-        if r.mu_c is not None:
-            best = min(best, r.mu_c)
-    return best, "found"
-
-
-def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, stats: BnBStats,
-                        scale: float | None = None, dive: int = DIVE_NODES) -> float | None:
-    """2D global mu^c by MILPs (conic.wedge_milp, valid big-M): the least certified
-    pattern mu^c `best` found; None when in doubt (the caller runs the tree instead).
-    solve(zero_u, zero_r, mu_hi): the certified mu^c of one pattern (mu_critical).
-
-    The MILP decides feasibility only to HiGHS's tolerance (a pattern infeasible by ~1e-6
-    relative in mu can come back feasible, and then hide one feasible with margin), so
-    each step asks at best (1 - delta) with delta = MILP_STEPS in turn: a pattern returned
-    of lower certified mu^c replaces best (same delta again); none, or one no better
-    (blurred), moves to the next delta. The first pattern is the MILP's at mu = inf (r_t
-    free), whose mu^c, when finite, saves the MILP at mu_max (the slowest). Before each
-    MILP the tree dives for dive * m + 1 nodes (0: no dive), see `milp` below."""
-    s = 1.0 if scale is None else float(scale)
-    stats.extra["route"] = "milp"
-
-    def milp(mu: float) -> WedgeMilp:
-        # a short dive of the tree first: it settles most steps with a few LPs (a relaxed
-        # vertex that is complementary descends without a solve; an infeasible root proves
-        # none); the MILP only where the dive's budget runs out
-        if dive:
-            tree = PatternTree(param, m, 0.0 if np.isinf(mu) else mu, friction=not np.isinf(mu))
-            out = tree.explore(Subtree(0), budget=dive * m + 1, first_only=True)
-            stats.add(out.stats)
-            if out.found and not out.undecided:
-                _bump(stats.statuses, "dive_feasible")
-                zu, zr = out.found[0].masks(m)
-                return WedgeMilp(FEASIBLE, math.nan, 0, zu, zr)
-            if not (out.found or out.open or out.stopped or out.stats.undecided):
-                _bump(stats.statuses, "dive_infeasible")
-                return WedgeMilp(INFEASIBLE, 0.0, 0)
-        ans = wedge_milp(param, m, mu, s)
-        stats.extra["milp_solves"] = stats.extra.get("milp_solves", 0) + 1
-        stats.extra["milp_nodes"] = stats.extra.get("milp_nodes", 0) + ans.nodes
-        _bump(stats.statuses, "milp_" + ans.status)
-        return ans
-
-    seen: dict = {}
-
-    def certified(ans: WedgeMilp, bound: float) -> float | None:
-        key = (ans.zero_u.tobytes(), ans.zero_r.tobytes())
-        if key in seen:                   # a pattern met again (blurred): its value is known
-            _bump(stats.statuses, "milp_pattern_again")
-            return seen[key]
-        seen[key] = _certified(ans, bound)
-        return seen[key]
-
-    def _certified(ans: WedgeMilp, bound: float) -> float | None:
-        rows = pattern_rows(param, m, ans.zero_u, ans.zero_r)
-        stats.lps += 1
-        ok = np.isfinite(bound) and feasible(rows, bound, stats.statuses)[0] == FEASIBLE
-        r = solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None)
-        _absorb(stats, r)
-        return r.mu_c
-
-    best = None
-    for mu in (np.inf, mu_max):
-        ans = milp(mu)
-        if ans.status != FEASIBLE:
-            return None                   # no wedge, or undecided: the tree decides
-        best = certified(ans, mu)
-        if best is not None:
-            break
-    if best is None:
-        return None                       # the MILP's pattern at mu_max is no wedge: doubt
-    for delta in MILP_STEPS:
-        while True:
-            task_tick()
-            bound = best * (1 - delta)
-            ans = milp(bound)
-            if ans.status == UNDECIDED:
-                return None
-            if ans.status == INFEASIBLE:
-                break
-            mu = certified(ans, bound)
-            if mu is None:
-                return None
-            if mu >= best:
-                break
-            best = mu
-    return best
 
 
 # ---------------------------------------------------------------- the "subtree" task of the engine

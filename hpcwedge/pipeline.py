@@ -31,12 +31,13 @@ import numpy as np
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .environment import environment, single_threaded
 from .faces import branching_nodes, run_faces
+from .global_mu_c import global_mu_critical
 from .model import Model
 from .mu_critical import MuC, mu_critical, run_mu_c
 from .nodesets import canonical_order
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
 from .parallel import Engine, ranks_on_host
-from .patterns import BnBStats, PatternTree, expand_orbits, global_mu_critical, run_patterns
+from .patterns import BnBStats, PatternTree, expand_orbits, run_patterns
 from .problem import (ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize,
                       ray_vectors, strip_exact)
 from .progress import MemoryGuard, Progress, out_of_memory
@@ -206,7 +207,7 @@ def _run_plan(scene: Scene, progress: Progress, engine: Engine, condensed: Conde
         elif step == "mu_c":
             values = mu_c(ctx, result.runs, every_run=plan.mu_c_cones)
             for r in values.by_key.values():
-                stats.add(lps=r.lps, undecided=r.undecided, polished=int(r.polished),
+                stats.add(solves=r.solves, undecided=r.undecided, polished=int(r.polished),
                           unpolished=int(not r.polished))
             if plan.mu_c_cones:
                 for key, item in (pair for pairs in values.keyed for pair in pairs):
@@ -466,7 +467,7 @@ def _mask(nodes, m: int) -> np.ndarray:
 def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:
     """The global mu^c: the least of the first listed mu's cone / pattern values (any
     pattern feasible below that mu lies in one of its cones / patterns); when no mu lists
-    any, or none of them has a value, the global search (patterns.global_mu_critical: tree
+    any, or none of them has a value, the global search (global_mu_c.global_mu_critical: tree
     or MILP route, below mu_max)."""
     if values.first is not None:
         found = [v for v in (values.by_key[key].mu_c for key in values.first) if v is not None]

@@ -10,7 +10,7 @@ is taken from an item of a run:
                 the cone's rays are pairwise cross-complementary, so their sum is a wedged
                 configuration of the cone.
     pattern J   one point of the pattern's feasible set at the run's mu:
-                conic.feasible(pattern_rows(...)) (3D: the SOCP; 2D: the LP) gives x,
+                feasibility.decide(pattern_rows(...)) (3D: the SOCP; 2D: the LP) gives x,
                 and u = U x, r = R x (problem.parametrize), scaled to sum r_n = 1.
 
 and extended to the body by the static condensation read backwards (`whole_body`):
@@ -188,16 +188,18 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
 
 def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[np.ndarray, np.ndarray]:
     """(u_local, r_local) of one solution of the sign pattern (C = contact, G = the other nodes)
-    at mu, normalised to sum r_n = 1: conic.feasible on pattern_rows of the parametrisation."""
+    at mu, normalised to sum r_n = 1: feasibility.decide on pattern_rows of the parametrisation."""
     from .build import contact_problem, unscale_u
-    from .conic import FEASIBLE, feasible, pattern_rows
+    from .feasibility import decide
+    from .rows import Status, pattern_rows
     from .problem import parametrize
     problem = contact_problem(scene, model)
     param = parametrize(problem)
     m = problem.m
     zero_u = np.isin(np.arange(m), contact)
-    status, x = feasible(pattern_rows(param, m, zero_u, ~zero_u), mu)
-    if status != FEASIBLE:
+    dec = decide(pattern_rows(param, m, zero_u, ~zero_u), mu)
+    status, x = dec.status, dec.x
+    if status != Status.FEASIBLE:
         raise ConfigurationError(f"pattern with contact {list(contact)} at mu = {mu:.6g}: the solvers "
                                  f"return {status}, no configuration to export")
     u, r = unscale_u(param.U @ x, scene), param.R @ x      # K is rescaled (build.stiffness_exponent)

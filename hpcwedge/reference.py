@@ -1,7 +1,7 @@
 """Independent routes that tests and benchmarks check the engines against, each written once.
 
 - brute force over the 2^m full sign patterns: one feasibility problem per partition
-  (2D: an LP, 3D: an SOCP, conic.feasible), `pattern_decisions` / `brute_force_patterns`;
+  (2D: an LP, 3D: an SOCP, feasibility.decide), `pattern_decisions` / `brute_force_patterns`;
 - the patterns a set of rays implies, by trying all 2^m contact sets (`patterns_of_supports`,
   `patterns_of_rays`, SPEC §2);
 - a 3D feasibility route in other variables and another solver: (u, r) with K u = r, the
@@ -23,7 +23,8 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .conic import FEASIBLE, feasible, pattern_rows
+from .feasibility import decide
+from .rows import Status, pattern_rows
 
 CDD_HELP = ("pycddlib is not installed (needed for the cddlib peers). Install it with\n"
             "    apt-get install -y libcdd-dev libgmp-dev\n"
@@ -39,16 +40,16 @@ def contact_mask(bits: int, m: int) -> np.ndarray:
 
 def pattern_decisions(param, m: int, mu: float, counts: dict | None = None) -> Iterator[tuple]:
     """(bits, contact mask, status, x) of every full pattern (contact = bits, gap = the rest),
-    bits ascending: one conic.feasible problem each (2D: LP; 3D: SOCP)."""
+    bits ascending: one feasibility.decide problem each (2D: LP; 3D: SOCP)."""
     for bits in range(1 << m):
         zu = contact_mask(bits, m)
-        status, x = feasible(pattern_rows(param, m, zu, ~zu), mu, counts)
-        yield bits, zu, status, x
+        d = decide(pattern_rows(param, m, zu, ~zu), mu, counts=counts)
+        yield bits, zu, d.status, d.x
 
 
 def brute_force_patterns(param, m: int, mu: float, counts: dict | None = None) -> list[int]:
     """Contact bitsets (ascending) of the feasible full patterns at mu, by 2^m solves."""
-    return [bits for bits, _, status, _ in pattern_decisions(param, m, mu, counts) if status == FEASIBLE]
+    return [bits for bits, _, status, _ in pattern_decisions(param, m, mu, counts) if status == Status.FEASIBLE]
 
 
 def patterns_of_supports(load: np.ndarray, gap: np.ndarray, m: int) -> set[int]:

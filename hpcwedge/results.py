@@ -126,9 +126,9 @@ class SolveStats:
     parallel: dict | None = None             # Engine.summary()
     environment: dict | None = None          # environment.environment()
 
-    def add(self, lps: int = 0, undecided: int = 0, polished: int = 0, unpolished: int = 0) -> None:
+    def add(self, solves: int = 0, undecided: int = 0, polished: int = 0, unpolished: int = 0) -> None:
         """Count mu^c computations: LP/SOCP solves, undecided solves, values (un)polished."""
-        self.lp_solves += lps
+        self.lp_solves += solves
         self.lp_undecided += undecided
         self.mu_c_polished += polished
         self.mu_c_unpolished += unpolished

@@ -19,8 +19,9 @@ import time
 
 from hpcwedge.build import contact_problem
 from hpcwedge.environment import environment
+from hpcwedge.global_mu_c import global_mu_critical
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import BnBStats, PatternTree, Subtree, global_mu_critical
+from hpcwedge.patterns import BnBStats, PatternTree, Subtree
 from hpcwedge.problem import parametrize
 from hpcwedge.reference import brute_force_patterns
 from hpcwedge.scene import parse_scene
@@ -77,7 +78,7 @@ def main():
         zu = Subtree(m, contact=bits).masks(m)[0]
         r = mu_critical(p, m, zu, ~zu, mu_hi=mu)
         polished += r.polished
-        lps += r.lps
+        lps += r.solves
         values.append(r.mu_c)
     t_muc = time.perf_counter() - t
     t = time.perf_counter()

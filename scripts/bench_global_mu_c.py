@@ -8,13 +8,13 @@ Scenes: plug2d rows R (m = 2 R contact nodes, taper 10 deg, free body; global mu
 tan(10 deg) analytically), `enumerate = false`, `mu_c = "global"`.
 Engines, each in its own process with a time limit (bench_2d.run_script):
   ours         `hpcwedge run`'s route (pipeline.run_scene): in 2D the MILP bracket
-               (patterns.global_bracket_milp: conic.wedge_milp by HiGHS, each pattern's
+               (global_mu_c.global_bracket_milp: milp.wedge_milp by HiGHS, each pattern's
                mu^c certified by mu_critical), tree fallback on doubt
   ours_milp    the same MILP bracket without the tree's dive (global_bracket_milp(dive=0)):
                every step a MILP
-  ours_tree    patterns.global_mu_critical(route="tree"): the sign-pattern branch and bound
+  ours_tree    global_mu_c.global_mu_critical(route="tree"): the sign-pattern branch and bound
                with an incumbent (the route before issue 13)
-  highs_bisect the MILP of conic.wedge_milp at fixed mu (valid big-M from the
+  highs_bisect the MILP of milp.wedge_milp at fixed mu (valid big-M from the
                normalisation sum r_n + s sum u_n = 1), bisection on mu to 1e-6 relative
   scip_bisect  SCIP (pyscipopt) on the MILP of issue 13's text (reference.scip_wedged): x in
                the (r, alpha) form, u_n >= 0, friction, sum r_n = 1, r_n,i <= z_i, indicator
@@ -72,8 +72,10 @@ def bisect(decide, hi: float = MU_MAX, rtol: float = BISECT_RTOL) -> float | Non
 
 def worker(engine: str, rows: int) -> dict:
     """One engine on one scene: {"mu_c", "seconds", counts...}."""
-    from hpcwedge.conic import FEASIBLE, INFEASIBLE, wedge_milp
-    from hpcwedge.patterns import BnBStats, global_mu_critical
+    from hpcwedge.milp import wedge_milp
+    from hpcwedge.rows import Status
+    from hpcwedge.global_mu_c import global_mu_critical
+    from hpcwedge.patterns import BnBStats
     from hpcwedge.pipeline import run_scene
     from hpcwedge.reference import scip_wedged
     if engine == "ours":
@@ -94,7 +96,7 @@ def worker(engine: str, rows: int) -> dict:
     if engine == "ours_milp":
         from functools import partial
         from hpcwedge.mu_critical import mu_critical
-        from hpcwedge.patterns import global_bracket_milp
+        from hpcwedge.global_mu_c import global_bracket_milp
         st = BnBStats()
         t = time.perf_counter()
         mu = global_bracket_milp(param, m, MU_MAX, partial(mu_critical, param, m, mu_max=MU_MAX, scale=s),
@@ -107,9 +109,9 @@ def worker(engine: str, rows: int) -> dict:
             ans = wedge_milp(param, m, mu, s)
             counts["milp_solves"] = counts.get("milp_solves", 0) + 1
             counts["milp_nodes"] = counts.get("milp_nodes", 0) + ans.nodes
-            if ans.status not in (FEASIBLE, INFEASIBLE):
+            if ans.status not in (Status.FEASIBLE, Status.INFEASIBLE):
                 counts["undecided"] = counts.get("undecided", 0) + 1
-            return ans.status != INFEASIBLE
+            return ans.status != Status.INFEASIBLE
     elif engine == "scip_bisect":
         try:
             import pyscipopt  # noqa: F401

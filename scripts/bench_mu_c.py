@@ -7,7 +7,7 @@ is found once; then its mu^c is recomputed by every method, repeated, and timed:
 - "bisection tol=T": plain bisection on LP (2D, HiGHS) or SOCP (3D, Clarabel)
   feasibility to relative width T (T = 1e-2 ... 1e-12), the upper end returned;
   "tight bisection tol=T": the same with the solvers' feasibility (and Clarabel's
-  gap) tolerances tightened from their defaults to 1e-10 (conic.solver_tolerances);
+  gap) tolerances tightened from their defaults to 1e-10 (feasibility.SolverOptions);
 - "accurate": 2D: bracket to 1e-7 then the verified pencil polish; 3D: scaled
   Dinkelbach iterations then the verified KKT Newton step (the default).
 
@@ -33,8 +33,8 @@ import time
 
 import numpy as np
 
-from hpcwedge.conic import solver_tolerances
 from hpcwedge.environment import environment
+from hpcwedge.feasibility import SolverOptions
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
@@ -109,12 +109,12 @@ def main() -> None:
     for label, dim, model, mu, want in scenes(args.quick):
         param, m, zu, zr = critical_pattern(dim, model, mu)
         for name, method, tol, tolerances in methods:
-            solver_tolerances(tolerances)
-            sec, r = timed(lambda: mu_critical(param, m, zu, zr, mu_hi=mu, method=method, tol=tol), repeat)
-            solver_tolerances("default")
+            options = SolverOptions(tolerances)
+            sec, r = timed(lambda: mu_critical(param, m, zu, zr, mu_hi=mu, method=method, tol=tol,
+                                               options=options), repeat)
             err = abs(r.mu_c - want) / want
             rows.append({"scene": label, "dim": dim, "m": m, "method": name, "tol": tol, "seconds": sec,
-                         "lps": r.lps, "mu_c": r.mu_c, "analytic": want, "rel_error": err,
+                         "lps": r.solves, "mu_c": r.mu_c, "analytic": want, "rel_error": err,
                          "polished": r.polished})
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "bench_mu_c.csv"), "w", newline="") as f:

@@ -20,7 +20,7 @@
   cdd_float    the same peer in cddlib's float arithmetic on the float rows (what a float
                user hands it), zero test |a.x| <= dd.FLOAT_ZERO_TOL on unit rows and rays
   brute_lp     one LP per sign pattern, all 2^m of them (reference.brute_force_patterns: HiGHS
-               via conic.feasible), compared with the pattern set the exact rays imply
+               via feasibility.decide), compared with the pattern set the exact rays imply
                (cones.implied_patterns, SPEC §2)
 mu^c: bench_mu_c's analytic scenes (its --quick list; --quick here: every other one): the
   critical cone / pattern once (bench_mu_c.critical_pattern), then plain bisection (LP in
@@ -143,7 +143,7 @@ def worker_muc(index: int, quick: bool) -> dict:
     out = {"label": label, "dim": dim, "m": m, "analytic": want, "methods": {}}
     for name, method, tol in MUC_METHODS:
         sec, r = bench_mu_c.timed(lambda: mu_critical(param, m, zu, zr, mu_hi=mu, method=method, tol=tol), 3)
-        out["methods"][name] = {"seconds": sec, "mu_c": r.mu_c, "solves": r.lps,
+        out["methods"][name] = {"seconds": sec, "mu_c": r.mu_c, "solves": r.solves,
                                 "rel_error": abs(r.mu_c - want) / want if r.mu_c is not None else None}
     return out
 

@@ -4,10 +4,10 @@ an LP per sign pattern, on random supported and free bodies."""
 import numpy as np
 import pytest
 
-from hpcwedge.conic import FEASIBLE, INFEASIBLE
 from hpcwedge.dd import complementary_rays
 from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.reference import brute_force_rays, pattern_decisions, patterns_of_rays
+from hpcwedge.rows import Status
 from instances import random_problem
 
 
@@ -45,8 +45,8 @@ def test_patterns_lp_per_pattern(seed, m, free):
     dd = complementary_rays(friction_rows_2d(p, mu, m), m)
     lp = set()
     for bits, _, status, _ in pattern_decisions(p, m, mu):
-        assert status in (FEASIBLE, INFEASIBLE)
-        if status == FEASIBLE:
+        assert status in (Status.FEASIBLE, Status.INFEASIBLE)
+        if status == Status.FEASIBLE:
             lp.add(bits)
     assert patterns_of_rays(dd.zero, m) == lp
 

@@ -1,4 +1,4 @@
-"""The 2D global mu^c by the MILP route (patterns.global_bracket_milp, conic.wedge_milp)
+"""The 2D global mu^c by the MILP route (global_mu_c.global_bracket_milp, milp.wedge_milp)
 against analytic values, the tree route and the public scenes' expected answers."""
 import json
 import math
@@ -11,11 +11,14 @@ from functools import partial
 import numpy as np
 import pytest
 
-from hpcwedge.conic import FEASIBLE, INFEASIBLE, feasible, pattern_rows, wedge_milp
+from hpcwedge.feasibility import decide
+from hpcwedge.global_mu_c import MILP_FROM_M, global_bracket_milp, global_mu_critical
+from hpcwedge.milp import wedge_milp
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import MILP_FROM_M, BnBStats, global_bracket_milp, global_mu_critical
+from hpcwedge.patterns import BnBStats
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
+from hpcwedge.rows import Status, pattern_rows
 from hpcwedge.scene import parse_scene
 from instances import random_problem
 
@@ -119,16 +122,16 @@ def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
     res = global_run({"kind": "plug2d", "rows": 3, "taper_deg": 10.0})
     p, m = parametrize(res.problem), res.m
     mu_c = math.tan(math.radians(10.0))
-    assert wedge_milp(p, m, 0.99 * mu_c).status == INFEASIBLE
+    assert wedge_milp(p, m, 0.99 * mu_c).status == Status.INFEASIBLE
     ans = wedge_milp(p, m, 1.01 * mu_c)
-    assert ans.status == FEASIBLE and ans.value > 0.5
+    assert ans.status == Status.FEASIBLE and ans.value > 0.5
     assert np.array_equal(ans.zero_u, ~ans.zero_r)
-    assert feasible(pattern_rows(p, m, ans.zero_u, ans.zero_r), 1.01 * mu_c)[0] == FEASIBLE
+    assert decide(pattern_rows(p, m, ans.zero_u, ans.zero_r), 1.01 * mu_c).status == Status.FEASIBLE
 
 
 def test_highs_debug_prints_never_reach_stdout():
     """HiGHS's MIP solver printf()s debug lines past its output_flag on these bodies (6 lines
-    without conic._stdout_silenced); stdout carries `hpcwedge run --json`."""
+    without milp._stdout_silenced); stdout carries `hpcwedge run --json`."""
     code = f"""
 import sys
 sys.path.insert(0, {os.path.dirname(os.path.abspath(__file__))!r})
@@ -136,7 +139,8 @@ from functools import partial
 import numpy as np
 from instances import random_problem
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import BnBStats, global_bracket_milp
+from hpcwedge.global_mu_c import global_bracket_milp
+from hpcwedge.patterns import BnBStats
 from hpcwedge.problem import parametrize
 for seed in range(100, 106):
     prob = random_problem(np.random.default_rng(seed), 6, free=seed % 2 == 0)

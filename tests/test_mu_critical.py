@@ -5,8 +5,8 @@ import pytest
 
 from hpcwedge.cones import maximal_cones
 from hpcwedge.dd import complementary_rays
+from hpcwedge.global_mu_c import global_mu_critical
 from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import global_mu_critical
 from hpcwedge.problem import ContactProblem, friction_rows_2d, parametrize
 from instances import random_problem
 
@@ -75,9 +75,11 @@ def test_bisection_method_tolerance():
 # ------------------------------------------------------------------------ 3D
 import math                                                          # noqa: E402
 
-from hpcwedge.conic import FEASIBLE, INFEASIBLE, feasible, pattern_rows, violation   # noqa: E402
-from hpcwedge.mu_critical import max_ratio                           # noqa: E402
-from hpcwedge.patterns import sign_patterns                          # noqa: E402
+from hpcwedge.dinkelbach import max_ratio                          # noqa: E402
+from hpcwedge.feasibility import decide                            # noqa: E402
+from hpcwedge.patterns import sign_patterns                        # noqa: E402
+from hpcwedge.rows import Status, pattern_rows                     # noqa: E402
+from hpcwedge.socp import violation                                # noqa: E402
 from instances import frames_3d, random_problem_3d                   # noqa: E402
 
 
@@ -157,9 +159,9 @@ def test_3d_pattern_mu_c_certified_and_against_bisection(seed, m, free):
         rows = pattern_rows(p, m, zu, zr)
         assert violation(rows, r.mu_c, r.x) <= 1e-12
         assert max_ratio(rows, r.x) <= r.mu_c * (1 + 1e-12)
-        assert feasible(rows, r.mu_c * (1 - 1e-4))[0] == INFEASIBLE
-        assert feasible(rows, r.mu_c * (1 - 1e-6))[0] != FEASIBLE      # infeasible or undecided
-        assert feasible(rows, r.mu_c * (1 + 1e-6))[0] != INFEASIBLE
+        assert decide(rows, r.mu_c * (1 - 1e-4)).status == Status.INFEASIBLE
+        assert decide(rows, r.mu_c * (1 - 1e-6)).status != Status.FEASIBLE      # infeasible or undecided
+        assert decide(rows, r.mu_c * (1 + 1e-6)).status != Status.INFEASIBLE
         b = mu_critical(p, m, zu, zr, mu_hi=4.0, method="bisection", tol=1e-8)
         assert r.mu_c * (1 - 1e-4) <= b.mu_c <= r.mu_c * (1 + 1e-8)
 

@@ -145,7 +145,7 @@ def test_run_mu_c_equals_direct_calls():
     got = run_mu_c(partial(mu_critical, param, m, mu_max=100.0), items)
     for (zu, zr, mu_hi), r in zip(items, got):
         want = mu_critical(param, m, zu, zr, mu_hi=mu_hi, mu_max=100.0)
-        assert (r.mu_c, r.polished, r.lps, r.undecided) == (want.mu_c, want.polished, want.lps, want.undecided)
+        assert (r.mu_c, r.polished, r.solves, r.undecided) == (want.mu_c, want.polished, want.solves, want.undecided)
 
 
 def test_task_job_state_round_trip_with_arrays():

@@ -312,7 +312,7 @@ def test_solve_stats_as_dict_is_the_file_object():
     """SolveStats.as_dict: the fields that are set, in the result file's key order."""
     s = SolveStats()
     assert s.as_dict() == {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
-    s.add(lps=3, undecided=1, polished=1)
+    s.add(solves=3, undecided=1, polished=1)
     s.add(unpolished=2)
     s.symmetry = SymmetryStats(2)
     s.bnb = TreeStats.of({"solves": 4, "status_optimal": 1}, partitions=8)

@@ -185,20 +185,22 @@ def test_exact_fallback_key_is_validated():
 def test_undecided_simplex_is_retried_by_interior_point(monkeypatch):
     """An LP the dual simplex leaves undecided is solved again by HiGHS's interior point
     method (counted), not taken as feasible."""
-    import hpcwedge.conic as conic
-    rows = conic.pattern_rows(parametrize(random_problem(np.random.default_rng(3), 3, False)), 3,
+    import hpcwedge.feasibility as feasibility
+    from hpcwedge.lp import lp_feasible
+    from hpcwedge.rows import Status, pattern_rows
+    rows = pattern_rows(parametrize(random_problem(np.random.default_rng(3), 3, False)), 3,
                               np.array([True, True, False]), np.array([False, False, True]))
-    plain = conic.lp_feasible(rows, 0.8)[0]
-    real = conic.lp_feasible
+    plain = lp_feasible(rows, 0.8)[0]
+    real = lp_feasible
     methods = []
 
     def flaky(rows, mu, options=None, method="highs-ds"):
         methods.append(method)
-        return (conic.UNDECIDED, None) if method == "highs-ds" else real(rows, mu, options, method)
-    monkeypatch.setattr(conic, "lp_feasible", flaky)
+        return (Status.UNDECIDED, None) if method == "highs-ds" else real(rows, mu, options, method)
+    monkeypatch.setattr(feasibility, "lp_feasible", flaky)
     counts = {}
-    status, _ = conic.feasible(rows, 0.8, counts)
-    assert methods == ["highs-ds", "highs-ipm"] and status == plain != conic.UNDECIDED
+    status = feasibility.decide(rows, 0.8, counts=counts).status
+    assert methods == ["highs-ds", "highs-ipm"] and status == plain != Status.UNDECIDED
     assert counts == {"lp_undecided": 1, f"lp_retry_ipm_{plain}": 1}
 
 

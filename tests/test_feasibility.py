@@ -1,17 +1,19 @@
-"""The pattern problems (conic.py): 3D feasible sign patterns by the branch and
-bound == brute force over all 2^m partitions by the SOCP == an independent
+"""The one decision policy (feasibility.decide): 3D feasible sign patterns by the branch
+and bound == brute force over all 2^m partitions by the SOCP == an independent
 route (a different formulation, in (u, r) with K u = r, and a different solver:
-HiGHS on inscribed / circumscribed pyramids of the friction cones); the status
-policy's answers are verified; the 2D dispatch is the LP."""
+HiGHS on inscribed / circumscribed pyramids of the friction cones); the policy's
+answers are verified; the pyramid fallback; the 2D dispatch is the LP; options."""
 import numpy as np
 import pytest
 
-from hpcwedge.conic import (FEASIBLE, INFEASIBLE, PYRAMID_SIDES, UNDECIDED, VERIFY_TOL, ConeRows, Rows, decide,
-                            feasible, lp_feasible, pattern_rows, pyramid_rows, pyramid_sides_for, violation)
+from hpcwedge.feasibility import PYRAMID_SIDES, SolverOptions, decide, pyramid_sides_for
+from hpcwedge.lp import lp_feasible
 from hpcwedge.mu_critical import mu_critical, mu_critical_rows
 from hpcwedge.patterns import PatternTree
 from hpcwedge.problem import parametrize
 from hpcwedge.reference import pattern_decisions, ur_sandwich
+from hpcwedge.rows import Rows, Status, pattern_rows, pyramid_rows
+from hpcwedge.socp import VERIFY_TOL, violation
 from instances import random_problem, random_problem_3d
 
 
@@ -27,15 +29,15 @@ def test_3d_patterns_bnb_equals_brute_force_and_independent_route(seed, m, free)
     p = parametrize(prob)
     brute, undecided_indep = set(), 0
     for bits, zu, status, x in pattern_decisions(p, m, mu, {}):
-        assert status != UNDECIDED
-        if status == FEASIBLE:
+        assert status != Status.UNDECIDED
+        if status == Status.FEASIBLE:
             brute.add(bits)
             assert violation(pattern_rows(p, m, zu, ~zu), mu, x) <= VERIFY_TOL
         indep = ur_sandwich(prob, zu, mu)
         if indep is None:
             undecided_indep += 1
         else:
-            assert (indep == FEASIBLE) == (status == FEASIBLE), (bits, status, indep)
+            assert (indep == Status.FEASIBLE) == (status == Status.FEASIBLE), (bits, status, indep)
     assert undecided_indep <= 1
     tree = PatternTree(p, m, mu)
     out = tree.explore(tree.root())
@@ -60,13 +62,13 @@ def test_pyramids_sandwich_the_cone():
     for _ in range(40):
         rows = _random_partial_rows(rng)
         for mu in (0.5, 1.5):
-            s = feasible(rows, mu)[0]
+            s = decide(rows, mu).status
             si = lp_feasible(pyramid_rows(rows, 8, inner=True), mu)[0]
             so = lp_feasible(pyramid_rows(rows, 8, inner=False), mu)[0]
-            if si == FEASIBLE:
-                assert s == FEASIBLE
-            if s == FEASIBLE:
-                assert so == FEASIBLE
+            if si == Status.FEASIBLE:
+                assert s == Status.FEASIBLE
+            if s == Status.FEASIBLE:
+                assert so == Status.FEASIBLE
             n_checked += 1
     assert n_checked == 80
 
@@ -114,7 +116,7 @@ def test_decide_without_pyramids_decides_what_clarabel_decides():
         rows = _random_partial_rows(rng)
         for mu in (0.5, 1.5):
             full, bare = decide(rows, mu), decide(rows, mu, pyramid_sides=())
-            assert bare.status == full.status or bare.status == UNDECIDED
+            assert bare.status == full.status or bare.status == Status.UNDECIDED
 
 
 def test_decide_objective_proves_the_contact_child():
@@ -128,24 +130,13 @@ def test_decide_objective_proves_the_contact_child():
         zu, zr = np.zeros(m, bool), np.zeros(m, bool)
         obj = p.U[0] / np.linalg.norm(p.U[0])
         d = decide(pattern_rows(p, m, zu, zr), 2.0, objective=obj)
-        if d.status != FEASIBLE:
+        if d.status != Status.FEASIBLE:
             continue
-        child = feasible(pattern_rows(p, m, np.array([True, False, False]), zr), 2.0)[0]
+        child = decide(pattern_rows(p, m, np.array([True, False, False]), zr), 2.0).status
         if d.positive:
-            assert child == INFEASIBLE
+            assert child == Status.INFEASIBLE
         agree += 1
     assert agree > 10
-
-
-def test_3d_rows_shapes_and_friction_free_relaxation_is_an_lp():
-    p = parametrize(random_problem_3d(np.random.default_rng(0), 3, True))
-    zu = np.array([True, False, False])
-    zr = np.array([False, True, False])
-    rows = pattern_rows(p, 3, zu, zr)
-    assert isinstance(rows, ConeRows)
-    assert rows.rn.shape == (2, p.d) and rows.rt.shape == (2, 2, p.d) and rows.lin.shape == (2, p.d)
-    assert np.allclose(rows.eq @ rows.Z, 0, atol=1e-12)
-    assert isinstance(pattern_rows(p, 3, zu, zr, friction=False), Rows)
 
 
 def test_2d_dispatch_is_the_lp():
@@ -154,5 +145,19 @@ def test_2d_dispatch_is_the_lp():
     rows = pattern_rows(p, 3, zu, ~zu)
     assert isinstance(rows, Rows)
     for mu in (0.3, 3.0, 30.0):
-        a, b = feasible(rows, mu), lp_feasible(rows, mu)
-        assert a[0] == b[0]
+        assert decide(rows, mu).status == lp_feasible(rows, mu)[0]
+
+
+def test_solver_options_are_values():
+    """Tolerances are a value handed to decide (no module state): "tight" decides as
+    "default" does on clear cases; an unknown mode is refused."""
+    with pytest.raises(ValueError, match="solver tolerances"):
+        SolverOptions("loose")
+    rng = np.random.default_rng(9)
+    for _ in range(10):
+        rows = _random_partial_rows(rng)
+        plain, tight = decide(rows, 1.5), decide(rows, 1.5, SolverOptions("tight"))
+        assert Status.UNDECIDED in (plain.status, tight.status) or plain.status == tight.status
+        if tight.status == Status.FEASIBLE:
+            assert violation(rows, 1.5, tight.x) <= VERIFY_TOL
+    assert decide(rows, 1.5).status == plain.status       # nothing left behind by the tight calls

@@ -1,0 +1,195 @@
+"""mu^c of a 3D pattern (SPEC §2): min over the pattern's x of max_i ||r_t,i|| / r_n,i,
+a generalised fractional program.
+
+Route "accurate":
+  1. a feasible x at mu_hi (one SOCP);
+  2. Dinkelbach iterations in the scaled form of Crouzeix, Ferland and
+     Schaible: mu_k = max_i ||r_t,i(x_{k-1})|| / r_n,i(x_{k-1}); x_k solves the SOCP
+         min s  s.t.  ||r_t,i|| <= mu_k r_n,i + s r_n,i(x_{k-1}),  pattern rows,
+     (s_k <= 0 since x_{k-1} is feasible with s = 0), until mu_k stalls
+     (DINKELBACH_RTOL) — each mu_k is the max ratio of a verified point, an
+     upper bound of mu^c;
+  3. polish: the KKT Newton certificate (kkt.py). Otherwise the Dinkelbach bound is
+     returned, flagged (polished = False).
+Route "bisection": bisection on SOCP feasibility (mu_bracket.Probe: undecided counted
+and taken as feasible) to mu_c_tol.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .feasibility import count, pyramid_sides_for
+from .kkt import APEX_RTOL, kkt_polish
+from .mu_bracket import BRACKET_RTOL, Probe, bisect
+from .parallel import task_tick
+from .problem import Parametrization
+from .rows import ConeRows, Status, pattern_rows
+from .socp import ConicProblem, attempts, pattern_socp
+
+#: Dinkelbach stops when a step lowers mu by less than this (relative)
+DINKELBACH_RTOL = 1e-7
+DINKELBACH_MAX = 60
+DINKELBACH_WEIGHT_FLOOR = 1e-2
+
+
+def mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray, rows: ConeRows,
+                   probe: Probe, mu_hi: float | None, mu_max: float, method: str,
+                   tol: float) -> tuple[float | None, bool, np.ndarray | None]:
+    """(mu^c, polished, x*) of the 3D pattern (zero_u, zero_r) whose rows are `rows` (module
+    doc; mu^c None: infeasible at mu_max; x*: the polished point, else None)."""
+    hi = float(mu_max if mu_hi is None else mu_hi)
+    first = probe.decide(rows, hi)
+    if first.status != Status.FEASIBLE and hi < mu_max:
+        # mu_hi was not confirmed (a pattern taken as feasible there on a tolerance
+        # or an undecided status): start from mu_max instead
+        alt = probe.decide(rows, mu_max)
+        if alt.status == Status.INFEASIBLE:
+            return None, False, None
+        if first.status == Status.INFEASIBLE or alt.status == Status.FEASIBLE:
+            first, hi = alt, float(mu_max)
+    if first.status == Status.INFEASIBLE:
+        return None, False, None
+    if method != "accurate":
+        return bisect(lambda mu, _: probe.feasible(rows, mu), 0.0, hi, tol)[1], False, None
+    return _accurate_3d(param, m, np.asarray(zero_u, bool), np.asarray(zero_r, bool), rows,
+                        hi, first, probe, depth=0)
+
+
+def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth):
+    """(mu^c, polished) of the pattern given a decision `first` that is not
+    infeasible at hi: Dinkelbach + KKT polish; if the polish does not verify,
+    bisection to BRACKET_RTOL and again from the bracket's upper point (that
+    bisection only seeks a start for Dinkelbach, whose result is then checked: its
+    undecided points skip the pyramid levels too coarse to decide a point so near
+    mu^c, feasibility.pyramid_sides_for; on plug3d 3 x 6 the full ladder there cost
+    2 s of a 2.3 s task and decided nothing). A polished
+    mu* proves that every point below it leaves the cones carrying the KKT
+    multipliers unloaded: that sub-pattern (those nodes also gap) is then checked
+    at mu*, and its own mu^c taken when it is feasible there."""
+    pol = None
+    x = first.x
+    if x is not None:
+        mu, x = dinkelbach(rows, x, hi, probe)
+        if mu == 0.0:
+            return 0.0, True, x
+        pol = kkt_polish(rows, x, mu, options=probe.options)
+    if pol is None:
+        state = {"x": x}
+
+        def ok(mu, spread):
+            d = probe.decide(rows, mu, pyramid_sides_for(spread))
+            if d.status != Status.INFEASIBLE:
+                state["x"] = d.x if d.x is not None else state["x"]
+                return True
+            return False
+
+        lo, hi = bisect(ok, 0.0, hi, BRACKET_RTOL)
+        x = state["x"]
+        if x is None:
+            return hi, False, None
+        mu, x = dinkelbach(rows, x, hi, probe)
+        pol = kkt_polish(rows, x, mu, options=probe.options)
+        if pol is None:
+            return hi, False, None
+    mu_s, support, x_s, signed = pol
+    if depth >= m:
+        return mu_s, signed, x_s
+    zr_sub = zr.copy()
+    zr_sub[rows.nodes[support]] = True
+    sub = pattern_rows(param, m, zu, zr_sub)
+    d = probe.decide(sub, mu_s * (1 + 1e-12))
+    if d.status == Status.INFEASIBLE:
+        if signed:
+            return mu_s, True, x_s
+        return _fallback_3d(rows, hi, probe)
+    mu_sub, polished_sub, x_sub = _accurate_3d(param, m, zu, zr_sub, sub, mu_s * (1 + 1e-12), d,
+                                               probe, depth + 1)
+    count(probe.statuses, "polish_support_recursions")
+    if signed:
+        return (mu_sub, polished_sub, x_sub) if mu_sub < mu_s else (mu_s, True, x_s)
+    # unsigned apex point: accepted when the sub-pattern (apex cones unloaded) has
+    # the same value, polished
+    count(probe.statuses, "polish_apex_by_subpattern")
+    if polished_sub and abs(mu_sub - mu_s) <= 1e-10 * mu_s:
+        return min(mu_s, mu_sub), True, x_s
+    if mu_sub < mu_s:
+        return mu_sub, False, x_sub
+    return _fallback_3d(rows, hi, probe)
+
+
+def _fallback_3d(rows, hi, probe: Probe):
+    """Bisection to BRACKET_RTOL: (upper end, False, None)."""
+    count(probe.statuses, "mu_c_unpolished")
+    lo, hi = bisect(lambda mu, _: probe.feasible(rows, mu), 0.0, hi, BRACKET_RTOL)
+    return hi, False, None
+
+
+def max_ratio(rows: ConeRows, x: np.ndarray) -> float:
+    """max_i ||r_t,i|| / r_n,i over the cone nodes of x, cones at their apex
+    (||r_i|| <= APEX_RTOL relative) left out; inf if some r_n,i <= 0 < ||r_t,i||."""
+    rn = rows.rn @ x
+    rt = np.linalg.norm(rows.rt @ x, axis=1)
+    size = np.sqrt(rn ** 2 + rt ** 2)
+    live = size > APEX_RTOL * max(size.max(), 1e-300)
+    if not live.any():
+        return 0.0
+    rn, rt = rn[live], rt[live]
+    if np.any(rn <= 0):
+        return math.inf
+    return float((rt / rn).max())
+
+
+def dinkelbach(rows: ConeRows, x: np.ndarray, mu_hi: float, probe: Probe) -> tuple[float, np.ndarray]:
+    """Scaled Dinkelbach iterations (module doc) from a feasible x: (mu, x) with
+    mu = max_ratio(x) the least upper bound reached."""
+    mu = max_ratio(rows, x)
+    if not math.isfinite(mu):
+        return mu_hi, x
+    for _ in range(DINKELBACH_MAX):
+        task_tick()
+        if mu <= 0.0:
+            return 0.0, x
+        weights = np.maximum(rows.rn @ x, 0.0)
+        weights /= max(weights.max(), 1e-300)
+        # a floor: a cone nearly unloaded at x would otherwise barely move (its
+        # ratio converges as slowly as its weight); a cone that must unload
+        # completely to go lower is caught by the support recursion of the polish
+        weights = np.maximum(weights, DINKELBACH_WEIGHT_FLOOR)
+        y = _dinkelbach_step(rows, mu, weights, probe)
+        if y is None:
+            break
+        mu_y = max_ratio(rows, y)
+        if not mu_y < mu:
+            break
+        step = mu - mu_y
+        mu, x = mu_y, y
+        if step <= DINKELBACH_RTOL * mu:
+            break
+    return mu, x
+
+
+def _dinkelbach_step(rows: ConeRows, mu: float, weights: np.ndarray, probe: Probe) -> np.ndarray | None:
+    """argmin of min s s.t. (mu rn_i x + weights_i s, rt_i x) in SOC, pattern rows;
+    None unless Clarabel solves it and x verifies on the non-friction rows."""
+    base = pattern_socp(rows, mu)
+    p = rows.Z.shape[1]
+    col = np.zeros((base.A.shape[0], 1))
+    first_cone = 1 + base.n_lin
+    col[first_cone::3, 0] = -weights
+    q = np.zeros(p + 1)
+    q[-1] = 1.0
+    problem = ConicProblem(np.hstack([base.A, col]), base.b, base.n_zero, base.n_lin, base.n_soc, q)
+    for attempt, sol in attempts(problem, probe.options.tight):
+        probe.solves += 1
+        count(probe.statuses, ("dinkelbach_" if not attempt else f"dinkelbach_retry{attempt}_") + sol.status)
+        if sol.status == "Solved":
+            x = rows.Z @ sol.x[:p]
+            nr = rows.norm @ x
+            if nr > 0:
+                x = x / nr
+                lin_ok = rows.lin.shape[0] == 0 or (rows.lin @ x).min() >= -1e-9 * np.linalg.norm(x)
+                if lin_ok:
+                    return x
+    return None

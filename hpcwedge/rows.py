@@ -1,0 +1,200 @@
+"""The pattern feasibility problem as constraint rows, and the vocabulary of its answers.
+
+A (partial) sign pattern is two boolean masks over the m nodes:
+zero_u (u_n,i = 0: contact) and zero_r (r_i = 0: gap). A node in neither is
+free (u_n >= 0, r_n >= 0, no complementarity: the branch-and-bound relaxation);
+a node in both has u_n = r_n = 0. Every problem is normalised by sum(r_n) = 1.
+
+2D: the problem is an LP (`Rows`, solved by lp.py). mu = inf drops the friction rows
+(r_t free): the relaxation that decides "no wedge at any mu".
+
+3D: the problem is an SOCP (`ConeRows`, solved by socp.py) in x in R^d:
+
+    eq x = 0                 u_n,i = 0 (contact), r_i = 0 (gap)
+    lin x >= 0               u_n,i >= 0 (every node not in contact)
+    ||rt_i x|| <= mu rn_i x  every node not in gap (implies r_n,i >= 0)
+    norm x = 1               sum r_n = 1
+
+in the coordinates w of the null space of `eq` (x = Z w: the pattern equalities are
+eliminated once, by an SVD, so the solver never meets dependent equality rows). With
+friction=False (r_t free) it is the LP {eq, lin, r_n >= 0} (a `Rows`). `pyramid_rows`:
+the LP with every friction cone replaced by a polyhedral pyramid (feasibility.py's
+fallback). `node_rows`: every node's rows, for the learnt cores (cores.py).
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .problem import Parametrization
+
+
+class Status(enum.StrEnum):
+    """The answer to a feasibility question (the values reach the stats' counter keys,
+    e.g. "lp_feasible"). UNDECIDED: no solver decided it; callers keep the subtree / take
+    the point as feasible (nothing is pruned on doubt)."""
+
+    FEASIBLE = "feasible"
+    INFEASIBLE = "infeasible"
+    UNDECIDED = "undecided"
+
+#: relative size under which a constraint row is taken as identically zero
+ZERO_ROW_RTOL = 1e-12
+#: rank decision on the unit-scaled pattern equalities
+EQ_RANK_RTOL = 1e-10
+
+
+@dataclass(frozen=True)
+class Rows:
+    """Homogeneous constraint rows (a0 + mu * a1) . x  (>= 0 or == 0), unit-scaled at
+    build time; `eq` marks equalities. `norm` is the row of sum(r_n)."""
+
+    a0: np.ndarray
+    a1: np.ndarray
+    eq: np.ndarray
+    norm: np.ndarray
+
+
+@dataclass(frozen=True)
+class ConeRows:
+    """The 3D pattern SOCP (module doc). eq (E, d), lin (L, d): unit rows;
+    rn (c, d), rt (c, 2, d): the cone nodes `nodes`, each node's three rows scaled
+    by one common factor; norm (d,): sum r_n. Z (d, p): orthonormal basis of the
+    null space of eq (the solver's coordinates, x = Z w). lin_nodes (L,): the node
+    of each lin row."""
+
+    eq: np.ndarray
+    lin: np.ndarray
+    rn: np.ndarray
+    rt: np.ndarray
+    norm: np.ndarray
+    nodes: np.ndarray
+    Z: np.ndarray
+    lin_nodes: np.ndarray
+
+
+def problem_dim(param: Parametrization, m: int) -> int:
+    """2 or 3, from the parametrisation's row count (dim * m)."""
+    return param.U.shape[0] // m
+
+
+def _unit(A: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit norm; rows that are identically zero (relative to the
+    largest) dropped."""
+    A = A[_kept(A)]
+    return A / np.linalg.norm(A, axis=1, keepdims=True)
+
+
+def _kept(A: np.ndarray) -> np.ndarray:
+    """The rows of A that `_unit` keeps (boolean mask)."""
+    s = np.linalg.norm(A, axis=1)
+    return s > ZERO_ROW_RTOL * max(s.max(initial=0.0), 1e-300)
+
+
+def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
+                 friction: bool = True) -> Rows | ConeRows:
+    """The pattern problem in x in R^d: 2D -> `Rows` (LP); 3D -> `ConeRows` (SOCP),
+    or `Rows` (LP) when friction=False."""
+    if problem_dim(param, m) == 3:
+        return _pattern_rows_3d(param, m, np.asarray(zero_u, bool), np.asarray(zero_r, bool), friction)
+    U, R = param.U, param.R
+    Un, Rn, Rt = U[:m], R[:m], R[m:2 * m]
+    z = np.zeros_like(Un)
+    a0, a1, eq = [], [], []
+
+    def add(r0, r1, is_eq):
+        a0.append(r0)
+        a1.append(r1)
+        eq.append(np.full(len(r0), is_eq))
+
+    add(Un[zero_u], z[zero_u], True)
+    add(Rn[zero_r], z[zero_r], True)
+    add(Rt[zero_r], z[zero_r], True)
+    add(Un[~zero_u], z[~zero_u], False)
+    fr = ~zero_r
+    if friction:
+        add(Rt[fr], Rn[fr], False)
+        add(-Rt[fr], Rn[fr], False)
+    else:
+        add(Rn[fr], z[fr], False)
+    A0, A1, E = np.vstack(a0), np.vstack(a1), np.concatenate(eq)
+    return Rows(a0=A0, a1=A1, eq=E, norm=Rn.sum(axis=0))
+
+
+def _pattern_rows_3d(param, m, zu, zr, friction):
+    U, R = param.U, param.R
+    Un, Rn, Rt1, Rt2 = U[:m], R[:m], R[m:2 * m], R[2 * m:3 * m]
+    norm = Rn.sum(axis=0)
+    eq = _unit(np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]]))
+    lin = _unit(Un[~zu])
+    lin_nodes = np.flatnonzero(~zu)[_kept(Un[~zu])]
+    fr = ~zr
+    if not friction:
+        rn = _unit(Rn[fr])
+        A0 = np.vstack([eq, lin, rn])
+        E = np.concatenate([np.ones(len(eq), bool), np.zeros(len(lin) + len(rn), bool)])
+        return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=norm)
+    nodes = np.flatnonzero(fr)
+    rn, rt = Rn[fr], np.stack([Rt1[fr], Rt2[fr]], axis=1)
+    sc = _cone_scale(Rn, Rt1, Rt2)[fr]
+    if eq.shape[0]:
+        _, s, vt = np.linalg.svd(eq)
+        rank = int((s > EQ_RANK_RTOL * s[0]).sum())
+        Z = vt[rank:].T
+    else:
+        Z = np.eye(param.d)
+    return ConeRows(eq=eq, lin=lin, rn=rn / sc[:, None], rt=rt / sc[:, None, None], norm=norm,
+                    nodes=nodes, Z=Z, lin_nodes=lin_nodes)
+
+
+def _cone_scale(Rn: np.ndarray, Rt1: np.ndarray, Rt2: np.ndarray) -> np.ndarray:
+    """The common factor of each node's (r_n, r_t1, r_t2) rows in the SOCP."""
+    sc = np.sqrt((Rn ** 2).sum(1) + (Rt1 ** 2).sum(1) + (Rt2 ** 2).sum(1))
+    sc[sc == 0] = 1.0
+    return sc
+
+
+def pyramid_rows(rows: ConeRows, sides: int, inner: bool, phase: np.ndarray | None = None) -> Rows:
+    """LP rows of the pattern problem with every friction cone replaced by a pyramid of
+    `sides` facets: inscribed (inner) or circumscribed (outer). phase (c,): per cone
+    node, the angle in the (t1, t2) plane of one facet normal (default: half a
+    facet off the t1 axis)."""
+    c = rows.rn.shape[0]
+    base = 2 * np.pi * np.arange(sides) / sides
+    ph = np.full(c, np.pi / sides) if phase is None else np.asarray(phase, float)
+    th = ph[:, None] + base[None, :]                                  # (c, k)
+    dirs = np.stack([np.cos(th), np.sin(th)], axis=2)                 # (c, k, 2)
+    d = rows.norm.shape[0]
+    f0 = -np.einsum("cka,cad->ckd", dirs, rows.rt).reshape(-1, d)        # -(t . r_t)
+    f1 = np.repeat((math.cos(math.pi / sides) if inner else 1.0) * rows.rn, sides, axis=0)
+    a0 = np.vstack([rows.eq, rows.lin, f0])
+    a1 = np.vstack([np.zeros((rows.eq.shape[0] + rows.lin.shape[0], d)), f1])
+    eq = np.concatenate([np.ones(rows.eq.shape[0], bool), np.zeros(a0.shape[0] - rows.eq.shape[0], bool)])
+    return Rows(a0=a0, a1=a1, eq=eq, norm=rows.norm)
+
+
+@dataclass(frozen=True)
+class NodeRows:
+    """Every node's rows of the pattern SOCP in x-space, scaled as `pattern_rows`
+    scales them: un (m, d) unit u_n rows (zero rows stay zero); cone (m, 3, d) the
+    (r_n, r_t1, r_t2) rows over one common factor per node (mu not applied);
+    norm (d,) sum r_n."""
+
+    un: np.ndarray
+    cone: np.ndarray
+    norm: np.ndarray
+
+
+def node_rows(param: Parametrization, m: int) -> NodeRows:
+    """Every node's rows (NodeRows) of the parametrisation's m contact nodes (3D)."""
+    U, R = param.U, param.R
+    Un, Rn, Rt1, Rt2 = U[:m], R[:m], R[m:2 * m], R[2 * m:3 * m]
+    un = np.zeros_like(Un)
+    keep = _kept(Un)
+    un[keep] = Un[keep] / np.linalg.norm(Un[keep], axis=1, keepdims=True)
+    cone = np.stack([Rn, Rt1, Rt2], axis=1) / _cone_scale(Rn, Rt1, Rt2)[:, None, None]
+    return NodeRows(un=un, cone=cone, norm=Rn.sum(axis=0))
+

@@ -1,0 +1,40 @@
+"""The pattern problem's rows (rows.py): shapes, the friction-free relaxation, the
+per-node rows of the learnt cores against the pattern rows, the status values."""
+import numpy as np
+
+from hpcwedge.problem import parametrize
+from hpcwedge.rows import ConeRows, Rows, Status, node_rows, pattern_rows
+from instances import random_problem_3d
+
+
+def test_3d_rows_shapes_and_friction_free_relaxation_is_an_lp():
+    p = parametrize(random_problem_3d(np.random.default_rng(0), 3, True))
+    zu = np.array([True, False, False])
+    zr = np.array([False, True, False])
+    rows = pattern_rows(p, 3, zu, zr)
+    assert isinstance(rows, ConeRows)
+    assert rows.rn.shape == (2, p.d) and rows.rt.shape == (2, 2, p.d) and rows.lin.shape == (2, p.d)
+    assert np.allclose(rows.eq @ rows.Z, 0, atol=1e-12)
+    assert isinstance(pattern_rows(p, 3, zu, zr, friction=False), Rows)
+
+
+def test_node_rows_scale_as_the_pattern_rows():
+    """cores.infeasible_core reads a certificate of the pattern SOCP with node_rows: each
+    cone node's (r_n, r_t) rows and each kept u_n row must be the very rows pattern_rows built."""
+    for seed in range(6):
+        m = 4
+        p = parametrize(random_problem_3d(np.random.default_rng(seed), m, bool(seed % 2)))
+        nr = node_rows(p, m)
+        zu = np.array([True, False, False, True])
+        zr = np.array([False, True, False, False])
+        rows = pattern_rows(p, m, zu, zr)
+        assert np.array_equal(nr.cone[rows.nodes, 0], rows.rn)
+        assert np.array_equal(nr.cone[rows.nodes, 1:], rows.rt)
+        assert np.array_equal(nr.un[rows.lin_nodes], rows.lin)
+        assert np.array_equal(nr.norm, rows.norm)
+
+
+def test_status_values_are_the_counter_keys():
+    """The values reach the stats' counter keys ("lp_feasible", "milp_undecided"): fixed."""
+    assert [s.value for s in Status] == ["feasible", "infeasible", "undecided"]
+    assert "lp_" + Status.FEASIBLE == "lp_feasible" and f"{Status.UNDECIDED}" == "undecided"

@@ -1,0 +1,56 @@
+"""The Clarabel adapter (socp.py): the ladder of attempts, the settings as values, the
+Farkas check of what Clarabel returns."""
+import numpy as np
+
+from hpcwedge.feasibility import decide
+from hpcwedge.problem import parametrize
+from hpcwedge.rows import Status, pattern_rows
+from hpcwedge.socp import (ATTEMPTS, LEAST_NORM_ATTEMPT, attempts, certificate_ok, pattern_attempts, pattern_socp,
+                           settings)
+from instances import random_problem_3d
+
+
+def _rows(seed: int, m: int = 3):
+    p = parametrize(random_problem_3d(np.random.default_rng(seed), m, bool(seed % 2)))
+    return pattern_rows(p, m, np.zeros(m, bool), np.zeros(m, bool))
+
+
+def test_ladder_skips_the_least_norm_attempt_of_a_problem_with_its_own_objective():
+    from dataclasses import replace
+    rows = _rows(0)
+    plain = pattern_socp(rows, 1.0)
+    assert [k for k, _ in attempts(plain, False)] == list(range(ATTEMPTS))
+    own = replace(plain, q=np.ones(plain.A.shape[1]))
+    assert [k for k, _ in attempts(own, False)] == [k for k in range(ATTEMPTS) if k != LEAST_NORM_ATTEMPT]
+    sols = [s for _, s in attempts(plain, False, steered=own)]
+    assert len(sols) == ATTEMPTS and all(s.status for s in sols)
+
+
+def test_settings_are_values():
+    assert settings(0, True).tol_feas == 1e-10 and settings(0, False).tol_feas != 1e-10
+    assert settings(2, False).static_regularization_constant == 1e-7
+    assert not settings(0, False).equilibrate_enable and settings(3, False).equilibrate_enable
+    assert settings(1, True) is settings(1, True)               # cached: one object per (attempt, tight)
+
+
+def test_farkas_certificates_are_checked():
+    """An infeasible pattern's certificate passes the check; the same z with the sign of
+    b^T z flipped, or moved off the dual cone, does not."""
+    found = 0
+    for seed in range(30):
+        rows = _rows(seed)
+        for mu in (0.05, 0.2):
+            if decide(rows, mu).status != Status.INFEASIBLE:
+                continue
+            o = next(pattern_attempts(rows, mu, False))
+            if o.status != "PrimalInfeasible":
+                continue
+            prob = pattern_socp(rows, mu)
+            assert o.certified and certificate_ok(prob.A, prob.b, o.farkas, 1, prob.n_lin)
+            assert not certificate_ok(prob.A, prob.b, -o.farkas, 1, prob.n_lin)
+            bad = o.farkas.copy()
+            bad[prob.n_zero + prob.n_lin:] = 0.0
+            bad[prob.n_zero + prob.n_lin + 1] = 1e3            # a cone row with a huge tangential part
+            assert not certificate_ok(prob.A, prob.b, bad, 1, prob.n_lin)
+            found += 1
+    assert found >= 3
