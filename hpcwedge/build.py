@@ -12,7 +12,7 @@ import os
 import numpy as np
 
 from . import exact as xq
-from .model import Model
+from .models.record import Model
 from .problem import ContactProblem, stiffness_range
 from .scene import Scene, SceneError, array
 

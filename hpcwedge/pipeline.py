@@ -32,7 +32,7 @@ from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .environment import environment, single_threaded
 from .faces import branching_nodes, run_faces
 from .global_mu_c import global_mu_critical
-from .model import Model
+from .models.record import Model
 from .mu_critical import MuC, mu_critical, run_mu_c
 from .nodesets import canonical_order
 from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d

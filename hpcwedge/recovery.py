@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import Model
+from .models.record import Model
 
 #: cell-data names by cell family, in the VTU and in Configuration.element_values
 VON_MISES, AXIAL_FORCE = "von_mises", "axial_force"
@@ -54,7 +54,7 @@ class ConfigurationError(ValueError):
 class Configuration:
     """One wedged configuration of the whole body.
 
-    model:          the body (hpcwedge.model.Model).
+    model:          the body (hpcwedge.models.record.Model).
     u_local, r_local: (dim*m,) contact displacement and reaction, local frames, block ordering.
     displacement:   (n_nodes, dim) every node, global axes.
     reaction:       (n_nodes, dim) obstacle force on the body, global axes; zero off contact.

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from .model import Model
+    from .models.record import Model
     from .problem import ContactProblem
     from .scene import Scene
 

@@ -402,7 +402,7 @@ def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> No
 
 def array(value, key: str, ndim: int | None = None) -> np.ndarray:
     """A finite float array from a scene value, or a SceneError naming key."""
-    from .model import as_float_array
+    from .models.record import as_float_array
     try:
         return as_float_array(value, key, ndim)
     except ValueError as e:

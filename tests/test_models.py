@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from hpcwedge.model import contact_frames
+from hpcwedge.models.record import contact_frames
 from hpcwedge.models import (block2d, builtin, plug2d, plug3d, q4_stiffness, rigid_modes, truss_model,
                              truss_stiffness, vgroove_bar)
 

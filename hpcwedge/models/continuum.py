@@ -6,7 +6,7 @@ from collections.abc import Mapping
 import numpy as np
 import scipy.sparse as sp
 
-from ..model import as_float_array
+from .record import as_float_array
 from .assembly import CHUNK_ENTRIES, assemble_blocks
 from .elements import CELL_TYPES, REFERENCE, centroid_stress, check_jacobians, element_stiffness, von_mises
 

@@ -14,7 +14,7 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-from ..model import Model, contact_frames
+from .record import Model, contact_frames
 from .continuum import ContinuumAssembly, continuum_material
 from .patch import check_patch_size, with_contact_patch
 from .rigid import rigid_modes

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model import (Model, as_index_array, check_contact_free, check_contact_nodes, check_supports,
+from .record import (Model, as_index_array, check_contact_free, check_contact_nodes, check_supports,
                      contact_frames)
 from .continuum import ContinuumAssembly
 from .elements import CELL_TYPES

@@ -37,7 +37,7 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-from ..model import Model, Tie
+from .record import Model, Tie
 from .rigid import orthonormalise
 
 #: a boundary node at distance d <= a (1 + DIST_RTOL) of a contact node is in its patch

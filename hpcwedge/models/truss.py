@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..model import (Model, as_float_array, check_contact_free, check_contact_nodes,
+from .record import (Model, as_float_array, check_contact_free, check_contact_nodes,
                      check_supports, contact_frames)
 from .rigid import rigid_modes
 
