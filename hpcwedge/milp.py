@@ -48,7 +48,7 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
     u_n >= 0, u_n != 0: the lineality is factored out), so it bounds r_n,i <= 1 and
     s u_n,i <= 1 on the cone's section: both big-M constants (1) are valid, none cuts a
     solution off. A trivial lift-off has sum r_n = 0; a wedged configuration exists iff
-    the optimum is > 0. s > 0 weighs u_n against r (numerics.Numerics.scale)."""
+    the optimum is > 0. s > 0 weighs u_n against r (numerics.NumericsReport.scale)."""
     from scipy.optimize import Bounds, LinearConstraint, milp
     U, R = param.U, param.R
     Un, Rn, Rt = U[:m], R[:m], R[m:2 * m]

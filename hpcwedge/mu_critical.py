@@ -53,7 +53,7 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
 
     mu_hi: a mu known feasible (e.g. the run's mu for a cone found there); else
     mu_max is tested first. Returns MuC(None) when infeasible at mu_max.
-    scale (2D): the stiffness that weighs u_n against r (numerics.Numerics.scale). The
+    scale (2D): the stiffness that weighs u_n against r (numerics.NumericsReport.scale). The
     LPs then run in the balanced coordinates of problem.balanced_2d at mu_hi, and once
     more at the mu^c found when it lies below mu_hi / REBALANCE (scripts/stress.py: plug2d
     at 0.1 deg, mu^c to 3e-13 instead of 8e-9 relative).

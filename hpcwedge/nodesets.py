@@ -42,6 +42,11 @@ def bits_to_nodes(bits: int, m: int) -> tuple[int, ...]:
     return tuple(i for i in range(m) if bits >> i & 1)
 
 
+def bits_to_mask(bits: int, m: int) -> np.ndarray:
+    """Bitset -> (m,) bool mask (any m: Python ints)."""
+    return np.array([bool(bits >> i & 1) for i in range(m)], dtype=bool)
+
+
 def to_mask(nodes, m: int) -> np.ndarray:
     """Node list -> (m,) bool mask."""
     z = np.zeros(m, dtype=bool)

@@ -35,14 +35,14 @@ COND_SUSPECT = FLOAT_ZERO_TOL / float(np.finfo(float).eps)
 
 
 @dataclass
-class Numerics:
+class NumericsReport:
     """What the run-time checks found (the stats["numerics"] entry, see as_dict).
 
     lam_min, lam_max: problem.stiffness_range(problem); runs: one record per enumerated mu
     ({"mu", "exact", "suspect", and for a float DD "close_calls", "closest",
     "cancellation" (dd stats), "cond_T" (problem.balanced_2d)}); exact_fallback /
     unresolved: the mu values redone exactly / left suspect; patterns: the 2D sign
-    patterns' check (settle_patterns_2d); notes: other findings (mu^c not polished,
+    patterns' check (recheck_patterns_2d); notes: other findings (mu^c not polished,
     undecided solves, suspect patterns left as they are), each one line; cond_suspect:
     the stiffness condition number above which every float run is suspect."""
 
@@ -57,7 +57,7 @@ class Numerics:
     cond_suspect: float = COND_SUSPECT
 
     @classmethod
-    def of(cls, problem: ContactProblem, fallback_max_m: int) -> "Numerics":
+    def of(cls, problem: ContactProblem, fallback_max_m: int) -> "NumericsReport":
         """The record of a problem, before any check has run."""
         return cls(*stiffness_range(problem), fallback_max_m)
 
@@ -94,22 +94,22 @@ class Numerics:
         return out
 
 
-def enumerate_2d(param: Parametrization, m: int, mu: float, numerics: Numerics,
-                 exact_param: Callable[[], Parametrization], progress=None) -> tuple[DDResult, Parametrization]:
+def checked_rays_2d(param: Parametrization, m: int, mu: float, numerics: NumericsReport,
+                    exact_param: Callable[[], Parametrization], progress=None) -> tuple[DDResult, Parametrization]:
     """Complementary rays of P(mu) and the parametrisation they are expressed in.
 
     param exact (param.exact): the exact DD. Otherwise the float DD in balanced
-    coordinates (problem.balanced_2d), judged by `judge_2d`. Appends the mu's
+    coordinates (problem.balanced_2d), judged by `settle_rays_2d`. Appends the mu's
     record to numerics."""
     if param.exact:
-        return judge_2d(exact_rays(param, m, mu, progress), param, None, m, mu, numerics, exact_param)
+        return settle_rays_2d(exact_rays(param, m, mu, progress), param, None, m, mu, numerics, exact_param)
     p_mu, cond_T = balanced_2d(param, mu, m, numerics.scale)
     dd = complementary_rays(friction_rows_2d(p_mu, mu, m), m, progress=progress)
-    return judge_2d(dd, p_mu, cond_T, m, mu, numerics, exact_param, progress)
+    return settle_rays_2d(dd, p_mu, cond_T, m, mu, numerics, exact_param, progress)
 
 
-def judge_2d(dd: DDResult, p_mu: Parametrization, cond_T: float, m: int, mu: float, numerics: Numerics,
-             exact_param: Callable[[], Parametrization], progress=None) -> tuple[DDResult, Parametrization]:
+def settle_rays_2d(dd: DDResult, p_mu: Parametrization, cond_T: float, m: int, mu: float,
+                   numerics: NumericsReport, exact_param: Callable[[], Parametrization], progress=None) -> tuple[DDResult, Parametrization]:
     """A float DD of P(mu) run in the balanced coordinates p_mu (whole, or merged
     over faces): if it is suspect (module doc) and m <= numerics.fallback_max_m,
     the exact DD on exact_param() instead (called at most when needed; the caller
@@ -137,7 +137,7 @@ def judge_2d(dd: DDResult, p_mu: Parametrization, cond_T: float, m: int, mu: flo
     return dd, pq
 
 
-def note_mu_c(numerics: Numerics, unpolished: int, undecided: int) -> None:
+def note_mu_c(numerics: NumericsReport, unpolished: int, undecided: int) -> None:
     """Record mu^c values left unpolished and LP solves no solver decided."""
     if unpolished:
         numerics.notes.append(f"{unpolished} mu^c value(s) not polished: the upper end of a bisection "
@@ -152,9 +152,9 @@ def exact_rays(pq: Parametrization, m: int, mu: float, progress=None) -> DDResul
     return complementary_rays(friction_rows_2d(pq, mu, m, exact=True), m, exact=True, progress=progress)
 
 
-def settle_patterns_2d(numerics: Numerics, m: int, mus, counters: dict, undecided: int,
-                       exact_param: Callable[[], Parametrization],
-                       exact_scene: bool) -> list[set[tuple[int, ...]]] | None:
+def recheck_patterns_2d(numerics: NumericsReport, m: int, mus, counters: dict, undecided: int,
+                        exact_param: Callable[[], Parametrization],
+                        exact_scene: bool) -> list[set[tuple[int, ...]]] | None:
     """The 2D sign patterns per mu from the exact rays (SPEC §2), when the LP branch and
     bound's are suspect (module doc; counters: its status counts, undecided: patterns no
     solver decided) and m <= the fallback limit, or the scene asks for exact arithmetic.

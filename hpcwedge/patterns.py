@@ -19,6 +19,7 @@ import numpy as np
 from .cores import Cores, infeasible_core
 from .feasibility import count, decide
 from .lp import lp_violation
+from .nodesets import bits_to_mask, to_bits
 from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
 from .parallel.tasks import task_stopping
 from .rows import Status, node_rows, pattern_rows, problem_dim
@@ -73,9 +74,7 @@ class Subtree:
 
     def masks(self, m: int) -> tuple[np.ndarray, np.ndarray]:
         """(zero_u, zero_r) boolean masks over the m nodes."""
-        bits = 1 << np.arange(m, dtype=object)
-        return (np.array([bool(self.contact & b) for b in bits], dtype=bool),
-                np.array([bool(self.gap & b) for b in bits], dtype=bool))
+        return bits_to_mask(self.contact, m), bits_to_mask(self.gap, m)
 
 
 @dataclass
@@ -219,7 +218,7 @@ class PatternTree:
                     count(stats.statuses, "contact_child_infeasible_by_parent")
                     continue
                 fixed = [i] if contact else orbit
-                bits = sum(1 << j for j in fixed)
+                bits = to_bits(fixed)
                 kid = Subtree(node.depth + len(fixed), node.contact | bits if contact else node.contact,
                               node.gap if contact else node.gap | bits)
                 kids.append((kid, None if x is None else self._witness(kid, x, fixed, contact, mu)))

@@ -34,8 +34,8 @@ from .faces import branching_nodes, run_faces
 from .global_mu_c import global_mu_critical
 from .models.record import Model
 from .mu_critical import MuC, mu_critical, run_mu_c
-from .nodesets import canonical_order
-from .numerics import Numerics, enumerate_2d, judge_2d, note_mu_c, settle_patterns_2d
+from .nodesets import bits_to_nodes, canonical_order, pattern_key, to_bits, to_mask
+from .numerics import NumericsReport, checked_rays_2d, note_mu_c, recheck_patterns_2d, settle_rays_2d
 from .parallel import Engine, ranks_on_host
 from .patterns import BnBStats, PatternTree, expand_orbits, run_patterns
 from .problem import (ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize,
@@ -76,7 +76,7 @@ class Context:
     scene: Scene
     m: int
     param: Parametrization
-    numerics: Numerics
+    numerics: NumericsReport
     exact_param: Callable[[], Parametrization]   # the exact parametrisation, made on first call
     symmetry: Symmetry | None                    # the node symmetries (order > 1), or None
     engine: Engine
@@ -84,7 +84,7 @@ class Context:
 
     @property
     def scale(self) -> float | None:
-        """mu^c's coordinates: 2D the balanced scale (numerics.Numerics.scale), 3D None."""
+        """mu^c's coordinates: 2D the balanced scale (numerics.NumericsReport.scale), 3D None."""
         return self.numerics.scale if self.scene.dim == 2 else None
 
 
@@ -249,7 +249,7 @@ def _context(scene: Scene, plan: Plan, problem: ContactProblem, engine: Engine, 
         sym = node_symmetries(problem.K, scene.dim)
         stats.symmetry = SymmetryStats(sym.order)
         sym = sym if sym.order > 1 else None
-    numerics = Numerics.of(problem, scene.exact_fallback_max_m)
+    numerics = NumericsReport.of(problem, scene.exact_fallback_max_m)
     exact_param = (lambda: param) if scene.exact else once(lambda: parametrize(problem, exact=True))
     return Context(scene, problem.m, param, numerics, exact_param, sym, engine, progress)
 
@@ -304,7 +304,7 @@ def rays(ctx: Context) -> list[Rays]:
     description per mu on the master, or split over the faces of the scene's branching
     nodes (faces.branching_nodes; resumed: the checkpoint's split), one "face" task per (mu,
     face), the merged rays judged as a whole in each mu's balanced coordinates (float:
-    numerics.judge_2d, redone exactly when suspect and small)."""
+    numerics.settle_rays_2d, redone exactly when suspect and small)."""
     scene, m, param, numerics = ctx.scene, ctx.m, ctx.param, ctx.numerics
     e = stiffness_exponent(scene)
     nodes = branching_nodes(m, scene.face_split)
@@ -314,7 +314,7 @@ def rays(ctx: Context) -> list[Rays]:
         rows = [friction_rows_2d(p, mu, m, exact=scene.exact) for (p, _), mu in zip(coords, scene.mu)]
         dds = run_faces(rows, m, exact=scene.exact, engine=ctx.engine, nodes=nodes, name=RAYS_JOB,
                         max_memory_gb=scene.max_memory_gb)
-        done = [judge_2d(dd, p, cond_T, m, mu, numerics, ctx.exact_param, ctx.progress)
+        done = [settle_rays_2d(dd, p, cond_T, m, mu, numerics, ctx.exact_param, ctx.progress)
                 for dd, (p, cond_T), mu in zip(dds, coords, scene.mu)]
     else:                                        # one mu at a time: each DD dropped once filed
         done = (_rays_whole(ctx, mu) for mu in scene.mu)
@@ -322,10 +322,10 @@ def rays(ctx: Context) -> list[Rays]:
 
 
 def _rays_whole(ctx: Context, mu: float):
-    """One double description of P(mu) on the master, unsplit (numerics.enumerate_2d):
+    """One double description of P(mu) on the master, unsplit (numerics.checked_rays_2d):
     (rays, the parametrisation they are expressed in)."""
     ctx.progress.stage(f"rays mu={mu:g}")
-    dd, p_run = enumerate_2d(ctx.param, ctx.m, mu, ctx.numerics, ctx.exact_param, ctx.progress)
+    dd, p_run = checked_rays_2d(ctx.param, ctx.m, mu, ctx.numerics, ctx.exact_param, ctx.progress)
     ctx.progress.close()
     dd.stats.update(faces=1, branching_nodes=[])
     return dd, p_run
@@ -375,23 +375,23 @@ def patterns(ctx: Context) -> PatternSets:
     """The sign-patterns stage: the feasible patterns at every listed mu, branch and bound
     over subtrees as engine tasks (parallel.run_patterns; with a symmetry, over orbit
     representatives, expanded here). 2D: redone from the exact rays when the LP decisions
-    are suspect and m small (numerics.settle_patterns_2d). A warning for undecided ones."""
+    are suspect and m small (numerics.recheck_patterns_2d). A warning for undecided ones."""
     scene, m, sym = ctx.scene, ctx.m, ctx.symmetry
     make_tree = partial(PatternTree, strip_exact(ctx.param), m, symmetry=sym)
     pats = run_patterns(make_tree, scene.mu, engine=ctx.engine, budget=scene.task_budget)
     items = []
     for found, doubt in zip(pats.found, pats.undecided):
         found, doubt = expand_orbits(found, sym, m), set(expand_orbits(doubt, sym, m))
-        items.append([{"contact": np.flatnonzero(s.masks(m)[0]).tolist(), "mu_c": None,
-                       "undecided": s in doubt} for s in sorted(found, key=lambda s: s.contact)])
+        items.append([{"contact": list(bits_to_nodes(s.contact, m)), "mu_c": None,
+                       "undecided": s in doubt} for s in sorted(found, key=lambda s: pattern_key(s.contact))])
     reps = None if sym is None else [len(f) for f in pats.found]
     c = pats.counters
     undecided = sum(len(u) for u in pats.undecided)
     if scene.dim == 2:
-        exact_sets = settle_patterns_2d(ctx.numerics, m, scene.mu, c, undecided, ctx.exact_param, scene.exact)
+        exact_sets = recheck_patterns_2d(ctx.numerics, m, scene.mu, c, undecided, ctx.exact_param, scene.exact)
         if exact_sets is not None:
             exact = [[{"contact": list(cs), "mu_c": None, "undecided": False}
-                      for cs in sorted(sets, key=lambda cs: sum(1 << i for i in cs))] for sets in exact_sets]
+                      for cs in sorted(sets, key=lambda cs: pattern_key(to_bits(cs)))] for sets in exact_sets]
             items = exact + items[len(exact):]
             undecided = 0
     tree = TreeStats.of(c, 2 ** m * len(scene.mu))        # partitions: what brute force would solve
@@ -421,7 +421,7 @@ def orbit_key(zero_u, zero_r, symmetry: Symmetry | None) -> OrbitKey:
     """The key of a pair of node sets (zero_u, zero_r: node indices): their bit words (bit i:
     node i), canonical under `symmetry` (Symmetry.canonical; None: the pair's own words).
     Every pair of an orbit has the same key; mu^c is invariant, so one task serves a key."""
-    bits = (sum(1 << i for i in zero_u), sum(1 << i for i in zero_r))
+    bits = (to_bits(zero_u), to_bits(zero_r))
     return bits if symmetry is None else symmetry.canonical(*bits)
 
 
@@ -449,19 +449,13 @@ def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
     for run, entry in zip(wanted, entries):
         for key, zu, zr, _ in entry:
             if key not in tasks:
-                tasks[key] = (_mask(zu, m), _mask(zr, m), run.mu)
+                tasks[key] = (to_mask(zu, m), to_mask(zr, m), run.mu)
     solve = partial(mu_critical, strip_exact(ctx.param), m, mu_max=ctx.scene.mu_max,
                     method=ctx.scene.mu_c_method, tol=ctx.scene.mu_c_tol, scale=ctx.scale)
     by_key = dict(zip(tasks, run_mu_c(solve, list(tasks.values()), engine=ctx.engine)))
     keyed = [[(key, item) for key, _, _, item in entry] for entry in entries]
     first = next((ks for r, ks in zip(wanted, keyed) if r is listed[0]), None) if listed else None
     return MuCValues(by_key, keyed, None if first is None else [key for key, _ in first])
-
-
-def _mask(nodes, m: int) -> np.ndarray:
-    z = np.zeros(m, dtype=bool)
-    z[list(nodes)] = True
-    return z
 
 
 def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:

@@ -22,6 +22,7 @@ import numpy as np
 
 from .plot import (ARROW_FRACTION, AXIAL_LABEL, DISP_FRACTION, WALL_FRACTION, axial_colours, bars_panel,
                    checked_model, configuration_of, item_index, message, mu_c_attr, mu_c_panel, run_group)
+from .nodesets import to_mask
 from .resultfile import check_items, read_counts, read_items, stored_scene, text
 
 VON_MISES_PERCENTILE = 95  # the colour scale ends here (point contacts concentrate the stress)
@@ -189,7 +190,7 @@ def _body_3d(ax, d: dict) -> None:
     drawn = _obstacles_3d(ax, d["obstacles"], X[c], n, size)
     if drawn is not None:
         ext.append(drawn)
-    in_c = np.isin(np.arange(m), pat["contact"])
+    in_c = to_mask(pat["contact"], m)
     P = Y[c]
     ax.scatter(*P[in_c].T, s=40, color="tab:red", edgecolors="black", linewidths=0.6, depthshade=False,
                zorder=6, label=f"contact set C ({int(in_c.sum())}): u_n = 0")

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .models.record import Model
+from .nodesets import to_mask
 
 #: cell-data names by cell family, in the VTU and in Configuration.element_values
 VON_MISES, AXIAL_FORCE = "von_mises", "axial_force"
@@ -191,12 +192,12 @@ def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[n
     at mu, normalised to sum r_n = 1: feasibility.decide on pattern_rows of the parametrisation."""
     from .build import contact_problem, unscale_u
     from .feasibility import decide
-    from .rows import Status, pattern_rows
     from .problem import parametrize
+    from .rows import Status, pattern_rows
     problem = contact_problem(scene, model)
     param = parametrize(problem)
     m = problem.m
-    zero_u = np.isin(np.arange(m), contact)
+    zero_u = to_mask(contact, m)
     dec = decide(pattern_rows(param, m, zero_u, ~zero_u), mu)
     status, x = dec.status, dec.x
     if status != Status.FEASIBLE:

@@ -122,7 +122,7 @@ class SolveStats:
     patterns_undecided: int | None = None    # patterns kept undecided (flagged)
     bnb: TreeStats | GlobalRouteStats | None = None
     socp_statuses: dict | None = None        # 3D patterns: {solver status: count}
-    numerics: dict | None = None             # numerics.Numerics.as_dict()
+    numerics: dict | None = None             # numerics.NumericsReport.as_dict()
     parallel: dict | None = None             # Engine.summary()
     environment: dict | None = None          # environment.environment()
 

@@ -16,7 +16,7 @@ import pytest
 
 from hpcwedge import exact as xq
 from hpcwedge.dd import BASIS_DEPENDENT, CANCELLATION_MIN, complementary_rays
-from hpcwedge.numerics import COND_SUSPECT, Numerics, judge_2d
+from hpcwedge.numerics import COND_SUSPECT, NumericsReport, settle_rays_2d
 from hpcwedge.problem import Parametrization, friction_rows_2d, strip_exact
 from hpcwedge.progress import Progress
 from test_stress import answer, grid, run, tan
@@ -50,25 +50,25 @@ def test_cancelling_step_is_measured_flagged_and_redone_exactly():
     assert bad.stats["cancellation"] == pytest.approx(want, rel=1e-6)
     assert want < CANCELLATION_MIN / 10 and bad.stats["close_calls"] == 0
     # the judgement: suspect by the cancellation alone (no close call, K well conditioned)
-    num = Numerics(lam_min=1.0, lam_max=1.0, fallback_max_m=10)
+    num = NumericsReport(lam_min=1.0, lam_max=1.0, fallback_max_m=10)
     assert num.cond < COND_SUSPECT
-    got, used = judge_2d(bad, pf, 1.0, 1, 1.0, num, lambda: p)
+    got, used = settle_rays_2d(bad, pf, 1.0, 1, 1.0, num, lambda: p)
     rec = num.runs[0]
     assert rec["suspect"] and rec["exact"] and rec["cancellation"] == bad.stats["cancellation"]
     assert num.exact_fallback == [1.0] and num.as_dict()["flagged"] and used is p
     assert got.zero.tolist() == exact.zero.tolist() and got.X.dtype == object
     # above the fallback limit: kept, reported as unresolved, with a warning line
-    num = Numerics(lam_min=1.0, lam_max=1.0, fallback_max_m=0)
-    got, _ = judge_2d(bad, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("no exact run above the limit"))
+    num = NumericsReport(lam_min=1.0, lam_max=1.0, fallback_max_m=0)
+    got, _ = settle_rays_2d(bad, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("no exact run above the limit"))
     assert got is bad and num.unresolved == [1.0] and num.as_dict()["flagged"]
     assert any("too close to call" in w for w in num.warnings())
     # the well-posed run is not flagged
-    num = Numerics(lam_min=1.0, lam_max=1.0, fallback_max_m=10)
-    judge_2d(good, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("not suspect"))
+    num = NumericsReport(lam_min=1.0, lam_max=1.0, fallback_max_m=10)
+    settle_rays_2d(good, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("not suspect"))
     assert not num.runs[0]["suspect"] and not num.as_dict()["flagged"]
     # ... unless the stiffness counts as ill-conditioned (cond 4 > cond_suspect 2)
-    num = Numerics(lam_min=1.0, lam_max=4.0, fallback_max_m=0, cond_suspect=2.0)
-    judge_2d(good, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("no exact run above the limit"))
+    num = NumericsReport(lam_min=1.0, lam_max=4.0, fallback_max_m=0, cond_suspect=2.0)
+    settle_rays_2d(good, pf, 1.0, 1, 1.0, num, lambda: pytest.fail("no exact run above the limit"))
     assert num.runs[0]["suspect"] and num.unresolved == [1.0]
 
 

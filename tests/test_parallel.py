@@ -20,7 +20,7 @@ from hpcwedge.faces import branching_nodes, face_task, run_faces
 from hpcwedge.mu_critical import mu_critical, run_mu_c
 from hpcwedge.nodesets import canonical_order
 from hpcwedge.parallel.checkpoint import CheckpointError, read_checkpoint
-from hpcwedge.parallel.jobs import bits_to_words, words_to_bits
+from hpcwedge.nodesets import bits_to_words, words_to_bits
 from hpcwedge.patterns import PatternTree, explore_task, run_patterns, sign_patterns
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import friction_rows_2d, parametrize

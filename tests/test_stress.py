@@ -231,13 +231,13 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
     from hpcwedge.build import build_model, contact_problem
     from hpcwedge.dd import face_rows, initial_basis
     from hpcwedge.faces import split_faces
-    from hpcwedge.numerics import Numerics
+    from hpcwedge.numerics import NumericsReport
 
     mu = 1.5 * tan(0.1)
     scene = grid._scene(SMALL_TAPER, mu, {})
     problem = contact_problem(scene, build_model(scene))
     m = problem.m
-    p_mu, _ = balanced_2d(parametrize(problem), mu, m, Numerics.of(problem, 10).scale)
+    p_mu, _ = balanced_2d(parametrize(problem), mu, m, NumericsReport.of(problem, 10).scale)
     A = friction_rows_2d(p_mu, mu, m)
     for face in split_faces(m, [5, 6, 7]):
         basis, _ = initial_basis(A, m, list(range(m)), False, face_rows(face, m))

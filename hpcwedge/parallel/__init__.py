@@ -14,13 +14,13 @@ over MPI (master / workers), and its checkpoints. One job per module:
 """
 from .checkpoint import CheckpointError, Checkpointer, checkpoint_path, read_checkpoint, write_checkpoint
 from .engine import EXIT_INTERRUPTED, Engine, run_tasks
-from .jobs import DEFAULT_BUDGET, Patterns, SubtreeJob, TaskJob, canonical_key, decode_rays, encode_rays
+from .jobs import DEFAULT_BUDGET, Patterns, SubtreeJob, TaskJob, decode_rays, encode_rays
 from .mpi import ParallelError, ranks_on_host, world
 from .tasks import (Interrupted, TaskCancelled, handler_for, register, registered, task_stopping, task_tick)
 from .worker import serve
 
 __all__ = ["CheckpointError", "Checkpointer", "checkpoint_path", "read_checkpoint", "write_checkpoint",
            "EXIT_INTERRUPTED", "Engine", "run_tasks", "DEFAULT_BUDGET", "Patterns", "SubtreeJob", "TaskJob",
-           "canonical_key", "decode_rays", "encode_rays", "ParallelError", "ranks_on_host", "world",
+           "decode_rays", "encode_rays", "ParallelError", "ranks_on_host", "world",
            "Interrupted", "TaskCancelled", "handler_for", "register", "registered", "task_stopping", "task_tick",
            "serve"]

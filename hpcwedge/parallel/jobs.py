@@ -23,35 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..nodesets import bits_to_words, pattern_key, words_to_bits
 from .checkpoint import CheckpointError
 
 #: budget multiplier when the pool holds enough tasks for every worker
 BUDGET_SCALE = 16
 #: default node budget of a subtree task (scene key run.task_budget)
 DEFAULT_BUDGET = 64
-
-
-def bits_to_words(values, words: int) -> np.ndarray:
-    """Bit sets (ints) as (rows, words) uint64: bit i of word w = node 64 w + i."""
-    out = np.zeros((len(values), words), dtype=np.uint64)
-    for r, v in enumerate(values):
-        for w in range(words):
-            out[r, w] = (v >> (64 * w)) & 0xFFFFFFFFFFFFFFFF
-    return out
-
-
-def words_to_bits(arr: np.ndarray) -> list[int]:
-    """bits_to_words undone: (rows, words) uint64 (or (rows,)) back to ints."""
-    arr = np.asarray(arr, dtype=np.uint64)
-    if arr.ndim == 1:
-        arr = arr[:, None]
-    return [sum(int(x) << (64 * w) for w, x in enumerate(row)) for row in arr]
-
-
-def canonical_key(subtree, m: int) -> int:
-    """Patterns sort by their gap set read as a binary word with node 0 first:
-    the serial depth-first order (contact before gap, node 0 decided first)."""
-    return int(format(subtree.gap, f"0{m}b")[::-1], 2)
 
 
 class SubtreeJob:
@@ -154,7 +132,7 @@ class SubtreeJob:
             self._push(int(i), Subtree(int(depth), c, g), np.array(x, dtype=np.float64) if h else None)
 
     def output(self) -> "Patterns":
-        key = lambda s: canonical_key(s, self.m)
+        key = lambda s: pattern_key(s.contact)
         return Patterns(mus=self.mus, m=self.m,
                         found=[sorted(lst, key=key) for lst in self.found],
                         undecided=[sorted(lst, key=key) for lst in self.undecided],
