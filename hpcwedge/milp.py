@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .problem import Parametrization
+from .problem import Parametrization, blocks
 from .rows import Status
 
 #: a MILP optimum sum(r_n) below this (the normalisation makes it a share in [0, 1]) is
@@ -51,7 +51,7 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
     the optimum is > 0. s > 0 weighs u_n against r (numerics.NumericsReport.scale)."""
     from scipy.optimize import Bounds, LinearConstraint, milp
     U, R = param.U, param.R
-    Un, Rn, Rt = U[:m], R[:m], R[m:2 * m]
+    Un, (Rn, Rt) = blocks(U, m, 2)[0], blocks(R, m, 2)
     d = param.d
     zero = np.zeros((m, m))
     eye = np.eye(m)

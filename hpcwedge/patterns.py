@@ -24,7 +24,7 @@ from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
 from .parallel.tasks import task_stopping
 from .rows import Status, node_rows, pattern_rows, problem_dim
 from .socp import VERIFY_TOL, violation
-from .problem import Parametrization
+from .problem import Parametrization, blocks
 from .symmetry import Symmetry
 
 MEETS_TOL = 1e-12
@@ -136,7 +136,7 @@ class PatternTree:
         self.order = list(order)
         #: 3D, static order: each solve minimises the next node's u_n (see explore)
         self.steer = self.dim == 3 and friction and not self.dynamic
-        U = param.U[:m]
+        U = blocks(param.U, m, self.dim)[0]
         self._steer = U / np.maximum(np.linalg.norm(U, axis=1, keepdims=True), 1e-300)
         #: 3D with friction and learn_cores: the infeasible cores learnt so far (Cores). Off by
         #: default: a core learnt in one subtree prunes nodes of another, so the solver
@@ -248,7 +248,7 @@ class PatternTree:
         m = self.m
         fixed = node.contact | node.gap
         free = [i for i in self.order if not fixed >> i & 1]
-        u = self.param.U[:m] @ x
+        u = blocks(self.param.U, m, 3)[0] @ x
         r = np.linalg.norm((self.param.R[:3 * m] @ x).reshape(3, m), axis=0)
         v = np.minimum(np.maximum(u, 0) / max(np.abs(u).max(), 1e-300), r / max(r.max(), 1e-300))
         return max(free, key=lambda i: v[i])          # first maximum in `order`
@@ -305,7 +305,7 @@ def _meets(param: Parametrization, m: int, x: np.ndarray, i: int, contact: bool,
     scale = max(np.abs(param.U @ x).max(), np.abs(param.R @ x).max(), 1e-300)
     if contact:
         return abs(param.U[i] @ x) <= tol * scale
-    return max(abs(param.R[a * m + i] @ x) for a in range(dim)) <= tol * scale
+    return max(abs(B[i] @ x) for B in blocks(param.R, m, dim)) <= tol * scale
 
 
 # ---------------------------------------------------------------- the "subtree" task of the engine

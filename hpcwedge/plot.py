@@ -23,6 +23,7 @@ import os
 import numpy as np
 
 from .files import replace_atomic
+from .problem import blocks
 from .resultfile import (RangeError, check_items, index, index_range, open_result, read_items, read_model, read_rays,
                       read_run, text)
 
@@ -156,8 +157,7 @@ def mu_c_attr(attrs) -> float | None:
 # --------------------------------------------------------------------------- left panel
 
 def _split(ray_vec: np.ndarray, m: int):
-    u, r = ray_vec[:2 * m], ray_vec[2 * m:]
-    return u[:m], u[m:], r[:m], r[m:]          # u_n, u_t, r_n, r_t
+    return blocks(ray_vec, m, 4)              # u_n, u_t, r_n, r_t
 
 
 def _config_panel(ax, d: dict) -> None:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .problem import Parametrization
+from .problem import Parametrization, blocks
 
 
 class Status(enum.StrEnum):
@@ -101,7 +101,7 @@ def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.
     if problem_dim(param, m) == 3:
         return _pattern_rows_3d(param, m, np.asarray(zero_u, bool), np.asarray(zero_r, bool), friction)
     U, R = param.U, param.R
-    Un, Rn, Rt = U[:m], R[:m], R[m:2 * m]
+    Un, (Rn, Rt) = blocks(U, m, 2)[0], blocks(R, m, 2)
     z = np.zeros_like(Un)
     a0, a1, eq = [], [], []
 
@@ -126,7 +126,7 @@ def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.
 
 def _pattern_rows_3d(param, m, zu, zr, friction):
     U, R = param.U, param.R
-    Un, Rn, Rt1, Rt2 = U[:m], R[:m], R[m:2 * m], R[2 * m:3 * m]
+    Un, (Rn, Rt1, Rt2) = blocks(U, m, 3)[0], blocks(R, m, 3)
     norm = Rn.sum(axis=0)
     eq = _unit(np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]]))
     lin = _unit(Un[~zu])
@@ -191,7 +191,7 @@ class NodeRows:
 def node_rows(param: Parametrization, m: int) -> NodeRows:
     """Every node's rows (NodeRows) of the parametrisation's m contact nodes (3D)."""
     U, R = param.U, param.R
-    Un, Rn, Rt1, Rt2 = U[:m], R[:m], R[m:2 * m], R[2 * m:3 * m]
+    Un, (Rn, Rt1, Rt2) = blocks(U, m, 3)[0], blocks(R, m, 3)
     un = np.zeros_like(Un)
     keep = _kept(Un)
     un[keep] = Un[keep] / np.linalg.norm(Un[keep], axis=1, keepdims=True)
