@@ -152,15 +152,16 @@ def exact_rays(pq: Parametrization, m: int, mu: float, progress=None) -> DDResul
     return complementary_rays(friction_rows_2d(pq, mu, m, exact=True), m, exact=True, progress=progress)
 
 
-def recheck_patterns_2d(numerics: NumericsReport, m: int, mus, counters: dict, undecided: int,
-                        exact_param: Callable[[], Parametrization],
+def recheck_patterns_2d(numerics: NumericsReport, m: int, mus, near: int, undecided: int,
+                        undecided_solves: int, exact_param: Callable[[], Parametrization],
                         exact_scene: bool) -> list[set[tuple[int, ...]]] | None:
     """The 2D sign patterns per mu from the exact rays (SPEC §2), when the LP branch and
-    bound's are suspect (module doc; counters: its status counts, undecided: patterns no
-    solver decided) and m <= the fallback limit, or the scene asks for exact arithmetic.
+    bound's are suspect (module doc; near: its LP points feasible only to HiGHS's tolerance,
+    undecided: patterns no solver decided, undecided_solves: its solves no solver decided)
+    and m <= the fallback limit, or the scene asks for exact arithmetic.
     None: keep the branch and bound's (a suspect one is noted)."""
-    near = int(counters.get("status_near_boundary", 0))
-    suspect = bool(near or undecided or counters.get("undecided", 0) or numerics.cond > numerics.cond_suspect)
+    near = int(near)
+    suspect = bool(near or undecided or undecided_solves or numerics.cond > numerics.cond_suspect)
     numerics.patterns = {"suspect": suspect, "near_boundary": near, "undecided": undecided,
                          "exact": False}
     if not (suspect or exact_scene):

@@ -12,7 +12,7 @@ the subtree (never pruned on doubt); an undecided full pattern is reported in
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -22,9 +22,10 @@ from .lp import lp_violation
 from .nodesets import bits_to_mask, to_bits
 from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
 from .parallel.tasks import task_stopping
+from .problem import Parametrization, blocks
+from .results import TreeStats
 from .rows import Status, node_rows, pattern_rows, problem_dim
 from .socp import VERIFY_TOL, violation
-from .problem import Parametrization, blocks
 from .symmetry import Symmetry
 
 MEETS_TOL = 1e-12
@@ -329,8 +330,10 @@ class PatternContext:
         return {"make_tree": self.make_tree, "mus": self.mus, "_trees": {}}
 
 
-#: the counters of a subtree task that do not depend on the split of the work
-STAT_KEYS = ("nodes", "solves", "skipped", "pruned", "undecided")
+#: the counters of a subtree task that do not depend on the split of the work: stats.bnb's
+STAT_KEYS = tuple(f.name for f in fields(TreeStats) if f.name != "partitions")
+#: a subtree task's counter of how solves were decided: STATUS_PREFIX + feasibility's key
+STATUS_PREFIX = "status_"
 
 
 def explore_task(ctx: PatternContext, payload):
@@ -341,7 +344,7 @@ def explore_task(ctx: PatternContext, payload):
     out = ctx.tree(i).explore(subtree, budget, x=x)
     stats = {k: getattr(out.stats, k) for k in STAT_KEYS}
     for k, v in (getattr(out.stats, "statuses", None) or {}).items():
-        stats[f"status_{k}"] = v
+        stats[STATUS_PREFIX + k] = v
     return out.found, out.open, stats, list(getattr(out, "undecided", [])), list(out.open_x)
 
 
@@ -354,3 +357,9 @@ def run_patterns(make_tree, mus, engine: Engine | None = None, budget: int = DEF
     functools.partial(PatternTree, param, m) — for 2D and 3D alike."""
     engine = engine or Engine()
     return engine.run(SubtreeJob(name, make_tree, mus, budget)).output()
+
+
+def solver_statuses(counters: dict) -> dict:
+    """{status: count} of a patterns job's counters STATUS_PREFIX + status (how each solve
+    was decided: explore_task's), in the counters' order."""
+    return {k[len(STATUS_PREFIX):]: v for k, v in counters.items() if k.startswith(STATUS_PREFIX)}

@@ -37,7 +37,7 @@ from .mu_critical import MuC, mu_critical, run_mu_c
 from .nodesets import bits_to_nodes, canonical_order, pattern_key, to_bits, to_mask
 from .numerics import NumericsReport, checked_rays_2d, note_mu_c, recheck_patterns_2d, settle_rays_2d
 from .parallel import Engine, ranks_on_host
-from .patterns import BnBStats, PatternTree, expand_orbits, run_patterns
+from .patterns import BnBStats, PatternTree, expand_orbits, run_patterns, solver_statuses
 from .problem import (ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize,
                       ray_vectors, strip_exact)
 from .progress import MemoryGuard, Progress, out_of_memory
@@ -388,7 +388,9 @@ def patterns(ctx: Context) -> PatternSets:
     c = pats.counters
     undecided = sum(len(u) for u in pats.undecided)
     if scene.dim == 2:
-        exact_sets = recheck_patterns_2d(ctx.numerics, m, scene.mu, c, undecided, ctx.exact_param, scene.exact)
+        near = solver_statuses(c).get("near_boundary", 0)
+        exact_sets = recheck_patterns_2d(ctx.numerics, m, scene.mu, near, undecided, c.get("undecided", 0),
+                                         ctx.exact_param, scene.exact)
         if exact_sets is not None:
             exact = [[{"contact": list(cs), "mu_c": None, "undecided": False}
                       for cs in sorted(sets, key=lambda cs: pattern_key(to_bits(cs)))] for sets in exact_sets]
@@ -409,12 +411,6 @@ def _file_patterns(found: PatternSets, runs: list[Run], stats: SolveStats) -> No
     if found.representatives is not None:
         stats.symmetry.representatives = found.representatives
     stats.patterns_undecided, stats.bnb, stats.socp_statuses = found.undecided, found.tree, found.statuses
-
-
-def solver_statuses(counters: dict) -> dict:
-    """{status: count} of a patterns job's counters "status_<status>" (how each solve was
-    decided; the prefix is the engine's, parallel.explore_task), in the counters' order."""
-    return {k[len("status_"):]: v for k, v in counters.items() if k.startswith("status_")}
 
 
 def orbit_key(zero_u, zero_r, symmetry: Symmetry | None) -> OrbitKey:
