@@ -4,7 +4,7 @@ A thin layer over the stages the command line runs: every scene, however it is m
 scene table that goes through the one validator (scene.parse_scene), so every check,
 default and error message (a SceneError naming the key) is the parser's; `solve` is
 pipeline.run_scene; the result file, its JSON, the figure and the VTU export are
-results.py, plot.py and configuration.py.
+resultfile.py, plot.py, recovery.py and export.py.
 
 A scene made in Python (a dict, keyword arguments, arrays) keeps its table as TOML text
 (Scene.text): its hash identifies it, and a result file stores it, so that `show`, `plot`
@@ -305,14 +305,14 @@ def solve(scene: Scene | str | os.PathLike | Mapping, *, progress: bool = False)
 
 
 def write_result(result: Result, path: str | os.PathLike) -> None:
-    """Write `result` as a result file (SPEC §4; atomic, checksummed: results.write_result),
+    """Write `result` as a result file (SPEC §4; atomic, checksummed: resultfile.write_result),
     which ``hpcwedge show``, ``plot`` and ``export`` read like one written by ``hpcwedge run``."""
     from .resultfile import write_result as write
     write(os.fspath(path), result)
 
 
 def read_result(path: str | os.PathLike, *, with_rays: bool = True) -> dict:
-    """The ``show --json`` object of a result file (results.read_result); FileError (one
+    """The ``show --json`` object of a result file (resultfile.read_result); FileError (one
     line) for a missing, damaged or malformed file.
 
     Examples
@@ -387,13 +387,13 @@ def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *,
 
     Returns
     -------
-    configuration.Configuration
+    recovery.Configuration
         ``displacement`` and ``reaction`` of every node, ``element_values`` (von Mises,
         bar forces) of every element, ``model``, ``label``.
 
     Raises
     ------
-    configuration.ConfigurationError
+    recovery.ConfigurationError
         One line: a bad index, a result without a body (a stiffness scene), a bad file.
 
     Examples

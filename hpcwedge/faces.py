@@ -150,7 +150,7 @@ def face_task(ctx: FaceContext, payload: tuple) -> dict:
 
 def face_result(res: dict) -> DDResult:
     """The dd.DDResult of a face_task result (as returned, or as read back from a
-    checkpoint); stats["face"] is the face, as dd.merge_results expects."""
+    checkpoint); stats["face"] is the face, as merge_results expects."""
     contact, gap = np.asarray(res["contact"], dtype=bool), np.asarray(res["gap"], dtype=bool)
     m = len(contact)
     zero = np.unpackbits(np.asarray(res["zero"], dtype=np.uint8).reshape(-1, -(-3 * m // 8)),
@@ -168,7 +168,7 @@ def run_faces(rows: list, m: int, exact: bool = False, engine: Engine | None = N
               nodes=(), name: str = "rays", max_memory_gb: float | str = "auto") -> list[DDResult]:
     """The complementary rays at every mu, the double description split over the
     faces of the branching nodes `nodes` (SPEC §5; the scene's choice,
-    dd.branching_nodes; none: one face, the whole cone), one "face" task per
+    branching_nodes; none: one face, the whole cone), one "face" task per
     (mu, face), through the engine.
 
     rows: the constraint rows A of every mu (problem.friction_rows_2d). Returns one

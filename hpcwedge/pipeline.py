@@ -14,9 +14,9 @@ returning a typed record that the loop files into the Result and its SolveStats:
 
 Lists are in canonical order (SPEC §4). 2D float decisions too close to call are detected
 and, on small problems, redone exactly (numerics.py). The units of work the parallel layer
-distributes (parallel.run_patterns: budgeted PatternTree.explore calls over subtrees;
-parallel.run_mu_c: mu^c of one cone or pattern) are the same in both dimensions; the 2D
-double description is split over faces when the scene asks (parallel.run_faces: the DD of
+distributes (patterns.run_patterns: budgeted PatternTree.explore calls over subtrees;
+mu_critical.run_mu_c: mu^c of one cone or pattern) are the same in both dimensions; the 2D
+double description is split over faces when the scene asks (faces.run_faces: the DD of
 one face of a few branching nodes, at one mu).
 """
 from __future__ import annotations
@@ -152,10 +152,10 @@ class GlobalMuC:
 def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None,
               comm=None) -> Result:
     """Every answer the scene asks for: its plan's stages in order (Scene.plan). Sign
-    patterns and mu^c run as tasks of `engine` (parallel.py: in-process by default; the
+    patterns and mu^c run as tasks of `engine` (parallel/: in-process by default; the
     master of an MPI run, with checkpoints, from the command line). The 2D rays run as one
     double description per mu, or split over the faces the scene asks for (run.face_split;
-    "auto": 3 nodes from m = 16 on) as "face" tasks (parallel.run_faces) — the split, and so
+    "auto": 3 nodes from m = 16 on) as "face" tasks (faces.run_faces) — the split, and so
     every bit of the result, depends on the scene, not on the rank count; a resumed run keeps
     its checkpoint's split. `comm`: the master's communicator of an MPI run (the command
     line), for the collective condense stage (the workers call condense(None, comm)); None:
@@ -373,7 +373,7 @@ def cones(r: Rays) -> Cones:
 
 def patterns(ctx: Context) -> PatternSets:
     """The sign-patterns stage: the feasible patterns at every listed mu, branch and bound
-    over subtrees as engine tasks (parallel.run_patterns; with a symmetry, over orbit
+    over subtrees as engine tasks (patterns.run_patterns; with a symmetry, over orbit
     representatives, expanded here). 2D: redone from the exact rays when the LP decisions
     are suspect and m small (numerics.recheck_patterns_2d). A warning for undecided ones."""
     scene, m, sym = ctx.scene, ctx.m, ctx.symmetry
@@ -435,7 +435,7 @@ def mu_c_keys(run: Run, m: int, symmetry: Symmetry | None) -> list[tuple[OrbitKe
 def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
     """The mu_c stage: mu^c of the cones / patterns of every run (every_run), or of the first
     run that lists any (for the global value), one task per orbit key (mu_c_keys) at the
-    least mu that lists it (runs in increasing mu), through the engine (parallel.run_mu_c)."""
+    least mu that lists it (runs in increasing mu), through the engine (mu_critical.run_mu_c)."""
     m = ctx.m
     listed = [r for r in runs if r.cones or r.patterns]
     wanted = runs if every_run else listed[:1]

@@ -87,7 +87,7 @@ class TreeStats:
 
 @dataclass
 class GlobalRouteStats:
-    """stats.bnb after a global mu^c search (patterns.global_mu_critical's BnBStats, its route
+    """stats.bnb after a global mu^c search (global_mu_c.global_mu_critical's BnBStats, its route
     "tree" or "milp" and MILP counts); it replaces the patterns stage's TreeStats."""
 
     solves: int = 0

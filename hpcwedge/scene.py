@@ -88,9 +88,9 @@ class Scene:
     checkpoint_every_s: float
     text: str = field(repr=False, default="")
     base_dir: str = "."
-    task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel.py)
+    task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel/)
     symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
-    face_split: int | str = "auto"  # run.face_split: branching nodes of the 2D DD split (dd.branching_nodes)
+    face_split: int | str = "auto"  # run.face_split: branching nodes of the 2D DD split (faces.branching_nodes)
     condense: str = "auto"         # run.condense: auto | serial | distributed (under mpirun)
     obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
     obstacle_key: str = "obstacle"  # where they came from, for messages

@@ -60,7 +60,7 @@ def test_complementary_filter():
 
 @pytest.mark.parametrize("seed", range(10))
 def test_patterns_of_rays_equals_the_packages_map(seed):
-    """2^m contact sets tried one by one == patterns.implied_patterns' subset enumeration."""
+    """2^m contact sets tried one by one == cones.implied_patterns' subset enumeration."""
     rng = np.random.default_rng(500 + seed)
     m = 3 + seed % 3
     p = parametrize(random_problem(rng, m, free=bool(seed % 2)))
