@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hpcwedge.pipeline import condense, mu_c_keys, orbit_key, run_scene
-from hpcwedge.results import GlobalRouteStats, Run, SolveStats, SymmetryStats, TreeStats
+from hpcwedge.results import Run
 from hpcwedge.scene import parse_scene
 
 
@@ -306,26 +306,6 @@ def test_condense_stage_record():
     assert raw.model is None and raw.seconds == 0.0 and raw.problem.m == 1
     built = condense(scene({"kind": "plug2d", "rows": 2}))
     assert built.model is not None and built.problem.m == 4 and built.seconds > 0
-
-
-def test_solve_stats_as_dict_is_the_file_object():
-    """SolveStats.as_dict: the fields that are set, in the result file's key order."""
-    s = SolveStats()
-    assert s.as_dict() == {"dd": [], "lp_solves": 0, "mu_c_polished": 0, "mu_c_unpolished": 0, "lp_undecided": 0}
-    s.add(solves=3, undecided=1, polished=1)
-    s.add(unpolished=2)
-    s.symmetry = SymmetryStats(2)
-    s.bnb = TreeStats.of({"solves": 4, "status_optimal": 1}, partitions=8)
-    s.numerics = {}
-    d = s.as_dict()
-    assert list(d) == ["dd", "lp_solves", "mu_c_polished", "mu_c_unpolished", "lp_undecided", "symmetry", "bnb",
-                       "numerics"]
-    assert (d["lp_solves"], d["lp_undecided"], d["mu_c_polished"], d["mu_c_unpolished"]) == (3, 1, 1, 2)
-    assert d["symmetry"] == {"order": 2}
-    assert d["bnb"] == {"nodes": 0, "solves": 4, "skipped": 0, "pruned": 0, "undecided": 0, "partitions": 8}
-    s.bnb = GlobalRouteStats(solves=1, nodes=2, route="milp")
-    assert list(s.as_dict()["bnb"]) == ["solves", "skipped", "undecided", "nodes", "route", "milp_solves",
-                                        "milp_nodes"]
 
 
 def test_stats_keys_of_a_patterns_run():
