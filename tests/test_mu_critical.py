@@ -1,5 +1,9 @@
-"""mu^c: analytic single-node values, the cone route against the pattern
-branch and bound, and exact-arithmetic DD on both sides of the value."""
+"""mu_critical.py: the dispatch by dimension and the "mu_c" task — the cone route against the
+global branch and bound with exact-arithmetic DD on both sides of the value, the bisection
+method's tolerance, plug3d's tan(taper), and a task that stops within a solve. The routes
+themselves: test_mu_bracket.py (2D), test_dinkelbach.py and test_kkt.py (3D)."""
+import math
+
 import numpy as np
 import pytest
 
@@ -28,20 +32,6 @@ def cone_route(prob, mu):
         assert r.polished
         vals.append(r.mu_c)
     return min(vals) if vals else None
-
-
-@pytest.mark.parametrize("seed", range(12))
-def test_single_node_formula(seed):
-    rng = np.random.default_rng(seed)
-    G = rng.standard_normal((2, 2))
-    K = G @ G.T + 0.1 * np.eye(2)
-    p = parametrize(ContactProblem(2, K, np.zeros((2, 0))))
-    r = mu_critical(p, 1, np.array([True]), np.array([False]), mu_max=1e4)
-    want = K[1, 1] / abs(K[0, 1])
-    if want > 1e4:
-        assert r.mu_c is None
-    else:
-        assert r.polished and abs(r.mu_c - want) <= 1e-10 * want
 
 
 @pytest.mark.parametrize("seed", range(16))
@@ -73,97 +63,10 @@ def test_bisection_method_tolerance():
 
 
 # ------------------------------------------------------------------------ 3D
-import math                                                          # noqa: E402
-
-from hpcwedge.dinkelbach import max_ratio                          # noqa: E402
-from hpcwedge.feasibility import decide                            # noqa: E402
-from hpcwedge.patterns import sign_patterns                        # noqa: E402
-from hpcwedge.rows import Status, pattern_rows                     # noqa: E402
-from hpcwedge.socp import violation                                # noqa: E402
-from instances import frames_3d, random_problem_3d                   # noqa: E402
-
-
-def node_formula_3d(K):
-    """SPEC §6: one node, mu^c = 1 / ||K_tt^-1 k_tn||."""
-    return 1.0 / np.linalg.norm(np.linalg.solve(K[1:, 1:], K[1:, 0]))
-
-
-@pytest.mark.parametrize("seed", range(100))
-def test_single_node_formula_3d(seed):
-    rng = np.random.default_rng(seed)
-    G = rng.standard_normal((3, 3))
-    K = G @ G.T + rng.uniform(0.01, 1.0) * np.eye(3)
-    want = node_formula_3d(K)
-    p = parametrize(ContactProblem(3, K, np.zeros((3, 0))))
-    r = mu_critical(p, 1, np.array([True]), np.array([False]), mu_max=1e4)
-    if want > 1e4:
-        assert r.mu_c is None
-    else:
-        assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
-
 
 def test_single_node_uncoupled_has_no_wedge_at_any_mu():
     p = parametrize(ContactProblem(3, np.diag([2.0, 1.0, 3.0]), np.zeros((3, 0))))
     assert global_mu_critical(p, 1, 100.0) == (None, "none_at_any_mu")
-
-
-@pytest.mark.parametrize("seed", range(12))
-def test_decoupled_nodes_3d(seed):
-    """m independent nodes (K block diagonal over nodes, each node in its own
-    frame): a pattern is feasible as soon as one contact node carries load, so its
-    mu^c is the least single-node value over its contact nodes (the others unload:
-    exercises the support recursion of the polish); the global mu^c is the least."""
-    rng = np.random.default_rng(300 + seed)
-    m = 3
-    K = np.zeros((3 * m, 3 * m))
-    vals = []
-    for i in range(m):
-        G = rng.standard_normal((3, 3))
-        k = G @ G.T + 0.3 * np.eye(3)
-        idx = [i, m + i, 2 * m + i]
-        K[np.ix_(idx, idx)] = k
-        vals.append(node_formula_3d(k))
-    p = parametrize(ContactProblem(3, K, np.zeros((3 * m, 0))))
-    for bits in range(1, 1 << m):
-        zu = np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
-        want = min(v for v, c in zip(vals, zu) if c)
-        r = mu_critical(p, m, zu, ~zu, mu_max=1e3)
-        if want > 1e3:
-            assert r.mu_c is None
-            continue
-        assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
-    g, status = global_mu_critical(p, m, 1e3)
-    if min(vals) < 1e3:
-        assert status == "found" and abs(g - min(vals)) <= 1e-9 * min(vals)
-
-
-def _cases_3d():
-    for seed in range(36):
-        yield seed, [2, 3, 4][seed % 3], bool(seed % 2)
-
-
-@pytest.mark.parametrize("seed,m,free", list(_cases_3d()))
-def test_3d_pattern_mu_c_certified_and_against_bisection(seed, m, free):
-    """Every feasible pattern at mu = 4: the polished mu^c comes with a point x*
-    whose largest friction ratio is mu^c (feasible at mu^c to 1e-12: an upper
-    bound), the pattern is infeasible at mu^c (1 - 1e-4) (a verified Farkas
-    certificate: a lower bound) and not found feasible at mu^c (1 - 1e-6) (there,
-    infeasible or undecided), and a plain bisection on SOCP feasibility agrees
-    to its own accuracy (it is pulled low by the solver's feasibility tolerance,
-    measured up to ~1e-5 relative where a contact node carries little load)."""
-    rng = np.random.default_rng(7000 + seed)
-    p = parametrize(random_problem_3d(rng, m, free))
-    for zu, zr in sign_patterns(p, m, 4.0):
-        r = mu_critical(p, m, zu, zr, mu_hi=4.0)
-        assert r.polished
-        rows = pattern_rows(p, m, zu, zr)
-        assert violation(rows, r.mu_c, r.x) <= 1e-12
-        assert max_ratio(rows, r.x) <= r.mu_c * (1 + 1e-12)
-        assert decide(rows, r.mu_c * (1 - 1e-4)).status == Status.INFEASIBLE
-        assert decide(rows, r.mu_c * (1 - 1e-6)).status != Status.FEASIBLE      # infeasible or undecided
-        assert decide(rows, r.mu_c * (1 + 1e-6)).status != Status.INFEASIBLE
-        b = mu_critical(p, m, zu, zr, mu_hi=4.0, method="bisection", tol=1e-8)
-        assert r.mu_c * (1 - 1e-4) <= b.mu_c <= r.mu_c * (1 + 1e-8)
 
 
 @pytest.mark.parametrize("taper", [3.0, 10.0, 25.0])
@@ -181,33 +84,6 @@ def test_plug3d_global_mu_c_is_tan_taper(taper):
     allc = np.ones(10, dtype=bool)
     r = mu_critical(p, 10, allc, ~allc, mu_hi=1.0)
     assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
-
-
-def _bisect_ur(prob, contact, lo, hi, sides, inner, rtol=1e-10):
-    from hpcwedge.reference import bisect, ur_pyramid_feasible
-    return bisect(lambda mu: ur_pyramid_feasible(prob, contact, mu, sides, inner), lo, hi, rtol)
-
-
-@pytest.mark.parametrize("seed", range(8))
-def test_3d_mu_c_inside_an_independent_bracket(seed):
-    """Bisection (to 1e-10) on the (u, r) formulation with HiGHS on circumscribed and
-    inscribed pyramids of 512 facets: mu^c lies between the two values, which
-    enclose it within a factor 1/cos(pi/512) = 1 + 1.9e-5 — a different
-    formulation, a different solver, no parametrisation."""
-    m = [2, 3][seed % 2]
-    for k in range(20):
-        prob = random_problem_3d(np.random.default_rng(8100 + 100 * seed + k), m, free=bool(seed % 2))
-        p = parametrize(prob)
-        pats = sign_patterns(p, m, 4.0)
-        if pats:
-            break
-    zu, zr = pats[len(pats) // 2]
-    r = mu_critical(p, m, zu, zr, mu_hi=4.0)
-    assert r.polished
-    lower = _bisect_ur(prob, zu, 0.0, 4.0, 512, inner=False)
-    upper = _bisect_ur(prob, zu, 0.0, 4.0 / math.cos(math.pi / 512), 512, inner=True)
-    assert lower * (1 - 1e-7) <= r.mu_c <= upper * (1 + 1e-7)
-    assert upper <= lower / math.cos(math.pi / 512) ** 2 * (1 + 1e-6)
 
 
 # ------------------------------------------------------------------ stopping inside a task (issue 11)

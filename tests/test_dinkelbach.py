@@ -1,0 +1,89 @@
+"""dinkelbach.py: the 3D route of a pattern's mu^c (Dinkelbach iterations, the KKT polish and
+its support recursion), through mu_critical's dispatch: analytic single-node values,
+decoupled nodes, and an independent bracket ((u, r) formulation, HiGHS on pyramids)."""
+import math
+
+import numpy as np
+import pytest
+
+from hpcwedge.global_mu_c import global_mu_critical
+from hpcwedge.mu_critical import mu_critical
+from hpcwedge.patterns import sign_patterns
+from hpcwedge.problem import ContactProblem, parametrize
+from instances import random_problem_3d
+
+
+def node_formula_3d(K):
+    """SPEC §6: one node, mu^c = 1 / ||K_tt^-1 k_tn||."""
+    return 1.0 / np.linalg.norm(np.linalg.solve(K[1:, 1:], K[1:, 0]))
+
+
+@pytest.mark.parametrize("seed", range(100))
+def test_single_node_formula_3d(seed):
+    rng = np.random.default_rng(seed)
+    G = rng.standard_normal((3, 3))
+    K = G @ G.T + rng.uniform(0.01, 1.0) * np.eye(3)
+    want = node_formula_3d(K)
+    p = parametrize(ContactProblem(3, K, np.zeros((3, 0))))
+    r = mu_critical(p, 1, np.array([True]), np.array([False]), mu_max=1e4)
+    if want > 1e4:
+        assert r.mu_c is None
+    else:
+        assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_decoupled_nodes_3d(seed):
+    """m independent nodes (K block diagonal over nodes, each node in its own
+    frame): a pattern is feasible as soon as one contact node carries load, so its
+    mu^c is the least single-node value over its contact nodes (the others unload:
+    exercises the support recursion of the polish); the global mu^c is the least."""
+    rng = np.random.default_rng(300 + seed)
+    m = 3
+    K = np.zeros((3 * m, 3 * m))
+    vals = []
+    for i in range(m):
+        G = rng.standard_normal((3, 3))
+        k = G @ G.T + 0.3 * np.eye(3)
+        idx = [i, m + i, 2 * m + i]
+        K[np.ix_(idx, idx)] = k
+        vals.append(node_formula_3d(k))
+    p = parametrize(ContactProblem(3, K, np.zeros((3 * m, 0))))
+    for bits in range(1, 1 << m):
+        zu = np.array([(bits >> i) & 1 for i in range(m)], dtype=bool)
+        want = min(v for v, c in zip(vals, zu) if c)
+        r = mu_critical(p, m, zu, ~zu, mu_max=1e3)
+        if want > 1e3:
+            assert r.mu_c is None
+            continue
+        assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
+    g, status = global_mu_critical(p, m, 1e3)
+    if min(vals) < 1e3:
+        assert status == "found" and abs(g - min(vals)) <= 1e-9 * min(vals)
+
+
+def _bisect_ur(prob, contact, lo, hi, sides, inner, rtol=1e-10):
+    from hpcwedge.reference import bisect, ur_pyramid_feasible
+    return bisect(lambda mu: ur_pyramid_feasible(prob, contact, mu, sides, inner), lo, hi, rtol)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_3d_mu_c_inside_an_independent_bracket(seed):
+    """Bisection (to 1e-10) on the (u, r) formulation with HiGHS on circumscribed and
+    inscribed pyramids of 512 facets: mu^c lies between the two values, which
+    enclose it within a factor 1/cos(pi/512) = 1 + 1.9e-5 — a different
+    formulation, a different solver, no parametrisation."""
+    m = [2, 3][seed % 2]
+    for k in range(20):
+        prob = random_problem_3d(np.random.default_rng(8100 + 100 * seed + k), m, free=bool(seed % 2))
+        p = parametrize(prob)
+        pats = sign_patterns(p, m, 4.0)
+        if pats:
+            break
+    zu, zr = pats[len(pats) // 2]
+    r = mu_critical(p, m, zu, zr, mu_hi=4.0)
+    assert r.polished
+    lower = _bisect_ur(prob, zu, 0.0, 4.0, 512, inner=False)
+    upper = _bisect_ur(prob, zu, 0.0, 4.0 / math.cos(math.pi / 512), 512, inner=True)
+    assert lower * (1 - 1e-7) <= r.mu_c <= upper * (1 + 1e-7)
+    assert upper <= lower / math.cos(math.pi / 512) ** 2 * (1 + 1e-6)

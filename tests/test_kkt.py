@@ -1,0 +1,42 @@
+"""kkt.py: the KKT Newton certificate of a 3D pattern's mu^c — the polished point satisfies
+every row at mu^c, the pattern is proven infeasible just below, and bisection agrees."""
+import numpy as np
+import pytest
+
+from hpcwedge.dinkelbach import max_ratio
+from hpcwedge.feasibility import decide
+from hpcwedge.mu_critical import mu_critical
+from hpcwedge.patterns import sign_patterns
+from hpcwedge.problem import parametrize
+from hpcwedge.rows import Status, pattern_rows
+from hpcwedge.socp import violation
+from instances import random_problem_3d
+
+
+def _cases_3d():
+    for seed in range(36):
+        yield seed, [2, 3, 4][seed % 3], bool(seed % 2)
+
+
+@pytest.mark.parametrize("seed,m,free", list(_cases_3d()))
+def test_3d_pattern_mu_c_certified_and_against_bisection(seed, m, free):
+    """Every feasible pattern at mu = 4: the polished mu^c comes with a point x*
+    whose largest friction ratio is mu^c (feasible at mu^c to 1e-12: an upper
+    bound), the pattern is infeasible at mu^c (1 - 1e-4) (a verified Farkas
+    certificate: a lower bound) and not found feasible at mu^c (1 - 1e-6) (there,
+    infeasible or undecided), and a plain bisection on SOCP feasibility agrees
+    to its own accuracy (it is pulled low by the solver's feasibility tolerance,
+    measured up to ~1e-5 relative where a contact node carries little load)."""
+    rng = np.random.default_rng(7000 + seed)
+    p = parametrize(random_problem_3d(rng, m, free))
+    for zu, zr in sign_patterns(p, m, 4.0):
+        r = mu_critical(p, m, zu, zr, mu_hi=4.0)
+        assert r.polished
+        rows = pattern_rows(p, m, zu, zr)
+        assert violation(rows, r.mu_c, r.x) <= 1e-12
+        assert max_ratio(rows, r.x) <= r.mu_c * (1 + 1e-12)
+        assert decide(rows, r.mu_c * (1 - 1e-4)).status == Status.INFEASIBLE
+        assert decide(rows, r.mu_c * (1 - 1e-6)).status != Status.FEASIBLE      # infeasible or undecided
+        assert decide(rows, r.mu_c * (1 + 1e-6)).status != Status.INFEASIBLE
+        b = mu_critical(p, m, zu, zr, mu_hi=4.0, method="bisection", tol=1e-8)
+        assert r.mu_c * (1 - 1e-4) <= b.mu_c <= r.mu_c * (1 + 1e-8)
