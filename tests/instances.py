@@ -1,5 +1,6 @@
 """Random small contact problems for the tests (supported and free bodies, 2D and 3D, with
-a planted node symmetry); the independent routes are in hpcwedge.reference."""
+a planted node symmetry) and the helpers two test files share; the independent routes are in
+hpcwedge.reference."""
 from __future__ import annotations
 
 import math
@@ -114,3 +115,15 @@ def symmetric_problem_3d(rng: np.random.Generator, m: int, free: bool) -> Contac
         K += P @ K0 @ P.T
     K /= m
     return ContactProblem(3, 0.5 * (K + K.T), N)
+
+
+def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str = "global"):
+    """run_scene of a scene of `model` that asks only for the global mu^c (test_global_mu_c.py,
+    test_milp.py)."""
+    from hpcwedge.pipeline import run_scene
+    from hpcwedge.scene import parse_scene
+    data = {"name": "g", "dim": dim, "model": model, "friction": {"mu": [0.01]},
+            "compute": {"enumerate": False, "mu_c": mu_c}}
+    if mu_max is not None:
+        data["compute"]["mu_max"] = mu_max
+    return run_scene(parse_scene(data))

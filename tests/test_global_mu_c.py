@@ -1,36 +1,24 @@
-"""The 2D global mu^c by the MILP route (global_mu_c.global_bracket_milp, milp.wedge_milp)
-against analytic values, the tree route and the public scenes' expected answers."""
+"""The 2D global mu^c by the MILP route (global_mu_c.global_bracket_milp) against analytic
+values, the tree route and the public scenes' expected answers (the MILP itself, milp.py:
+test_milp.py)."""
 import json
 import math
 import os
-import subprocess
-import sys
 import tomllib
 from functools import partial
 
 import numpy as np
 import pytest
 
-from hpcwedge.feasibility import decide
 from hpcwedge.global_mu_c import MILP_FROM_M, global_bracket_milp, global_mu_critical
-from hpcwedge.milp import wedge_milp
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.patterns import BnBStats
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
-from hpcwedge.rows import Status, pattern_rows
 from hpcwedge.scene import parse_scene
-from instances import random_problem
+from instances import global_run, random_problem
 
 SCENES = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
-
-
-def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str = "global"):
-    data = {"name": "g", "dim": dim, "model": model, "friction": {"mu": [0.01]},
-            "compute": {"enumerate": False, "mu_c": mu_c}}
-    if mu_max is not None:
-        data["compute"]["mu_max"] = mu_max
-    return run_scene(parse_scene(data))
 
 
 def route_for(m: int) -> str:
@@ -118,36 +106,3 @@ def test_public_scenes_global_mu_c(name):
         assert abs(by_milp(res) - want) <= 1e-9 * want
 
 
-def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
-    res = global_run({"kind": "plug2d", "rows": 3, "taper_deg": 10.0})
-    p, m = parametrize(res.problem), res.m
-    mu_c = math.tan(math.radians(10.0))
-    assert wedge_milp(p, m, 0.99 * mu_c).status == Status.INFEASIBLE
-    ans = wedge_milp(p, m, 1.01 * mu_c)
-    assert ans.status == Status.FEASIBLE and ans.value > 0.5
-    assert np.array_equal(ans.zero_u, ~ans.zero_r)
-    assert decide(pattern_rows(p, m, ans.zero_u, ans.zero_r), 1.01 * mu_c).status == Status.FEASIBLE
-
-
-def test_highs_debug_prints_never_reach_stdout():
-    """HiGHS's MIP solver printf()s debug lines past its output_flag on these bodies (6 lines
-    without milp._stdout_silenced); stdout carries `hpcwedge run --json`."""
-    code = f"""
-import sys
-sys.path.insert(0, {os.path.dirname(os.path.abspath(__file__))!r})
-from functools import partial
-import numpy as np
-from instances import random_problem
-from hpcwedge.mu_critical import mu_critical
-from hpcwedge.global_mu_c import global_bracket_milp
-from hpcwedge.patterns import BnBStats
-from hpcwedge.problem import parametrize
-for seed in range(100, 106):
-    prob = random_problem(np.random.default_rng(seed), 6, free=seed % 2 == 0)
-    p = parametrize(prob)
-    global_bracket_milp(p, prob.m, 50.0, partial(mu_critical, p, prob.m, mu_max=50.0), BnBStats(), dive=0)
-print("done")
-"""
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout == "done\n"
