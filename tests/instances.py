@@ -1,6 +1,6 @@
 """Random small contact problems for the tests (supported and free bodies, 2D and 3D, with
-a planted node symmetry) and the helpers two test files share; the independent routes are in
-hpcwedge.reference."""
+a planted node symmetry, random partial 3D patterns) and the helpers two test files share;
+the independent routes are in hpcwedge.reference."""
 from __future__ import annotations
 
 import math
@@ -8,7 +8,8 @@ import math
 import numpy as np
 import scipy.linalg as sla
 
-from hpcwedge.problem import ContactProblem
+from hpcwedge.problem import ContactProblem, parametrize
+from hpcwedge.rows import pattern_rows
 
 
 def rigid_modes_local(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -127,3 +128,12 @@ def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str
     if mu_max is not None:
         data["compute"]["mu_max"] = mu_max
     return run_scene(parse_scene(data))
+
+
+def random_partial_rows(rng, m: int = 3):
+    """Rows of a random partial pattern (about 40 % of the nodes fixed in contact, 40 % of
+    the rest fixed open) of a random free or supported 3D body with m contact nodes."""
+    p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
+    zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
+    zr[~zu] = rng.random((~zu).sum()) < 0.4
+    return pattern_rows(p, m, zu, zr)

@@ -14,7 +14,7 @@ from hpcwedge.problem import parametrize
 from hpcwedge.reference import pattern_decisions, ur_sandwich
 from hpcwedge.rows import Rows, Status, pattern_rows, pyramid_rows
 from hpcwedge.socp import VERIFY_TOL, violation
-from instances import random_problem, random_problem_3d
+from instances import random_partial_rows, random_problem, random_problem_3d
 
 
 CASES = [(seed, [2, 3, 4, 3, 2, 4][seed % 6], bool(seed % 2)) for seed in range(110)] + \
@@ -44,33 +44,6 @@ def test_3d_patterns_bnb_equals_brute_force_and_independent_route(seed, m, free)
     assert {s.contact for s in out.found} == brute
     assert out.undecided == []
     assert all(s.depth == m and s.contact | s.gap == (1 << m) - 1 for s in out.found)
-
-
-def _random_partial_rows(rng, m: int = 3):
-    """Rows of a random partial pattern (about 40 % of the nodes fixed in contact, 40 % of
-    the rest fixed open) of a random free or supported 3D body with m contact nodes."""
-    p = parametrize(random_problem_3d(rng, m, bool(rng.integers(2))))
-    zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
-    zr[~zu] = rng.random((~zu).sum()) < 0.4
-    return pattern_rows(p, m, zu, zr)
-
-
-def test_pyramids_sandwich_the_cone():
-    """inner feasible => SOCP feasible => outer feasible, on random partial patterns."""
-    rng = np.random.default_rng(7)
-    n_checked = 0
-    for _ in range(40):
-        rows = _random_partial_rows(rng)
-        for mu in (0.5, 1.5):
-            s = decide(rows, mu).status
-            si = lp_feasible(pyramid_rows(rows, 8, inner=True), mu)[0]
-            so = lp_feasible(pyramid_rows(rows, 8, inner=False), mu)[0]
-            if si == Status.FEASIBLE:
-                assert s == Status.FEASIBLE
-            if s == Status.FEASIBLE:
-                assert so == Status.FEASIBLE
-            n_checked += 1
-    assert n_checked == 80
 
 
 def test_pyramid_critical_mu_within_its_gap_of_mu_c():
@@ -113,7 +86,7 @@ def test_decide_without_pyramids_decides_what_clarabel_decides():
     are the same (random partial patterns)."""
     rng = np.random.default_rng(5)
     for _ in range(20):
-        rows = _random_partial_rows(rng)
+        rows = random_partial_rows(rng)
         for mu in (0.5, 1.5):
             full, bare = decide(rows, mu), decide(rows, mu, pyramid_sides=())
             assert bare.status == full.status or bare.status == Status.UNDECIDED
@@ -155,7 +128,7 @@ def test_solver_options_are_values():
         SolverOptions("loose")
     rng = np.random.default_rng(9)
     for _ in range(10):
-        rows = _random_partial_rows(rng)
+        rows = random_partial_rows(rng)
         plain, tight = decide(rows, 1.5), decide(rows, 1.5, SolverOptions("tight"))
         assert Status.UNDECIDED in (plain.status, tight.status) or plain.status == tight.status
         if tight.status == Status.FEASIBLE:
