@@ -137,3 +137,10 @@ def random_partial_rows(rng, m: int = 3):
     zu, zr = rng.random(m) < 0.4, np.zeros(m, bool)
     zr[~zu] = rng.random((~zu).sum()) < 0.4
     return pattern_rows(p, m, zu, zr)
+
+
+def brute_3d(p, m, mu):
+    """Feasible full patterns by one SOCP per partition (contact bits; test_patterns.py,
+    test_cores.py)."""
+    from hpcwedge.reference import brute_force_patterns
+    return set(brute_force_patterns(p, m, mu))

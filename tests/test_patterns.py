@@ -5,8 +5,8 @@ import pytest
 
 from hpcwedge.patterns import PatternTree, Subtree
 from hpcwedge.problem import parametrize
-from hpcwedge.reference import brute_force_patterns, patterns_of_supports
-from instances import random_problem
+from hpcwedge.reference import patterns_of_supports
+from instances import brute_3d, random_problem
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -103,12 +103,7 @@ def test_3d_skip_rule_and_steering_save_solves():
     assert out2.stats.solves < s.solves
 
 
-# ---------------------------------------------------------------- symmetry and learnt cores
-
-
-def _brute_3d(p, m, mu):
-    """Feasible full patterns by one SOCP per partition (contact bits)."""
-    return set(brute_force_patterns(p, m, mu))
+# ---------------------------------------------------------------- symmetry (learnt cores: test_cores.py)
 
 
 @pytest.mark.parametrize("seed", range(16))
@@ -129,7 +124,7 @@ def test_orbital_branching_finds_every_orbit(seed):
     tree = PatternTree(p, m, mu, symmetry=G)
     out = tree.explore(tree.root())
     got = tree.expand(out.found)
-    assert {s.contact for s in got} == _brute_3d(p, m, mu)
+    assert {s.contact for s in got} == brute_3d(p, m, mu)
     assert all(s.depth == m and s.contact | s.gap == (1 << m) - 1 and not s.contact & s.gap for s in got)
     if any(len(G.expand([(s.contact, s.gap)])) > 1 for s in got):
         assert len(out.found) < len(got)
@@ -149,24 +144,3 @@ def test_symmetry_saves_solves_on_plug3d_and_changes_no_pattern():
     assert 2 * b.stats.solves < a.stats.solves
 
 
-@pytest.mark.parametrize("seed", range(10))
-def test_learnt_cores_rule_out_only_infeasible_patterns(seed):
-    """Every full pattern that extends a core learnt from a Farkas certificate is
-    infeasible by brute force; the cores are smaller than the nodes they came from."""
-    from instances import random_problem_3d
-    rng = np.random.default_rng(100 + seed)
-    m = 5 + seed % 2
-    prob = random_problem_3d(rng, m, free=bool(seed % 2))
-    mu = float(np.exp(rng.uniform(np.log(0.3), np.log(3.0))))
-    p = parametrize(prob)
-    tree = PatternTree(p, m, mu, learn_cores=True)
-    out = tree.explore(tree.root())
-    feasible = _brute_3d(p, m, mu)
-    assert {s.contact for s in out.found} == feasible
-    if seed == 2:                                     # this one learns 4 cores, which rule out 4 nodes
-        assert out.stats.pruned > 0
-    cores = tree._cores
-    for c, g in zip(cores._c[:cores.n].tolist(), cores._g[:cores.n].tolist()):
-        assert c & g == 0
-        for bits in feasible:                         # a feasible pattern extends no core
-            assert not (c & ~bits == 0 and g & bits == 0), (bin(c), bin(g), bin(bits))
