@@ -144,3 +144,36 @@ def brute_3d(p, m, mu):
     test_cores.py)."""
     from hpcwedge.reference import brute_force_patterns
     return set(brute_force_patterns(p, m, mu))
+
+
+def result_file(tmp_path, text: str, name: str = "result.h5", compute: dict | None = None) -> str:
+    """A result file of the scene `text` (compute: its [compute] table), run and written
+    (test_plot.py, test_plot3d.py)."""
+    import tomllib
+
+    from hpcwedge.pipeline import run_scene
+    from hpcwedge.resultfile import write_result
+    from hpcwedge.scene import parse_scene
+    data = tomllib.loads(text)
+    if compute:
+        data["compute"] = compute
+    result = run_scene(parse_scene(data, text))
+    path = str(tmp_path / name)
+    write_result(path, result)
+    return path
+
+
+def check_png(path) -> tuple[int, int]:
+    """(width, height) of a PNG figure of plausible size with something drawn in it
+    (test_plot.py, test_plot3d.py)."""
+    import struct
+    with open(path, "rb") as f:
+        head = f.read(24)
+        f.seek(0, 2)
+        size = f.tell()
+    assert head[:8] == b"\x89PNG\r\n\x1a\n"
+    assert head[12:16] == b"IHDR"
+    width, height = struct.unpack(">II", head[16:24])
+    assert 600 <= width <= 4000 and 300 <= height <= 3000, (width, height)
+    assert size > 10_000, size                     # two drawn panels, not an empty canvas
+    return width, height

@@ -1,7 +1,5 @@
-"""`hpcwedge plot`: figures from real result files (pipeline -> write_result -> plot_result)."""
-import os
-import shutil
-import struct
+"""`hpcwedge plot` (plot.py): figures of 2D result files (pipeline -> write_result -> plot_result);
+3D figures (plot3d.py): test_plot3d.py."""
 import tomllib
 
 import h5py
@@ -11,16 +9,13 @@ import pytest
 pytest.importorskip("matplotlib")
 
 from hpcwedge.cli import main
-from hpcwedge.pipeline import run_scene
 from hpcwedge.plot import plot_result
 from hpcwedge.files import seal
 from hpcwedge.results import Result, Run
 from hpcwedge.resultfile import write_result
 from hpcwedge.scene import parse_scene
+from instances import check_png, result_file
 
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-EXAMPLES = os.path.join(ROOT, "scripts", "examples")
 
 STIFFNESS_TOML = """\
 name = "two-dof"
@@ -43,32 +38,9 @@ mu = [0.65]
 """
 
 
-def _result_file(tmp_path, text: str, name: str = "result.h5", compute: dict | None = None) -> str:
-    data = tomllib.loads(text)
-    if compute:
-        data["compute"] = compute
-    result = run_scene(parse_scene(data, text))
-    path = str(tmp_path / name)
-    write_result(path, result)
-    return path
-
-
-def _check_png(path) -> tuple[int, int]:
-    with open(path, "rb") as f:
-        head = f.read(24)
-        f.seek(0, 2)
-        size = f.tell()
-    assert head[:8] == PNG_SIGNATURE
-    assert head[12:16] == b"IHDR"
-    width, height = struct.unpack(">II", head[16:24])
-    assert 600 <= width <= 4000 and 300 <= height <= 3000, (width, height)
-    assert size > 10_000, size                     # two drawn panels, not an empty canvas
-    return width, height
-
-
 @pytest.fixture
 def stiffness_h5(tmp_path):
-    return _result_file(tmp_path, STIFFNESS_TOML)
+    return result_file(tmp_path, STIFFNESS_TOML)
 
 
 def _plug2d_available() -> str | None:
@@ -92,13 +64,13 @@ def test_stiffness_scene_png(stiffness_h5, tmp_path):
         assert len(f["runs/000/rays"]) >= 1
     png = tmp_path / "fig.png"
     plot_result(stiffness_h5, str(png))
-    _check_png(png)
+    check_png(png)
 
 
 def test_run_and_ray_indices(stiffness_h5, tmp_path):
     png = tmp_path / "fig.png"
     plot_result(stiffness_h5, str(png), run=0, ray=-1)
-    _check_png(png)
+    check_png(png)
     with pytest.raises(ValueError, match=r"^plot: ray 5 out of range") as e:
         plot_result(stiffness_h5, str(tmp_path / "bad.png"), ray=5)
     assert "\n" not in str(e.value)
@@ -114,22 +86,22 @@ def test_run_and_ray_indices(stiffness_h5, tmp_path):
                                      {"enumerate": False, "mu_c": "global"}])
 def test_missing_answers_are_said_in_text(tmp_path, compute):
     # mu^c not computed / no cones / no rays: the panels say so, the figure is still written
-    h5 = _result_file(tmp_path, STIFFNESS_TOML, compute=compute)
+    h5 = result_file(tmp_path, STIFFNESS_TOML, compute=compute)
     png = tmp_path / "fig.png"
     plot_result(h5, str(png))
-    _check_png(png)
+    check_png(png)
 
 
 def test_run_without_wedged_rays(tmp_path):
     # K = identity: u = r at every node, no wedged configuration at any mu
     text = STIFFNESS_TOML.replace("[[2.0, 0.5], [0.5, 1.0]]", "[[1.0, 0.0], [0.0, 1.0]]")
-    h5 = _result_file(tmp_path, text)
+    h5 = result_file(tmp_path, text)
     with h5py.File(h5, "r") as f:
         n_wedged = int(f["runs/000"].attrs["n_wedged_rays"])
     assert n_wedged == 0
     png = tmp_path / "fig.png"
     plot_result(h5, str(png))                      # ray 0 of none: the panel says so
-    _check_png(png)
+    check_png(png)
     with pytest.raises(ValueError, match="out of range"):
         plot_result(h5, str(tmp_path / "bad.png"), ray=1)
 
@@ -150,7 +122,7 @@ def test_pattern_option_refused_for_2d(stiffness_h5, tmp_path, capsys):
 def test_cli_plot(stiffness_h5, tmp_path, capsys):
     png = str(tmp_path / "cli.png")
     assert main(["plot", stiffness_h5, "-o", png]) == 0
-    _check_png(png)
+    check_png(png)
     bad = str(tmp_path / "bad.png")
     assert main(["plot", stiffness_h5, "-o", bad, "--ray", "7"]) == 2
     err = capsys.readouterr().err
@@ -163,15 +135,15 @@ def test_cli_plot(stiffness_h5, tmp_path, capsys):
 
 @pytest.mark.skipif(_plug2d_available() is not None, reason=str(_plug2d_available()))
 def test_plug2d_png(tmp_path):
-    h5 = _result_file(tmp_path, PLUG2D_TOML)
+    h5 = result_file(tmp_path, PLUG2D_TOML)
     with h5py.File(h5, "r") as f:
         assert "model" in f and "cells_line" in f["model"]
         assert len(f["runs/000/rays"]) >= 1
     png = tmp_path / "plug.png"
     plot_result(h5, str(png))
-    _check_png(png)
+    check_png(png)
     assert main(["plot", h5, "-o", str(tmp_path / "cli.png"), "--ray", "-1"]) == 0
-    _check_png(tmp_path / "cli.png")
+    check_png(tmp_path / "cli.png")
     assert main(["plot", h5, "-o", str(tmp_path / "bad.png"), "--ray", "100000"]) == 2
 
 
@@ -198,7 +170,7 @@ def test_model_panel_without_condensation(tmp_path):
     for ray in (0, 2):
         png = tmp_path / f"ray{ray}.png"
         plot_result(h5, str(png), ray=ray)
-        _check_png(png)
+        check_png(png)
     with pytest.raises(ValueError, match=r"^plot: ray 3 out of range"):
         plot_result(h5, str(tmp_path / "bad.png"), ray=3)
 
@@ -212,7 +184,7 @@ def test_block2d_whole_body_von_mises(tmp_path):
     when the body cannot be rebuilt the contact-only drawing remains and the title says why."""
     from hpcwedge.recovery import VON_MISES
     from hpcwedge.plot import _load
-    h5 = _result_file(tmp_path, BLOCK2D_TOML)
+    h5 = result_file(tmp_path, BLOCK2D_TOML)
     d = _load(h5, -1, 1)
     cfg = d["config"]
     assert cfg is not None and d["config_note"] is None
@@ -221,165 +193,11 @@ def test_block2d_whole_body_von_mises(tmp_path):
     assert np.abs(cfg.displacement[interior]).max() > 0
     png = tmp_path / "block.png"
     plot_result(h5, str(png), ray=1)
-    _check_png(png)
+    check_png(png)
     with h5py.File(h5, "r+") as f:
         f["model/coords"][0, 0] += 0.5                 # no longer the scene's body
     seal(h5)
     d = _load(h5, -1, 1)
     assert d["config"] is None and "differs" in d["config_note"]
     plot_result(h5, str(png), ray=1)
-    _check_png(png)
-
-
-# ---------------------------------------------------------------- 3D results
-
-PLUG3D_TOML = """\
-name = "plug3d-2x4"
-dim = 3
-[model]
-kind = "plug3d"
-levels = 2
-ring = 4
-[friction]
-mu = [0.3, 1.0]
-[compute]
-enumerate = true
-mu_c = "cones"
-"""
-
-TAB_RED, TAB_BLUE = (214, 39, 40), (31, 119, 180)     # contact set C / reactions, gap set G
-
-
-def _left_panel(png) -> np.ndarray:
-    """The RGB pixels (0..255) of the left half of the figure: the body panel."""
-    from matplotlib.image import imread
-    img = imread(str(png))[..., :3]
-    return np.round(255 * img[:, : img.shape[1] // 2]).astype(int)
-
-
-def _pixels_near(rgb: np.ndarray, colour, tol: int = 40) -> int:
-    return int((np.abs(rgb - np.array(colour)).sum(axis=-1) < tol).sum())
-
-
-def _check_3d_png(png, contact_and_gap: bool = True) -> np.ndarray:
-    """A 3D figure of the expected size whose body panel is drawn (not blank); with
-    contact_and_gap, red (C nodes, reactions) and blue (G nodes) marks are in it."""
-    assert _check_png(png) == (1500, 750)
-    left = _left_panel(png)
-    assert left.std() > 20, left.std()                 # an empty 3D axes measures 16
-    colour = (left.max(axis=-1) - left.min(axis=-1) > 60).mean()
-    assert colour > 0.005, colour                      # the coloured body (an empty 3D axes: 0)
-    if contact_and_gap:
-        assert _pixels_near(left, TAB_RED) > 50
-        assert _pixels_near(left, TAB_BLUE) > 20
-    return left
-
-
-def _petsc_missing() -> str | None:
-    try:
-        import petsc4py  # noqa: F401
-    except ImportError as e:
-        return f"petsc4py not importable ({e}); condensation of a model needs it"
-    return None
-
-
-@pytest.mark.skipif(_petsc_missing() is not None, reason=str(_petsc_missing()))
-def test_plug3d_png(tmp_path, capsys):
-    """plug3d: the whole truss at pattern J's feasible point, C and G marked, reactions,
-    wall squares; the patterns' mu^c; the count against mu. Index errors are one line."""
-    from hpcwedge.recovery import AXIAL_FORCE
-    from hpcwedge.plot import _load
-    h5 = _result_file(tmp_path, PLUG3D_TOML)
-    d = _load(h5, -1, pattern=0)
-    assert d["dim"] == 3 and d["config"] is not None and d["config_note"] is None
-    assert d["config"].element_values[AXIAL_FORCE]["line"].shape == (len(d["model"]["cells"]["line"]),)
-    counts = [n for _, n in d["counts"]]
-    assert len(counts) == 2 and counts[0] < counts[1]             # mu 0.3 < 1: more patterns feasible
-    contact = d["patterns"][0]["contact"]
-    assert 0 < len(contact) < d["m"]                             # both C and G nodes to draw
-    png = tmp_path / "plug.png"
-    plot_result(h5, str(png))
-    _check_3d_png(png)
-    assert main(["plot", h5, "-o", str(tmp_path / "cli.png"), "--run", "0", "--pattern", "-1"]) == 0
-    _check_3d_png(tmp_path / "cli.png", contact_and_gap=False)   # mu 0.3: all nodes in contact
-    bad = str(tmp_path / "bad.png")
-    for args, say in ((["--pattern", "100000"], "pattern 100000 out of range (run 1 has "),
-                      (["--run", "5"], "run 5 out of range (the result has 2 run(s)"),
-                      (["--ray", "0"], "--ray is for 2D results; this result is 3D")):
-        assert main(["plot", h5, "-o", bad] + args) == 2
-        err = capsys.readouterr().err
-        assert err.startswith("hpcwedge: error: plot: ") and say in err, err
-        assert len(err.strip().splitlines()) == 1
-    assert not os.path.exists(bad)
-
-
-@pytest.mark.skipif(_petsc_missing() is not None, reason=str(_petsc_missing()))
-def test_gmsh_plug_png(tmp_path):
-    """The Gmsh plug (scripts/examples/plug3d.*): the tetra mesh's boundary by von Mises and
-    the scene's conical hole; with its mesh file gone, the contact nodes alone, still a figure."""
-    from hpcwedge.recovery import VON_MISES
-    from hpcwedge.models.obstacle import Cone
-    from hpcwedge.plot import _load
-    from hpcwedge.scene import load_scene
-    for name in ("plug3d.toml", "plug3d.msh"):
-        shutil.copy(os.path.join(EXAMPLES, name), tmp_path / name)
-    h5 = str(tmp_path / "gmsh.h5")
-    write_result(h5, run_scene(load_scene(str(tmp_path / "plug3d.toml"))))
-    d = _load(h5, -1, pattern=3)
-    assert [type(ob) for ob in d["obstacles"]] == [Cone]
-    assert d["config"] is not None and "tetra" in d["config"].element_values[VON_MISES]
-    png = tmp_path / "gmsh.png"
-    plot_result(h5, str(png), pattern=3)
-    _check_3d_png(png)
-    os.unlink(tmp_path / "plug3d.msh")
-    d = _load(h5, -1, pattern=3)
-    assert d["config"] is None and "plug3d.msh not found" in d["config_note"]
-    plot_result(h5, str(png), pattern=3)
-    _check_3d_png(png, contact_and_gap=False)
-
-
-@pytest.mark.skipif(_petsc_missing() is not None, reason=str(_petsc_missing()))
-@pytest.mark.parametrize("compute", [{"mu_c": "none"}, {"enumerate": False, "mu_c": "global"}])
-def test_3d_missing_answers_are_said_in_text(tmp_path, compute):
-    # patterns' mu^c not computed / no patterns: the panels say so, the figure is still written
-    h5 = _result_file(tmp_path, PLUG3D_TOML.replace("mu = [0.3, 1.0]", "mu = [1.0]"), compute=compute)
-    png = tmp_path / "fig.png"
-    plot_result(h5, str(png))
-    assert _check_png(png) == (1500, 750)
-
-
-def test_stiffness_3d_bars(tmp_path, capsys):
-    """A raw-stiffness 3D scene (no body): bars of r_n and u_n of the pattern's feasible
-    point; a run without patterns says so; an index into none is one line."""
-    from hpcwedge.plot import _load
-    h5 = _result_file(tmp_path, NODE3D_TOML)
-    d = _load(h5, -1, pattern=0)
-    assert d["model"] is None and d["point"] is not None
-    u, r = d["point"]
-    assert r[0] == pytest.approx(1.0) and u[0] == pytest.approx(0.0, abs=1e-9)   # node 0 in contact
-    png = tmp_path / "node.png"
-    plot_result(h5, str(png))
-    left = _left_panel(png)
-    assert _check_png(png) == (1500, 750) and _pixels_near(left, TAB_RED) > 2000   # the r_n bar
-    plot_result(h5, str(png), run=0)                                            # mu 4 < mu^c: none
-    _check_png(png)
-    assert main(["plot", h5, "-o", str(tmp_path / "bad.png"), "--run", "0", "--pattern", "1"]) == 2
-    err = capsys.readouterr().err
-    assert "pattern 1 out of range (run 0 has 0 sign pattern(s)" in err and len(err.strip().splitlines()) == 1
-
-
-NODE3D_TOML = """\
-# One contact node in 3D, raw stiffness in block order (n, t1, t2) (shared/scenes/node3d.toml).
-name = "node3d"
-dim = 3
-[model]
-kind = "stiffness"
-K = [[3.0, 0.4, 0.2],
-     [0.4, 2.0, 0.3],
-     [0.2, 0.3, 1.5]]
-[friction]
-mu = [4.0, 5.0]
-[compute]
-enumerate = true
-mu_c = "cones"
-"""
+    check_png(png)
