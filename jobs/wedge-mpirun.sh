@@ -114,7 +114,7 @@ wait "$child"; rc=$?
 
 complete=$("$PY" - "$SCENE" "$RESULT" <<'PYEOF' 2>/dev/null
 import os, sys
-from hpcwedge.results import read_result
+from hpcwedge.resultfile import read_result
 from hpcwedge.scene import load_scene
 scene, result = sys.argv[1:3]
 r = read_result(result, with_rays=False) if os.path.exists(result) else {}
