@@ -63,7 +63,7 @@ def truss_model(nodes, bars, EA, supports, contact_nodes, normals, tangents=None
     nodes: (n_nodes, dim), dim 2 or 3; bars: (n_bars, 2) 0-based; EA: scalar or (n_bars,) > 0;
     supports: [[node, dof], ...] or None; contact_nodes: (m,) unique node ids;
     normals: (m, dim) into the body (normalised here); tangents: optional, see
-    hpcwedge.model.contact_frames. Errors: ValueError("<key>: <reason>") with key among
+    hpcwedge.models.record.contact_frames. Errors: ValueError("<key>: <reason>") with key among
     model.nodes, model.bars, model.EA, model.supports, contact.nodes, contact.normals, contact.tangents.
     """
     X = as_float_array(nodes, "model.nodes", ndim=2)
