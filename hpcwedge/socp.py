@@ -13,6 +13,12 @@ iterates can run off along rigid lift-offs, measured up to ||x|| ~ 1e17; P = I i
 default because it weakens the infeasibility certificates: 732 of 2,126 failed the Farkas
 check on plug3d + 30 random free bodies, none with P = 0); 2: static regularisation 1e-7;
 3: Clarabel's defaults (equilibration on). The caller stops it when satisfied.
+
+A feasibility problem (no objective) starts with static regularisation 1e-7 and no iterative
+refinement: with Clarabel's 1e-8 the first attempt stopped at NumericalError after one
+zero-length step on 37 % of plug3d 3 x 6's SOCPs (62 % at 4 x 6), every one of which 1e-7
+decides; refinement adds nothing to a problem without an objective and cost a third of the
+solve time (scripts/bench_socp_count.py; issue 13's measurements in docs/benchmarks.md).
 """
 from __future__ import annotations
 
@@ -62,11 +68,12 @@ def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
     return float(v)
 
 
-@functools.lru_cache(maxsize=16)
-def settings(attempt: int, tight: bool = False):
+@functools.lru_cache(maxsize=32)
+def settings(attempt: int, tight: bool = False, feasibility: bool = False):
     """Clarabel settings of attempt 0..ATTEMPTS-1 (module doc). tight: feasibility and gap
     tolerances 1e-10 (an optimisation: the branch and bound's steered solves; or every solve
-    when the caller's options ask for it). The rows are unit-scaled already, and Ruiz
+    when the caller's options ask for it). feasibility: the problem has no objective (its
+    first attempt is regularised, module doc). The rows are unit-scaled already, and Ruiz
     equilibration on top of that measured worse: on plug3d (m = 10, all 1,024 partitions,
     mu = 0.55 / 0.65 / 1.0) 7 % non-definitive statuses with it, none without. Shared
     (cached): do not modify the object returned."""
@@ -75,8 +82,11 @@ def settings(attempt: int, tight: bool = False):
     s.verbose = False
     if attempt < 3:
         s.equilibrate_enable = False
-    if attempt == 2:
+    if attempt == 0 and feasibility:
         s.static_regularization_constant = 1e-7
+        s.iterative_refinement_enable = tight
+    if attempt == 2:
+        s.static_regularization_constant = 1e-6 if feasibility else 1e-7
         s.max_iter = 400
     if tight:
         # an optimum (the branch and bound's steered solves) lies on the boundary,
@@ -134,7 +144,8 @@ def solve(problem: ConicProblem, attempt: int, tight: bool) -> Solution:
         P, q = (_csc_eye(n) if attempt == LEAST_NORM_ATTEMPT else _csc_zero(n)), np.zeros(n)
     else:
         P, q = _csc_zero(n), problem.q
-    sol = clarabel.DefaultSolver(P, q, _csc_dense(problem.A), problem.b, cones, settings(attempt, tight)).solve()
+    opts = settings(attempt, tight, feasibility=problem.q is None)
+    sol = clarabel.DefaultSolver(P, q, _csc_dense(problem.A), problem.b, cones, opts).solve()
     return Solution(str(sol.status), np.asarray(sol.x), np.asarray(sol.z))
 
 
