@@ -86,7 +86,7 @@ def settings(attempt: int, tight: bool = False, feasibility: bool = False):
         s.static_regularization_constant = 1e-7
         s.iterative_refinement_enable = tight
     if attempt == 2:
-        s.static_regularization_constant = 1e-6 if feasibility else 1e-7
+        s.static_regularization_constant = 1e-7
         s.max_iter = 400
     if tight:
         # an optimum (the branch and bound's steered solves) lies on the boundary,
