@@ -24,7 +24,7 @@ from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
 from .parallel.tasks import task_stopping
 from .problem import Parametrization, blocks
 from .results import TreeStats
-from .rows import Status, node_rows, pattern_rows, problem_dim
+from .rows import ConeRows, Status, node_rows, pattern_rows, problem_dim
 from .socp import VERIFY_TOL, violation
 from .symmetry import Symmetry
 
@@ -269,7 +269,7 @@ class PatternTree:
             return None
         zu, zr = kid.masks(m)
         rows = pattern_rows(param, m, zu, zr, self.friction)
-        if not hasattr(rows, "Z"):                     # friction=False: an LP, no projection at hand
+        if not isinstance(rows, ConeRows):             # friction=False: an LP, no projection at hand
             return None
         y = rows.Z @ (rows.Z.T @ x)
         if violation(rows, mu, y) > VERIFY_TOL:

@@ -24,6 +24,7 @@ fallback). `node_rows`: every node's rows, for the learnt cores (cores.py).
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from dataclasses import dataclass
 
@@ -56,6 +57,14 @@ class Rows:
     a1: np.ndarray
     eq: np.ndarray
     norm: np.ndarray
+
+    @functools.cached_property
+    def Z(self) -> np.ndarray:
+        """(d, p) orthonormal basis of the null space of the equality rows (eq_null_space);
+        None when an equality row depends on mu (then no basis serves every mu)."""
+        if np.any(self.a1[self.eq]):
+            return None
+        return eq_null_space(_unit(self.a0[self.eq]), self.a0.shape[1])
 
 
 @dataclass(frozen=True)
@@ -140,14 +149,18 @@ def _pattern_rows_3d(param, m, zu, zr, friction):
     nodes = np.flatnonzero(fr)
     rn, rt = Rn[fr], np.stack([Rt1[fr], Rt2[fr]], axis=1)
     sc = _cone_scale(Rn, Rt1, Rt2)[fr]
-    if eq.shape[0]:
-        _, s, vt = np.linalg.svd(eq)
-        rank = int((s > EQ_RANK_RTOL * s[0]).sum())
-        Z = vt[rank:].T
-    else:
-        Z = np.eye(param.d)
     return ConeRows(eq=eq, lin=lin, rn=rn / sc[:, None], rt=rt / sc[:, None, None], norm=norm,
-                    nodes=nodes, Z=Z, lin_nodes=lin_nodes)
+                    nodes=nodes, Z=eq_null_space(eq, param.d), lin_nodes=lin_nodes)
+
+
+def eq_null_space(eq: np.ndarray, d: int) -> np.ndarray:
+    """(d, p) orthonormal basis of the null space of the unit equality rows eq (E, d), by
+    an SVD; rank: singular values above EQ_RANK_RTOL times the largest."""
+    if not eq.shape[0]:
+        return np.eye(d)
+    _, s, vt = np.linalg.svd(eq)
+    rank = int((s > EQ_RANK_RTOL * s[0]).sum())
+    return vt[rank:].T
 
 
 def _cone_scale(Rn: np.ndarray, Rt1: np.ndarray, Rt2: np.ndarray) -> np.ndarray:
