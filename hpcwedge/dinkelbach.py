@@ -20,12 +20,12 @@ import math
 
 import numpy as np
 
-from .feasibility import count, pyramid_sides_for
+from .feasibility import pyramid_sides_for
 from .kkt import APEX_RTOL, kkt_polish
 from .mu_bracket import BRACKET_RTOL, Probe, bisect
 from .parallel import task_tick
 from .problem import Parametrization
-from .rows import ConeRows, Status, pattern_rows
+from .rows import ConeRows, Status, count, pattern_rows
 from .socp import ConicProblem, attempts, pattern_socp
 
 #: Dinkelbach stops when a step lowers mu by less than this (relative)

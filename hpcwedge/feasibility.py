@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lp import LP_OPTIONS, lp_feasible
-from .rows import ZERO_ROW_RTOL, ConeRows, Rows, Status, pyramid_rows
+from .rows import ZERO_ROW_RTOL, ConeRows, Rows, Status, count, pyramid_rows
 from .socp import VERIFY_TOL, pattern_attempts, violation
 
 #: facets per node of the polyhedral pyramids, tried in turn
@@ -70,12 +70,6 @@ class Decision:
     farkas: np.ndarray | None = None
 
 
-def count(counts: dict | None, key: str, n: int = 1) -> None:
-    """counts[key] += n (counts None: nothing): how problems were decided, for the stats."""
-    if counts is not None:
-        counts[key] = counts.get(key, 0) + n
-
-
 def pyramid_sides_for(spread: float) -> tuple[int, ...]:
     """The pyramid levels worth trying at a mu known to lie within `spread`
     (relative) of mu^c (a bisection's midpoint: half the bracket width over mu).
@@ -100,10 +94,10 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
     infeasible when it is not. pyramid_sides: the levels of the pyramid LP fallback (step 3),
     e.g. pyramid_sides_for(spread)."""
     if isinstance(rows, Rows):
-        status, x = lp_feasible(rows, mu, LP_OPTIONS)
+        status, x = lp_feasible(rows, mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_" + status)
         if status == Status.UNDECIDED:          # HiGHS's simplex gave up: its interior point method
-            status, x = lp_feasible(rows, mu, LP_OPTIONS, method="highs-ipm")
+            status, x = lp_feasible(rows, mu, LP_OPTIONS, method="highs-ipm", counts=counts)
             count(counts, "lp_retry_ipm_" + status)
         return Decision(status, x)
     if rows.Z.shape[1] == 0 or np.abs(rows.norm @ rows.Z).max() <= ZERO_ROW_RTOL * np.linalg.norm(rows.norm):
@@ -123,12 +117,12 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
                 return Decision(Status.FEASIBLE, o.x / (rows.norm @ o.x), o.positive)
             count(counts, tag + "verify_failed")
     for sides in pyramid_sides:
-        status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, LP_OPTIONS)
+        status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_calls")
         if status == Status.FEASIBLE and violation(rows, mu, x) <= VERIFY_TOL:
             count(counts, "pyramid_inner_feasible")
             return Decision(Status.FEASIBLE, x / (rows.norm @ x))
-        status, _ = lp_feasible(pyramid_rows(rows, sides, inner=False), mu, LP_OPTIONS)
+        status, _ = lp_feasible(pyramid_rows(rows, sides, inner=False), mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_calls")
         if status == Status.INFEASIBLE:
             count(counts, "pyramid_outer_infeasible")

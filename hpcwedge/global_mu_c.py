@@ -9,13 +9,13 @@ from functools import partial
 
 import numpy as np
 
-from .feasibility import count, decide
+from .feasibility import decide
 from .milp import WedgeMilp, wedge_milp
 from .mu_critical import MuC, mu_critical
 from .parallel import task_tick
 from .patterns import BnBStats, PatternTree, Subtree, sign_patterns
 from .problem import Parametrization
-from .rows import Status, pattern_rows, problem_dim
+from .rows import Status, count, pattern_rows, problem_dim
 from .symmetry import Symmetry
 
 #: 2D MILP route (global_bracket_milp): the relative steps below the best mu^c found at

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rows import ZERO_ROW_RTOL, Rows, Status, eq_null_space
+from .rows import ZERO_ROW_RTOL, Rows, Status, count, eq_null_space
 
 #: HiGHS options of the pattern LPs (2D) and the pyramid LPs (3D fallback); None given to
 #: `lp_feasible`: HiGHS's defaults (feasibility tolerance 1e-7). Presolve stays on: off,
@@ -19,8 +19,8 @@ LP_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance
 X_SPACE_TOL = 1e-9
 
 
-def lp_feasible(rows: Rows, mu: float, options: dict | None = None,
-                method: str = "highs-ds") -> tuple[Status, np.ndarray | None]:
+def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str = "highs-ds",
+                counts: dict | None = None) -> tuple[Status, np.ndarray | None]:
     """Feasibility of {rows(mu) x (>=,==) 0, sum r_n = 1}: (status, x or None), by
     HiGHS (`method`: "highs-ds", dual simplex, which returns a vertex; "highs-ipm").
 
@@ -30,7 +30,8 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None,
     presolve of the equality rows). A point it returns must meet the unit x-space rows
     to X_SPACE_TOL absolutely, as the x-space LP's tolerance guarantees; one that does
     not (a huge y along a near-recession direction on which sum r_n is ~1e-10 of |y|,
-    within tolerance of the reduced rows only) is decided by the x-space LP instead."""
+    within tolerance of the reduced rows only) is decided by the x-space LP instead
+    (counted as "lp_x_space" in counts)."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
     live = scale > 0
@@ -53,6 +54,7 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None,
     x = Z @ y
     if max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0)) <= X_SPACE_TOL:
         return status, x
+    count(counts, "lp_x_space")
     status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method)
     return status, x
 

@@ -17,14 +17,14 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from .cores import Cores, infeasible_core
-from .feasibility import count, decide
+from .feasibility import decide
 from .lp import lp_violation
 from .nodesets import bits_to_mask, to_bits
 from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
 from .parallel.tasks import task_stopping
 from .problem import Parametrization, blocks
 from .results import TreeStats
-from .rows import ConeRows, Status, node_rows, pattern_rows, problem_dim
+from .rows import ConeRows, Status, count, node_rows, pattern_rows, problem_dim
 from .socp import VERIFY_TOL, violation
 from .symmetry import Symmetry
 

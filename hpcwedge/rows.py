@@ -42,6 +42,13 @@ class Status(enum.StrEnum):
     INFEASIBLE = "infeasible"
     UNDECIDED = "undecided"
 
+
+def count(counts: dict | None, key: str, n: int = 1) -> None:
+    """counts[key] += n (counts None: nothing): how problems were decided, for the stats."""
+    if counts is not None:
+        counts[key] = counts.get(key, 0) + n
+
+
 #: relative size under which a constraint row is taken as identically zero
 ZERO_ROW_RTOL = 1e-12
 #: rank decision on the unit-scaled pattern equalities

@@ -47,3 +47,52 @@ def test_lp_point_meets_its_rows_and_violation_measures_a_wrong_one():
             assert lp_violation(rows, mu, -x) > 1e-3            # sum r_n = -1: some row broken
             n_feasible += 1
     assert n_feasible >= 5 and n_infeasible >= 5
+
+
+def _x_space_lp(rows, mu):
+    """The pattern LP as written (x in R^d, equality rows kept), by HiGHS through
+    scipy.optimize.linprog with presolve: the independent route lp_feasible's
+    elimination must agree with."""
+    from scipy.optimize import linprog
+    A = rows.a0 + mu * rows.a1
+    A = A / np.linalg.norm(A, axis=1)[:, None]
+    E, d = rows.eq, A.shape[1]
+    A_eq = np.vstack([A[E], rows.norm[None, :]])
+    b_eq = np.zeros(A_eq.shape[0])
+    b_eq[-1] = 1.0
+    res = linprog(np.zeros(d), A_ub=-A[~E], b_ub=np.zeros((~E).sum()), A_eq=A_eq, b_eq=b_eq,
+                  bounds=[(None, None)] * d, method="highs-ds",
+                  options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10})
+    return {0: Status.FEASIBLE, 2: Status.INFEASIBLE}.get(res.status, Status.UNDECIDED)
+
+
+def test_eliminated_lp_agrees_with_the_x_space_lp():
+    """lp_feasible solves in the null space of the equalities; on random full and partial
+    2D patterns (nodes in both sets too: dependent equality rows) at mu away from every
+    pattern's mu^c it gives the x-space LP's answer, and a point on the equalities to
+    rounding (|eq x| <= 1e-12, sum r_n = 1) that meets every row (lp_violation), without
+    the x-space fallback but on rare near-recession points."""
+    rng = np.random.default_rng(11)
+    seen = {Status.FEASIBLE: 0, Status.INFEASIBLE: 0}
+    counts: dict = {}
+    for trial in range(60):
+        m = int(rng.integers(3, 7))
+        p = parametrize(random_problem(rng, m, bool(trial % 2)))
+        zu, zr = rng.random(m) < 0.4, rng.random(m) < 0.4
+        rows = pattern_rows(p, m, zu, zr)
+        for mu in (0.2, 1.0, 5.0, np.inf):
+            if not np.isfinite(mu):
+                rows_mu, mu = pattern_rows(p, m, zu, zr, friction=False), 0.0
+            else:
+                rows_mu = rows
+            status, x = lp_feasible(rows_mu, mu, counts=counts)
+            ref = _x_space_lp(rows_mu, mu)
+            assert status == ref, (trial, mu)
+            if status == Status.FEASIBLE:
+                A = rows_mu.a0 + mu * rows_mu.a1
+                assert np.abs(A[rows_mu.eq] @ x).max(initial=0.0) <= 1e-12 * max(1.0, np.linalg.norm(x))
+                assert abs(rows_mu.norm @ x - 1) <= 1e-9
+                assert lp_violation(rows_mu, mu, x) <= 1e-9
+            seen[status] += 1
+    assert min(seen.values()) >= 30
+    assert counts.get("lp_x_space", 0) <= 2            # the eliminated LP answered

@@ -3,8 +3,8 @@ per-node rows of the learnt cores against the pattern rows, the status values.""
 import numpy as np
 
 from hpcwedge.problem import parametrize
-from hpcwedge.rows import ConeRows, Rows, Status, node_rows, pattern_rows
-from instances import random_problem_3d
+from hpcwedge.rows import ConeRows, Rows, Status, eq_null_space, node_rows, pattern_rows
+from instances import random_problem, random_problem_3d
 
 
 def test_3d_rows_shapes_and_friction_free_relaxation_is_an_lp():
@@ -38,3 +38,23 @@ def test_status_values_are_the_counter_keys():
     """The values reach the stats' counter keys ("lp_feasible", "milp_undecided"): fixed."""
     assert [s.value for s in Status] == ["feasible", "infeasible", "undecided"]
     assert "lp_" + Status.FEASIBLE == "lp_feasible" and f"{Status.UNDECIDED}" == "undecided"
+
+
+def test_eq_null_space_is_an_orthonormal_basis_of_the_equalities_kernel():
+    """Rows.Z (2D) and ConeRows.Z (3D) come from eq_null_space: orthonormal columns,
+    killed by every equality row, of dimension d - rank (dependent rows included: a node
+    fixed both in contact and open)."""
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        m = 4
+        p = parametrize(random_problem(rng, m, bool(trial % 2)))
+        zu = rng.random(m) < 0.5
+        zr = rng.random(m) < 0.5
+        rows = pattern_rows(p, m, zu, zr)
+        Z = rows.Z
+        eq = rows.a0[rows.eq]
+        assert np.allclose(Z.T @ Z, np.eye(Z.shape[1]), atol=1e-12)
+        assert np.abs(eq @ Z).max(initial=0.0) <= 1e-12 * max(1.0, np.abs(eq).max(initial=0.0))
+        rank = np.linalg.matrix_rank(eq) if eq.shape[0] else 0
+        assert Z.shape == (p.d, p.d - rank)
+    assert eq_null_space(np.zeros((0, 5)), 5).shape == (5, 5)
