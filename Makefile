@@ -37,6 +37,9 @@ bench: setup-bench
 	PYTHONPATH=. $(PY) scripts/bench_growth.py
 	$(PY) scripts/stress.py
 	PYTHONPATH=. $(PY) scripts/bench_peers.py
+	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py
+	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py --rows 40 80 --engines ours scip_bisect --out results/bench_global_mu_c_large
+	PYTHONPATH=. $(PY) scripts/bench_search_3d.py --full
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick --out results/quick
@@ -44,6 +47,8 @@ bench-quick: setup-bench
 	$(PY) scripts/stress.py --quick --out results/quick
 	PYTHONPATH=. $(PY) scripts/bench_growth.py --quick --out results/quick/bench_growth
 	PYTHONPATH=. $(PY) scripts/bench_peers.py --quick --out results/quick/bench_peers
+	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py --quick --out results/quick/bench_global_mu_c
+	PYTHONPATH=. $(PY) scripts/bench_search_3d.py --quick --out results/quick/bench_search_3d
 
 check: setup
 	../shared/acceptance/check_public

@@ -469,6 +469,47 @@ def bench_mu_c() -> str:
     return table(["", *[t for _, t in cols], "accurate / bisection 1e-6"], rows)
 
 
+def bench_global_mu_c() -> str:
+    """results/bench_global_mu_c{,_large}.json: the 2D global mu^c against MILP peers
+    (scripts/bench_global_mu_c.py)."""
+    recs = _load("bench_global_mu_c.json")["records"] + _load("bench_global_mu_c_large.json")["records"]
+    engines = [e for e in ("ours", "ours_milp", "ours_tree", "highs_bisect", "scip_bisect")
+               if any(r["engine"] == e for r in recs)]
+    rows = []
+    for m in sorted({r["m"] for r in recs}):
+        same = {r["engine"]: r for r in recs if r["m"] == m}
+        ours = same.get("ours")
+        if ours is None or ours["status"] != "ok":
+            continue
+        cells = [f"{_s(ours['seconds'], 2)} ({ours['lps']:,} LPs, {ours['tree_nodes']:,} nodes, "
+                 f"{ours['milp_solves']} MILPs; error {ours['rel_error']:.0e})"]
+        for e in engines[1:]:
+            r = same.get(e)
+            cells.append("–" if r is None else r["status"] if r["status"] == "skipped" else _peer_cell(r, ours))
+        rows.append([str(m), *cells])
+    heads = {"ours_milp": "MILPs alone", "ours_tree": "tree alone", "highs_bisect": "HiGHS MILP, bisection",
+             "scip_bisect": "SCIP, bisection (error 5.6e-6)"}
+    return table(["m", "ours, s", *[heads[e] for e in engines[1:]]], rows)
+
+
+def bench_search_3d() -> str:
+    """results/bench_search_3d.json: the 3D pattern search without symmetry (scripts/bench_search_3d.py)."""
+    recs = _load("bench_search_3d.json")["records"]
+    rows = []
+    for r in recs:
+        if r["status"] != "ok":
+            rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]), r["status"], "", "", "", "", "", ""])
+            continue
+        enum = r["task"] == "enumerate"
+        rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]),
+                     f"{r['patterns']:,}" if enum else f"mu^c {r['mu_c']:.10g}", f"{r['nodes']:,}", f"{r['socps']:,}",
+                     f"{r['socps_per_pattern']:.1f}" if enum else "–",
+                     f"{100 * r['first_attempt']:.1f} %" if enum and r.get("first_attempt") is not None else "–",
+                     str(r["undecided"]), _s(r["seconds"], 2)])
+    return table(["search", "plug3d", "m", "answer", "tree nodes", "SOCPs", "SOCPs / pattern",
+                  "first attempt settled", "undecided", "CPU s"], rows)
+
+
 def examples() -> str:
     """scripts/examples/examples.json: the Gmsh example bodies and the counts of a run of
     each (scripts/make_examples.py; tests/test_examples.py checks them)."""
@@ -518,6 +559,11 @@ BENCHMARKS: dict = {
     "bench_mu_c": (bench_mu_c, "results/bench_mu_c.json", "PYTHONPATH=. .venv/bin/python scripts/bench_mu_c.py"),
     "examples": (examples, "scripts/examples/examples.json", "PYTHONPATH=. .venv/bin/python scripts/make_examples.py"),
     "faults": (faults, "results/faults.json", "python scripts/fault_campaign.py"),
+    "bench_global_mu_c": (bench_global_mu_c, "results/bench_global_mu_c.json, results/bench_global_mu_c_large.json",
+                          "PYTHONPATH=. .venv/bin/python scripts/bench_global_mu_c.py [--rows 40 80 --engines ours scip_bisect"
+                          " --out results/bench_global_mu_c_large]"),
+    "bench_search_3d": (bench_search_3d, "results/bench_search_3d.json",
+                        "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
 }
 

@@ -194,9 +194,9 @@ def test_undecided_simplex_is_retried_by_interior_point(monkeypatch):
     real = lp_feasible
     methods = []
 
-    def flaky(rows, mu, options=None, method="highs-ds"):
+    def flaky(rows, mu, options=None, method="highs-ds", counts=None):
         methods.append(method)
-        return (Status.UNDECIDED, None) if method == "highs-ds" else real(rows, mu, options, method)
+        return (Status.UNDECIDED, None) if method == "highs-ds" else real(rows, mu, options, method, counts)
     monkeypatch.setattr(feasibility, "lp_feasible", flaky)
     counts = {}
     status = feasibility.decide(rows, 0.8, counts=counts).status

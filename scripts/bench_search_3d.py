@@ -1,0 +1,133 @@
+#!/usr/bin/env python3
+"""The 3D sign-pattern search on a body without symmetry (issue 13): counts and times.
+
+    PYTHONPATH=. python scripts/bench_search_3d.py [--quick] [--full] [--limit 600]
+                                                   [--out results/bench_search_3d]
+
+Scenes: plug3d LEVELS x RING (m = LEVELS * RING contact nodes), `run.symmetry = false`
+(a generic body: no orbit saves a solve), each in its own process (bench_2d.run_script)
+through `hpcwedge run`'s route (pipeline.run_scene):
+  enumerate  all feasible sign patterns at mu = 0.65 (`mu_c = "none"`): 2 x 6, 3 x 5, 3 x 6,
+             and with --full 4 x 6 (about 4 minutes)
+  global     the global mu^c (`enumerate = false`, `mu_c = "global"`, mu = 0.3): 2 x 6, 3 x 6,
+             and with --full 4 x 6
+Per row: the patterns (their set's hash, to compare runs), tree nodes, SOCPs, SOCPs per
+feasible pattern, undecided, the share of SOCPs that Clarabel's first attempt settled
+(`first_attempt`: the SOCPs that needed no retry over all SOCPs, from the result's solver
+statuses), CPU and wall seconds. Counts are the same on every machine; seconds are not
+(2 shared cores: read them as +-2x). --quick: 2 x 6 only.
+Writes <out>.csv and <out>.json (with the environment record); prints the table.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import bench_2d  # noqa: E402
+
+ENUMERATE = ((2, 6), (3, 5), (3, 6))
+GLOBAL = ((2, 6), (3, 6))
+FULL = ((4, 6),)
+MU_ENUMERATE = 0.65
+MU_GLOBAL = 0.3
+
+
+def scene(task: str, levels: int, ring: int):
+    from hpcwedge.scene import parse_scene
+    enum = task == "enumerate"
+    return parse_scene({"name": f"plug3d-{levels}x{ring}", "dim": 3,
+                        "model": {"kind": "plug3d", "levels": levels, "ring": ring},
+                        "friction": {"mu": [MU_ENUMERATE if enum else MU_GLOBAL]},
+                        "compute": {"enumerate": enum, "mu_c": "none" if enum else "global"},
+                        "run": {"symmetry": False}})
+
+
+def first_attempt(statuses: dict) -> tuple[int, int]:
+    """(SOCPs settled by Clarabel's first attempt, SOCPs): an attempt's Clarabel status is
+    counted under its CamelCase name, "retry<k>_" prefixed from the second attempt on."""
+    first = sum(v for k, v in statuses.items() if k[:1].isupper())
+    retried = sum(v for k, v in statuses.items() if k.startswith("retry1_") and k[7:8].isupper())
+    return first - retried, first
+
+
+def worker(task: str, levels: int, ring: int) -> dict:
+    from hpcwedge.pipeline import run_scene
+    t, c = time.perf_counter(), time.process_time()
+    res = run_scene(scene(task, levels, ring))
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    bnb = res.stats["bnb"]
+    statuses = res.stats.get("socp_statuses") or {}
+    out = {"m": res.m, "nodes": bnb.get("nodes"), "socps": bnb.get("solves"), "undecided": bnb.get("undecided"),
+           "seconds": cpu, "wall_in_process": wall}
+    if task == "enumerate":
+        pats = sorted(tuple(p["contact"]) for p in res.runs[0].patterns)
+        out["patterns"] = len(pats)
+        out["patterns_hash"] = hashlib.sha1(repr(pats).encode()).hexdigest()[:12]
+        out["socps_per_pattern"] = out["socps"] / max(len(pats), 1)
+        good, total = first_attempt(statuses)
+        out["first_attempt"] = good / total if total else None
+    else:
+        out["mu_c"] = res.mu_c
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="2 x 6 only")
+    ap.add_argument("--full", action="store_true", help="also 4 x 6 (m = 24)")
+    ap.add_argument("--limit", type=float, default=600.0, help="seconds per run")
+    ap.add_argument("--out", default=os.path.join(bench_2d.ROOT, "results", "bench_search_3d"))
+    ap.add_argument("--worker", nargs=3, metavar=("TASK", "LEVELS", "RING"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker:
+        out = worker(args.worker[0], int(args.worker[1]), int(args.worker[2]))
+        print(bench_2d.MARK + json.dumps(out))
+        return
+    extra = FULL if args.full else ()
+    plan = [("enumerate", lr) for lr in (ENUMERATE[:1] if args.quick else ENUMERATE + extra)]
+    plan += [("global", lr) for lr in (GLOBAL[:1] if args.quick else GLOBAL + extra)]
+    records = []
+    for task, (levels, ring) in plan:
+        status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__),
+                                                     ["--worker", task, str(levels), str(ring)], args.limit)
+        rec = {"task": task, "levels": levels, "ring": ring, "m": levels * ring, "status": status, "wall": wall}
+        if res is not None:
+            rec.update(res)
+        elif err:
+            rec["error"] = err
+        records.append(rec)
+        print(line(rec), flush=True)
+    write(args.out, records, {"mu_enumerate": MU_ENUMERATE, "mu_global": MU_GLOBAL, "limit_s": args.limit})
+
+
+def line(r: dict) -> str:
+    keys = ("patterns", "nodes", "socps", "socps_per_pattern", "first_attempt", "undecided", "mu_c", "seconds")
+    extra = "  ".join(f"{k}={r[k]:.4g}" if isinstance(r.get(k), float) else f"{k}={r[k]}"
+                      for k in keys if r.get(k) is not None)
+    return f"{r['task']:9s} m={r['m']:3d} {r['status']:7s} {extra}"
+
+
+def write(out: str, records: list[dict], meta: dict) -> None:
+    from hpcwedge.environment import environment
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    with open(out + ".json", "w") as f:
+        json.dump({**meta, "records": records, "environment": environment()}, f, indent=1)
+    cols = ["task", "levels", "ring", "m", "status", "patterns", "patterns_hash", "nodes", "socps",
+            "socps_per_pattern", "first_attempt", "undecided", "mu_c", "seconds", "wall"]
+    with open(out + ".csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for r in records:
+            w.writerow(r)
+    print(f"wrote {out}.csv and {out}.json")
+
+
+if __name__ == "__main__":
+    main()
