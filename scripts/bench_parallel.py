@@ -17,6 +17,11 @@ scripts/bench_socp_count.py (results/bench_socp_count.json); its table is
 copied into the JSON here when present.
 
     .venv/bin/python scripts/bench_parallel.py [--levels 3] [--ring 6] [--mu 1.0] [--repeat 2]
+        [--mu-c cones|none] [--no-symmetry] [--workers 0 1 2 3] [--out results/bench_parallel]
+
+Issue 13's target (plug3d 4 x 6 without symmetry, patterns only, 2 workers >= 1.8x 1 worker):
+    .venv/bin/python scripts/bench_parallel.py --levels 4 --ring 6 --mu 0.65 --mu-c none \
+        --no-symmetry --workers 1 2 --repeat 1 --out results/bench_parallel_4x6
 """
 from __future__ import annotations
 
@@ -34,10 +39,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "results")
 
 
-def scene_text(levels: int, ring: int, mu: float) -> str:
+def scene_text(levels: int, ring: int, mu: float, mu_c: str = "cones", symmetry: bool = True) -> str:
     return (f'name = "plug3d-{levels}x{ring}"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = {levels}\n'
-            f'ring = {ring}\n[friction]\nmu = [{mu}]\n[compute]\nenumerate = true\nmu_c = "cones"\n'
-            '[run]\ncheckpoint_every_s = 600\n')
+            f'ring = {ring}\n[friction]\nmu = [{mu}]\n[compute]\nenumerate = true\nmu_c = "{mu_c}"\n'
+            f'[run]\ncheckpoint_every_s = 600\nsymmetry = {str(symmetry).lower()}\n')
 
 
 def run(ranks: int | None, scene: str, out: str) -> float:
@@ -68,12 +73,19 @@ def main() -> None:
     ap.add_argument("--ring", type=int, default=6)
     ap.add_argument("--mu", type=float, default=1.0)
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--mu-c", default="cones", choices=["cones", "none"])
+    ap.add_argument("--no-symmetry", action="store_true", help="run.symmetry = false (a generic body)")
+    ap.add_argument("--workers", type=int, nargs="*", default=[0, 1, 2, 3],
+                    help="configurations: 0 = serial, k = mpirun with k workers (1 must be among them)")
+    ap.add_argument("--out", default=os.path.join(OUT, "bench_parallel"))
     args = ap.parse_args()
+    text = scene_text(args.levels, args.ring, args.mu, args.mu_c, not args.no_symmetry)
     tmp = tempfile.mkdtemp(prefix="bench_parallel_")
     scene = os.path.join(tmp, "scene.toml")
     with open(scene, "w") as f:
-        f.write(scene_text(args.levels, args.ring, args.mu))
-    configs = [("serial", None, 0), ("1 worker", 2, 1), ("2 workers", 3, 2), ("3 workers (oversubscribed)", 4, 3)]
+        f.write(text)
+    configs = [c for c in [("serial", None, 0), ("1 worker", 2, 1), ("2 workers", 3, 2),
+                           ("3 workers (oversubscribed)", 4, 3)] if c[2] in args.workers]
     walls = {label: [] for label, _, _ in configs}
     inside = {label: [] for label, _, _ in configs}
     stages = {label: [] for label, _, _ in configs}
@@ -105,8 +117,8 @@ def main() -> None:
     for r in rows:
         r["speedup_vs_1_worker"] = one["seconds"] / r["seconds"]
         r["program_speedup_vs_1_worker"] = one["program_seconds"] / r["program_seconds"]
-    os.makedirs(OUT, exist_ok=True)
-    with open(os.path.join(OUT, "bench_parallel.csv"), "w", newline="") as f:
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with open(args.out + ".csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["config", "ranks", "workers", "seconds", "speedup_vs_1_worker",
                                           "program_seconds", "program_speedup_vs_1_worker",
                                           "patterns", "same_answers"], extrasaction="ignore")
@@ -114,9 +126,9 @@ def main() -> None:
         w.writerows(rows)
     socp = os.path.join(OUT, "bench_socp_count.json")
     from hpcwedge.environment import environment
-    doc = {"scene": scene_text(args.levels, args.ring, args.mu), "machine_cores": os.cpu_count(), "rows": rows,
+    doc = {"scene": text, "machine_cores": os.cpu_count(), "rows": rows,
            "socp_count": json.load(open(socp)) if os.path.exists(socp) else None, "environment": environment()}
-    with open(os.path.join(OUT, "bench_parallel.json"), "w") as f:
+    with open(args.out + ".json", "w") as f:
         json.dump(doc, f, indent=1)
     for r in rows:
         print(f"{r['config']:<28} {r['seconds']:7.2f} s wall ({r['speedup_vs_1_worker']:.2f}x vs 1 worker), "
