@@ -130,6 +130,16 @@ def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str
     return run_scene(parse_scene(data))
 
 
+def plug3d_param(levels: int, ring: int):
+    """(parametrisation, m) of the built-in plug3d LEVELS x RING (test_socp.py,
+    test_global_mu_c.py: a body searched without its symmetry)."""
+    from hpcwedge.build import contact_problem
+    from hpcwedge.scene import parse_scene
+    prob = contact_problem(parse_scene({"name": "p", "dim": 3, "friction": {"mu": [1.0]},
+                                        "model": {"kind": "plug3d", "levels": levels, "ring": ring}}))
+    return parametrize(prob), prob.m
+
+
 def random_partial_rows(rng, m: int = 3):
     """Rows of a random partial pattern (about 40 % of the nodes fixed in contact, 40 % of
     the rest fixed open) of a random free or supported 3D body with m contact nodes."""

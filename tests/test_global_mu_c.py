@@ -16,7 +16,7 @@ from hpcwedge.patterns import BnBStats
 from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
 from hpcwedge.scene import parse_scene
-from instances import global_run, random_problem
+from instances import global_run, plug3d_param, random_problem
 
 SCENES = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
 
@@ -106,3 +106,15 @@ def test_public_scenes_global_mu_c(name):
         assert abs(by_milp(res) - want) <= 1e-9 * want
 
 
+
+
+def test_3d_tree_route_decides_every_problem_on_a_body_without_symmetry():
+    """plug3d 2 x 6 (m = 12) without its symmetry: the tree route's global mu^c is tan 10 deg
+    with no undecided problem and at most 1 % of the SOCPs failing verification (the bound
+    best (1 - TREE_STEP) and the first attempt's 1e-10 tolerances; with 1e-7 and Clarabel's
+    default tolerances: 1 undecided and 88 of 319 failing)."""
+    param, m = plug3d_param(2, 6)
+    st = BnBStats()
+    mu, status = global_mu_critical(param, m, 100.0, stats=st)
+    assert status == "found" and abs(mu - math.tan(math.radians(10))) <= 1e-12
+    assert st.undecided == 0 and st.statuses.get("verify_failed", 0) <= 0.01 * st.solves, st.statuses
