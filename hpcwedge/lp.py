@@ -30,8 +30,8 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     presolve of the equality rows). A point it returns must meet the unit x-space rows
     to X_SPACE_TOL absolutely, as the x-space LP's tolerance guarantees; one that does
     not (a huge y along a near-recession direction on which sum r_n is ~1e-10 of |y|,
-    within tolerance of the reduced rows only) is decided by the x-space LP instead
-    (counted as "lp_x_space" in counts)."""
+    within tolerance of the reduced rows only) is decided by the x-space LP instead, and so
+    is a problem HiGHS leaves undecided in the eliminated form (counted as "lp_x_space")."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
     live = scale > 0
@@ -49,11 +49,12 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     bn = np.linalg.norm(B, axis=1)
     keep = bn > ZERO_ROW_RTOL
     status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], options, method)
-    if status != Status.FEASIBLE:
+    if status == Status.INFEASIBLE:
         return status, None
-    x = Z @ y
-    if max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0)) <= X_SPACE_TOL:
-        return status, x
+    if status == Status.FEASIBLE:
+        x = Z @ y
+        if max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0)) <= X_SPACE_TOL:
+            return status, x
     count(counts, "lp_x_space")
     status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method)
     return status, x

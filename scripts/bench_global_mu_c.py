@@ -2,10 +2,12 @@
 """2D global mu^c at realistic size (issue 13): ours against MILP peers, in one run.
 
     PYTHONPATH=. python scripts/bench_global_mu_c.py [--quick] [--rows 5 10 20 40] [--limit 170]
-                                                     [--out results/bench_global_mu_c]
+                                                     [--model plug2d|block2d] [--out results/bench_global_mu_c]
 
 Scenes: plug2d rows R (m = 2 R contact nodes, taper 10 deg, free body; global mu^c =
-tan(10 deg) analytically), `enumerate = false`, `mu_c = "global"`.
+tan(10 deg) analytically), or with --model block2d the plane-stress Q4 plug with R coarse
+rows, each element split 2 x 2 (refine 2; m = 2 (R + 1); the same analytic mu^c);
+`enumerate = false`, `mu_c = "global"`.
 Engines, each in its own process with a time limit (bench_2d.run_script):
   ours         `hpcwedge run`'s route (pipeline.run_scene): in 2D the MILP bracket
                (global_mu_c.global_bracket_milp: milp.wedge_milp by HiGHS, each pattern's
@@ -45,6 +47,14 @@ MU_MAX = 100.0
 BISECT_RTOL = 1e-6
 
 
+#: the scene family (main's --model; the workers get it through the environment)
+MODEL = os.environ.get("BENCH_GLOBAL_MODEL", "plug2d")
+
+
+def m_of(rows: int) -> int:
+    return 2 * rows if MODEL == "plug2d" else 2 * (rows + 1)
+
+
 def problem(rows: int):
     """(result of the enumeration-free run, parametrisation, m, numerics scale)."""
     import numpy as np
@@ -58,8 +68,10 @@ def problem(rows: int):
 
 def scene(rows: int, mu_c: str):
     from hpcwedge.scene import parse_scene
-    return parse_scene({"name": f"plug2d-r{rows}", "dim": 2,
-                        "model": {"kind": "plug2d", "rows": rows, "taper_deg": TAPER},
+    model = {"kind": MODEL, "rows": rows, "taper_deg": TAPER}
+    if MODEL == "block2d":
+        model["refine"] = 2
+    return parse_scene({"name": f"{MODEL}-r{rows}", "dim": 2, "model": model,
                         "friction": {"mu": [0.1]}, "compute": {"enumerate": False, "mu_c": mu_c}})
 
 
@@ -133,9 +145,13 @@ def main() -> None:
     ap.add_argument("--rows", type=int, nargs="*", default=None)
     ap.add_argument("--engines", nargs="*", default=list(ENGINES))
     ap.add_argument("--limit", type=float, default=None, help="seconds per engine and scene")
+    ap.add_argument("--model", default="plug2d", choices=["plug2d", "block2d"])
     ap.add_argument("--out", default=os.path.join(bench_2d.ROOT, "results", "bench_global_mu_c"))
     ap.add_argument("--worker", nargs=2, metavar=("ENGINE", "ROWS"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    global MODEL
+    if not args.worker:
+        MODEL = os.environ["BENCH_GLOBAL_MODEL"] = args.model
     if args.worker:
         out = worker(args.worker[0], int(args.worker[1]))
         print(bench_2d.MARK + json.dumps(out))
@@ -147,11 +163,11 @@ def main() -> None:
     for rows in rows_list:
         for engine in args.engines:
             if engine in dead:                     # timed out at a smaller size: not again
-                records.append({"rows": rows, "m": 2 * rows, "engine": engine, "status": "skipped"})
+                records.append({"model": MODEL, "rows": rows, "m": m_of(rows), "engine": engine, "status": "skipped"})
                 continue
             status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__),
                                                          ["--worker", engine, str(rows)], limit)
-            rec = {"rows": rows, "m": 2 * rows, "engine": engine, "status": status, "wall": wall}
+            rec = {"model": MODEL, "rows": rows, "m": m_of(rows), "engine": engine, "status": status, "wall": wall}
             if res is not None:
                 rec.update(res)
                 mu = res.get("mu_c")
@@ -162,7 +178,7 @@ def main() -> None:
                 dead.add(engine)
             records.append(rec)
             print(line(rec), flush=True)
-    write(args.out, records, {"taper_deg": TAPER, "mu_max": MU_MAX, "bisect_rtol": BISECT_RTOL,
+    write(args.out, records, {"model": MODEL, "taper_deg": TAPER, "mu_max": MU_MAX, "bisect_rtol": BISECT_RTOL,
                               "limit_s": limit, "analytic_mu_c": want})
 
 
@@ -178,7 +194,7 @@ def write(out: str, records: list[dict], meta: dict) -> None:
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     with open(out + ".json", "w") as f:
         json.dump({**meta, "records": records, "environment": environment()}, f, indent=1)
-    cols = ["rows", "m", "engine", "status", "seconds", "wall", "mu_c", "rel_error", "route", "lps",
+    cols = ["model", "rows", "m", "engine", "status", "seconds", "wall", "mu_c", "rel_error", "route", "lps",
             "tree_nodes", "milp_solves", "milp_nodes", "undecided"]
     with open(out + ".csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")

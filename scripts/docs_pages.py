@@ -470,14 +470,14 @@ def bench_mu_c() -> str:
 
 
 def bench_global_mu_c() -> str:
-    """results/bench_global_mu_c{,_large}.json: the 2D global mu^c against MILP peers
+    """results/bench_global_mu_c{,_large,_block2d}.json: the 2D global mu^c against MILP peers
     (scripts/bench_global_mu_c.py)."""
-    recs = _load("bench_global_mu_c.json")["records"] + _load("bench_global_mu_c_large.json")["records"]
+    recs = [dict(r, model=r.get("model", "plug2d")) for name in GLOBAL_MU_C_FILES for r in _load(name)["records"]]
     engines = [e for e in ("ours", "ours_milp", "ours_tree", "highs_bisect", "scip_bisect")
                if any(r["engine"] == e for r in recs)]
     rows = []
-    for m in sorted({r["m"] for r in recs}):
-        same = {r["engine"]: r for r in recs if r["m"] == m}
+    for model, m in sorted({(r["model"], r["m"]) for r in recs}, key=lambda k: (k[0] != "plug2d", k)):
+        same = {r["engine"]: r for r in recs if r["m"] == m and r["model"] == model}
         ours = same.get("ours")
         if ours is None or ours["status"] != "ok":
             continue
@@ -486,28 +486,42 @@ def bench_global_mu_c() -> str:
         for e in engines[1:]:
             r = same.get(e)
             cells.append("–" if r is None else r["status"] if r["status"] == "skipped" else _peer_cell(r, ours))
-        rows.append([str(m), *cells])
+        rows.append([model, str(m), *cells])
     heads = {"ours_milp": "MILPs alone", "ours_tree": "tree alone", "highs_bisect": "HiGHS MILP, bisection",
              "scip_bisect": "SCIP, bisection (error 5.6e-6)"}
-    return table(["m", "ours, s", *[heads[e] for e in engines[1:]]], rows)
+    return table(["body", "m", "ours, s", *[heads[e] for e in engines[1:]]], rows)
+
+
+#: the files of bench_global_mu_c's table (plug2d m = 10..40 every engine; m = 80, 160 and
+#: block2d: ours and SCIP)
+GLOBAL_MU_C_FILES = ("bench_global_mu_c.json", "bench_global_mu_c_large.json", "bench_global_mu_c_block2d.json")
 
 
 def bench_search_3d() -> str:
-    """results/bench_search_3d.json: the 3D pattern search without symmetry (scripts/bench_search_3d.py)."""
+    """results/bench_search_3d.json: the 3D pattern search without symmetry (scripts/bench_search_3d.py),
+    beside results/bench_search_3d_before.json (the same script on the code before issue 13)."""
     recs = _load("bench_search_3d.json")["records"]
+    before = {(r["task"], r["m"]): r for r in _load("bench_search_3d_before.json")["records"]}
     rows = []
     for r in recs:
+        b = before.get((r["task"], r["m"]), {"status": "–"})
         if r["status"] != "ok":
-            rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]), r["status"], "", "", "", "", "", ""])
+            rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]), r["status"]] + [""] * 6)
             continue
         enum = r["task"] == "enumerate"
+
+        def cells(x: dict) -> list[str]:
+            if x.get("status") != "ok":
+                return [x.get("status", "–")] * 3
+            share = f"{100 * x['first_attempt']:.1f} %" if enum and x.get("first_attempt") is not None else "–"
+            return [f"{x['socps']:,}" + (f" ({x['socps_per_pattern']:.1f} / pattern)" if enum else ""),
+                    share if enum else str(x["undecided"]), _s(x["seconds"], 3)]
+        now, was = cells(r), cells(b)
         rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]),
-                     f"{r['patterns']:,}" if enum else f"mu^c {r['mu_c']:.10g}", f"{r['nodes']:,}", f"{r['socps']:,}",
-                     f"{r['socps_per_pattern']:.1f}" if enum else "–",
-                     f"{100 * r['first_attempt']:.1f} %" if enum and r.get("first_attempt") is not None else "–",
-                     str(r["undecided"]), _s(r["seconds"], 2)])
-    return table(["search", "plug3d", "m", "answer", "tree nodes", "SOCPs", "SOCPs / pattern",
-                  "first attempt settled", "undecided", "CPU s"], rows)
+                     f"{r['patterns']:,} patterns" if enum else f"mu^c {r['mu_c']:.12g}",
+                     *[f"{a} (was {w})" for a, w in zip(now, was)]])
+    return table(["search", "plug3d", "m", "answer", "SOCPs", "first attempt settled / undecided",
+                  "CPU s"], rows)
 
 
 def examples() -> str:
@@ -559,10 +573,11 @@ BENCHMARKS: dict = {
     "bench_mu_c": (bench_mu_c, "results/bench_mu_c.json", "PYTHONPATH=. .venv/bin/python scripts/bench_mu_c.py"),
     "examples": (examples, "scripts/examples/examples.json", "PYTHONPATH=. .venv/bin/python scripts/make_examples.py"),
     "faults": (faults, "results/faults.json", "python scripts/fault_campaign.py"),
-    "bench_global_mu_c": (bench_global_mu_c, "results/bench_global_mu_c.json, results/bench_global_mu_c_large.json",
+    "bench_global_mu_c": (bench_global_mu_c, ", ".join(f"results/{f}" for f in GLOBAL_MU_C_FILES),
                           "PYTHONPATH=. .venv/bin/python scripts/bench_global_mu_c.py [--rows 40 80 --engines ours scip_bisect"
-                          " --out results/bench_global_mu_c_large]"),
-    "bench_search_3d": (bench_search_3d, "results/bench_search_3d.json",
+                          " --out results/bench_global_mu_c_large] [--model block2d --rows 19 39 --engines ours"
+                          " scip_bisect --out results/bench_global_mu_c_block2d]"),
+    "bench_search_3d": (bench_search_3d, "results/bench_search_3d.json, results/bench_search_3d_before.json",
                         "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
 }
