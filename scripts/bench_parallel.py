@@ -106,7 +106,8 @@ def main() -> None:
     for label, ranks, workers in configs:
         g = got[label]
         same = g["mu_c"] == ref["mu_c"] and [p[0] for p in g["patterns"]] == [p[0] for p in ref["patterns"]] \
-            and all(abs(a[1] - b[1]) <= 1e-12 * abs(b[1]) for a, b in zip(g["patterns"], ref["patterns"]))
+            and all(a[1] == b[1] or (a[1] is not None and b[1] is not None and abs(a[1] - b[1]) <= 1e-12 * abs(b[1]))
+                    for a, b in zip(g["patterns"], ref["patterns"]))
         rows.append({"config": label, "ranks": ranks or 1, "workers": workers, "seconds": min(walls[label]),
                      "all_seconds": walls[label], "program_seconds": min(inside[label]),
                      "all_program_seconds": inside[label], "all_stage_seconds": stages[label],
