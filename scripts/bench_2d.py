@@ -287,6 +287,26 @@ def run_script(script: str, argv: list[str], limit: float) -> tuple[str, dict | 
     return "error", None, wall, tail
 
 
+def fields(r: dict, keys: tuple[str, ...], digits: int = 3) -> str:
+    """`key=value` of the keys a record has (floats to `digits` significant digits)."""
+    return "  ".join(f"{k}={r[k]:.{digits}g}" if isinstance(r.get(k), float) else f"{k}={r[k]}"
+                     for k in keys if r.get(k) is not None)
+
+
+def write_records(out: str, records: list[dict], meta: dict, cols: list[str]) -> None:
+    """<out>.json (meta, the records, the environment record) and <out>.csv (`cols` of each
+    record), for the benchmarks that run their engines through run_script."""
+    from hpcwedge.environment import environment
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    with open(out + ".json", "w") as f:
+        json.dump({**meta, "records": records, "environment": environment()}, f, indent=1)
+    with open(out + ".csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(records)
+    print(f"wrote {out}.csv and {out}.json")
+
+
 def fmt_s(v) -> str:
     if v is None:
         return "-"

@@ -30,7 +30,6 @@ Writes <out>.csv and <out>.json (with the environment record); prints the table.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import os
@@ -178,30 +177,19 @@ def main() -> None:
                 dead.add(engine)
             records.append(rec)
             print(line(rec), flush=True)
-    write(args.out, records, {"model": MODEL, "taper_deg": TAPER, "mu_max": MU_MAX, "bisect_rtol": BISECT_RTOL,
-                              "limit_s": limit, "analytic_mu_c": want})
+    bench_2d.write_records(args.out, records, {"model": MODEL, "taper_deg": TAPER, "mu_max": MU_MAX,
+                                               "bisect_rtol": BISECT_RTOL, "limit_s": limit, "analytic_mu_c": want},
+                           COLUMNS)
 
 
 def line(r: dict) -> str:
     keys = ("seconds", "rel_error", "route", "lps", "tree_nodes", "milp_solves", "milp_nodes", "undecided")
-    extra = "  ".join(f"{k}={r[k]:.3g}" if isinstance(r.get(k), float) else f"{k}={r[k]}"
-                      for k in keys if r.get(k) is not None)
-    return f"m={r['m']:4d} {r['engine']:13s} {r['status']:8s} {extra}"
+    return f"m={r['m']:4d} {r['engine']:13s} {r['status']:8s} {bench_2d.fields(r, keys)}"
 
 
-def write(out: str, records: list[dict], meta: dict) -> None:
-    from hpcwedge.environment import environment
-    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    with open(out + ".json", "w") as f:
-        json.dump({**meta, "records": records, "environment": environment()}, f, indent=1)
-    cols = ["model", "rows", "m", "engine", "status", "seconds", "wall", "mu_c", "rel_error", "route", "lps",
-            "tree_nodes", "milp_solves", "milp_nodes", "undecided"]
-    with open(out + ".csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        for r in records:
-            w.writerow(r)
-    print(f"wrote {out}.csv and {out}.json")
+#: the CSV's columns
+COLUMNS = ["model", "rows", "m", "engine", "status", "seconds", "wall", "mu_c", "rel_error", "route", "lps",
+           "tree_nodes", "milp_solves", "milp_nodes", "undecided"]
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ Writes <out>.csv and <out>.json (with the environment record); prints the table.
 from __future__ import annotations
 
 import argparse
-import csv
 import hashlib
 import json
 import os
@@ -104,29 +103,17 @@ def main() -> None:
             rec["error"] = err
         records.append(rec)
         print(line(rec), flush=True)
-    write(args.out, records, {"mu_enumerate": MU_ENUMERATE, "mu_global": MU_GLOBAL, "limit_s": args.limit})
+    bench_2d.write_records(args.out, records, {"mu_enumerate": MU_ENUMERATE, "mu_global": MU_GLOBAL, "limit_s": args.limit}, COLUMNS)
 
 
 def line(r: dict) -> str:
     keys = ("patterns", "nodes", "socps", "socps_per_pattern", "first_attempt", "undecided", "mu_c", "seconds")
-    extra = "  ".join(f"{k}={r[k]:.4g}" if isinstance(r.get(k), float) else f"{k}={r[k]}"
-                      for k in keys if r.get(k) is not None)
-    return f"{r['task']:9s} m={r['m']:3d} {r['status']:7s} {extra}"
+    return f"{r['task']:9s} m={r['m']:3d} {r['status']:7s} {bench_2d.fields(r, keys, 4)}"
 
 
-def write(out: str, records: list[dict], meta: dict) -> None:
-    from hpcwedge.environment import environment
-    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    with open(out + ".json", "w") as f:
-        json.dump({**meta, "records": records, "environment": environment()}, f, indent=1)
-    cols = ["task", "levels", "ring", "m", "status", "patterns", "patterns_hash", "nodes", "socps",
-            "socps_per_pattern", "first_attempt", "undecided", "mu_c", "seconds", "wall"]
-    with open(out + ".csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        for r in records:
-            w.writerow(r)
-    print(f"wrote {out}.csv and {out}.json")
+#: the CSV's columns
+COLUMNS = ["task", "levels", "ring", "m", "status", "patterns", "patterns_hash", "nodes", "socps",
+           "socps_per_pattern", "first_attempt", "undecided", "mu_c", "seconds", "wall"]
 
 
 if __name__ == "__main__":
