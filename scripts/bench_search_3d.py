@@ -10,7 +10,7 @@ through `hpcwedge run`'s route (pipeline.run_scene):
   enumerate  all feasible sign patterns at mu = 0.65 (`mu_c = "none"`): 2 x 6, 3 x 5, 3 x 6,
              and with --full 4 x 6 (about 4 minutes)
   global     the global mu^c (`enumerate = false`, `mu_c = "global"`, mu = 0.3): 2 x 6, 3 x 6,
-             and with --full 4 x 6
+             and with --full 4 x 6 and 4 x 8 (m = 32, about 2.5 minutes)
 Per row: the patterns (their set's hash, to compare runs), tree nodes, SOCPs, SOCPs per
 feasible pattern, undecided, the share of SOCPs that Clarabel's first attempt settled
 (`first_attempt`: the SOCPs that needed no retry over all SOCPs, from the result's solver
@@ -34,6 +34,7 @@ import bench_2d  # noqa: E402
 ENUMERATE = ((2, 6), (3, 5), (3, 6))
 GLOBAL = ((2, 6), (3, 6))
 FULL = ((4, 6),)
+FULL_GLOBAL = ((4, 6), (4, 8))
 MU_ENUMERATE = 0.65
 MU_GLOBAL = 0.3
 
@@ -89,9 +90,8 @@ def main() -> None:
         out = worker(args.worker[0], int(args.worker[1]), int(args.worker[2]))
         print(bench_2d.MARK + json.dumps(out))
         return
-    extra = FULL if args.full else ()
-    plan = [("enumerate", lr) for lr in (ENUMERATE[:1] if args.quick else ENUMERATE + extra)]
-    plan += [("global", lr) for lr in (GLOBAL[:1] if args.quick else GLOBAL + extra)]
+    plan = [("enumerate", lr) for lr in (ENUMERATE[:1] if args.quick else ENUMERATE + (FULL if args.full else ()))]
+    plan += [("global", lr) for lr in (GLOBAL[:1] if args.quick else GLOBAL + (FULL_GLOBAL if args.full else ()))]
     records = []
     for task, (levels, ring) in plan:
         status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__),
