@@ -15,8 +15,16 @@ from .rows import ZERO_ROW_RTOL, Rows, Status, count, eq_null_space
 #: the dual simplex ended "Unknown" near mu^c on a random free body (m = 3)
 LP_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
 #: absolute violation of the unit x-space rows (sum r_n = 1) that a point of the eliminated
-#: LP may keep (lp_feasible): 10x the x-space LP's feasibility tolerance
-X_SPACE_TOL = 1e-9
+#: LP may keep (lp_feasible): the x-space LP's own feasibility tolerance. At 1e-9 a point
+#: with ||x|| ~ 8e6 (equality rows 4.5e-10 off through rounding alone) passed 3e-8 below a
+#: random free body's mu^c under OpenBLAS's Haswell kernels; the solution there has ||x|| 16
+X_SPACE_TOL = LP_OPTIONS["primal_feasibility_tolerance"]
+#: a point of the eliminated LP whose normalisation share 1 / (||norm|| ||x||), times sqrt(d),
+#: is below this is decided by the x-space LP: a near-recession point passes the rows to
+#: tolerance yet lies far from the answer (a random free body, d = 6, 4e-9 below its mu^c
+#: under OpenBLAS's Haswell kernels: ||x|| 1.2e6 against 16 for the solution, share x
+#: sqrt(d) 3e-5; the least of plug2d's solutions, m = 20 and 160: 1.5e-3 and 4e-3)
+NORM_SHARE_MIN = 1e-2
 
 
 def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str = "highs-ds",
@@ -29,8 +37,8 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     (plug2d m = 80, 240 x 160: 25 ms a solve against 257 ms, most of which was HiGHS's
     presolve of the equality rows). A point it returns must meet the unit x-space rows
     to X_SPACE_TOL absolutely, as the x-space LP's tolerance guarantees; one that does
-    not (a huge y along a near-recession direction on which sum r_n is ~1e-10 of |y|,
-    within tolerance of the reduced rows only) is decided by the x-space LP instead, and so
+    not (a huge y along a near-recession direction on which sum r_n is a tiny share of
+    |y|, within tolerance of the reduced rows only) is decided by the x-space LP instead, and so
     is a problem HiGHS leaves undecided in the eliminated form (counted as "lp_x_space")."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
@@ -53,7 +61,10 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
         return status, None
     if status == Status.FEASIBLE:
         x = Z @ y
-        if max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0)) <= X_SPACE_TOL:
+        # sum r_n = 1 over ||norm|| ||x||: the share of x the normalisation sees
+        share = 1.0 / max(np.linalg.norm(rows.norm) * np.linalg.norm(x), 1e-300)
+        if share * np.sqrt(x.size) >= NORM_SHARE_MIN and \
+                max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0)) <= X_SPACE_TOL:
             return status, x
     count(counts, "lp_x_space")
     status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method)
