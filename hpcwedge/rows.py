@@ -66,7 +66,7 @@ class Rows:
     norm: np.ndarray
 
     @functools.cached_property
-    def Z(self) -> np.ndarray:
+    def Z(self) -> np.ndarray | None:
         """(d, p) orthonormal basis of the null space of the equality rows (eq_null_space);
         None when an equality row depends on mu (then no basis serves every mu)."""
         if np.any(self.a1[self.eq]):

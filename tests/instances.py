@@ -130,13 +130,14 @@ def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str
     return run_scene(parse_scene(data))
 
 
-def plug3d_param(levels: int, ring: int):
-    """(parametrisation, m) of the built-in plug3d LEVELS x RING (test_socp.py,
-    test_global_mu_c.py: a body searched without its symmetry)."""
+def plug3d_param(levels: int = 2, ring: int = 5, **model):
+    """(parametrisation, m) of the built-in plug3d LEVELS x RING, other model keys as given
+    (e.g. taper_deg): a body searched without its symmetry (test_socp.py,
+    test_global_mu_c.py, test_mu_critical.py)."""
     from hpcwedge.build import contact_problem
     from hpcwedge.scene import parse_scene
     prob = contact_problem(parse_scene({"name": "p", "dim": 3, "friction": {"mu": [1.0]},
-                                        "model": {"kind": "plug3d", "levels": levels, "ring": ring}}))
+                                        "model": {"kind": "plug3d", "levels": levels, "ring": ring, **model}}))
     return parametrize(prob), prob.m
 
 

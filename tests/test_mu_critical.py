@@ -12,7 +12,7 @@ from hpcwedge.dd import complementary_rays
 from hpcwedge.global_mu_c import global_mu_critical
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.problem import ContactProblem, friction_rows_2d, parametrize
-from instances import random_problem
+from instances import plug3d_param, random_problem
 
 
 def n_wedged_exact(prob, mu):
@@ -73,11 +73,7 @@ def test_single_node_uncoupled_has_no_wedge_at_any_mu():
 def test_plug3d_global_mu_c_is_tan_taper(taper):
     """A conical plug wedges first with every ring node in contact and the
     reactions horizontal: mu^c = tan(taper), to 1e-9 (m = 10, free body)."""
-    from hpcwedge.build import contact_problem
-    from hpcwedge.scene import parse_scene
-    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d", "taper_deg": taper},
-                      "friction": {"mu": [1.0]}})
-    p = parametrize(contact_problem(sc))
+    p, _ = plug3d_param(taper_deg=taper)
     want = math.tan(math.radians(taper))
     g, status = global_mu_critical(p, 10, 100.0)
     assert status == "found" and abs(g - want) <= 1e-9 * want
@@ -91,12 +87,8 @@ def test_plug3d_global_mu_c_is_tan_taper(taper):
 def _plug3d_pattern(ring: int = 10):
     """plug3d with `ring` nodes per level at mu = 1 (m = 2 ring) and one of its feasible
     patterns: (parametrisation, m, zero_u, zero_r)."""
-    from hpcwedge.build import contact_problem
     from hpcwedge.patterns import PatternTree
-    from hpcwedge.scene import parse_scene
-    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d", "ring": ring}, "friction": {"mu": 1.0}})
-    p = parametrize(contact_problem(sc))
-    m = 2 * ring
+    p, m = plug3d_param(ring=ring)
     tree = PatternTree(p, m, 1.0)
     leaf = tree.explore(tree.root(), first_only=True).found[0]
     zu, zr = leaf.masks(m)
