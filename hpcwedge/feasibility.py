@@ -100,8 +100,8 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
             status, x = lp_feasible(rows, mu, LP_OPTIONS, method="highs-ipm", counts=counts)
             count(counts, "lp_retry_ipm_" + status)
         return Decision(status, x)
-    if rows.Z.shape[1] == 0 or np.abs(rows.norm @ rows.Z).max() <= ZERO_ROW_RTOL * np.linalg.norm(rows.norm):
-        count(counts, "eq_infeasible")          # sum r_n vanishes on the pattern's subspace
+    if rows.nodes.size == 0:
+        count(counts, "eq_infeasible")          # every node in gap: sum r_n = 0
         return Decision(Status.INFEASIBLE)
     # retries are plain feasibility problems (an optimum on the boundary is the first thing
     # to miss a verification)
@@ -116,6 +116,11 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
             if violation(rows, mu, o.x) <= VERIFY_TOL:
                 return Decision(Status.FEASIBLE, o.x / (rows.norm @ o.x), o.positive)
             count(counts, tag + "verify_failed")
+        if o.attempt == 0 and (rows.Z.shape[1] == 0 or np.abs(rows.norm @ rows.Z).max()
+                               <= ZERO_ROW_RTOL * np.linalg.norm(rows.norm)):
+            # before the retries in the null space of the equalities: sum r_n vanishes there
+            count(counts, "eq_infeasible")
+            return Decision(Status.INFEASIBLE)
     for sides in pyramid_sides:
         status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_calls")

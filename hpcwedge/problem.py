@@ -88,6 +88,31 @@ class Parametrization:
     def exact(self) -> bool:
         return self.Uq is not None
 
+    @cached_property
+    def reactions(self) -> "ReactionCoordinates":
+        """The same states in the coordinates x' = (r, beta) (ReactionCoordinates), computed
+        once."""
+        ny = self.d - self.n_alpha
+        B = self.R[:, :ny]
+        E = sla.null_space(B.T).T if ny < B.shape[0] else np.zeros((0, B.shape[0]))
+        return ReactionCoordinates(U=np.hstack([self.U[:, :ny] @ B.T, self.U[:, ny:]]), E=E, B=B)
+
+
+@dataclass(frozen=True)
+class ReactionCoordinates:
+    """A parametrisation in x' = (r, beta) (r the n reactions, beta the rigid amplitudes):
+    u = U x', with E r = 0 (E (n - rank B, n), orthonormal rows: equilibrium N^T r = 0),
+    and x = (B^T r, beta). A friction cone in x' is a coordinate cone (mu r_n, r_t1, r_t2),
+    which keeps the 3D pattern SOCP sparse (socp.reaction_socp)."""
+
+    U: np.ndarray
+    E: np.ndarray
+    B: np.ndarray
+
+    def to_x(self, r: np.ndarray, beta: np.ndarray) -> np.ndarray:
+        """x = (B^T r, beta) for r (n,) on range(B)."""
+        return np.concatenate([self.B.T @ r, beta])
+
 
 def blocks(M: np.ndarray, m: int, dim: int) -> tuple[np.ndarray, ...]:
     """The dim row blocks of M (dim*m rows in the block order of SPEC §1): (normal,

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .problem import Parametrization, blocks
+from .problem import Parametrization, ReactionCoordinates, blocks
 
 
 class Status(enum.StrEnum):
@@ -71,16 +71,17 @@ class Rows:
         None when an equality row depends on mu (then no basis serves every mu)."""
         if np.any(self.a1[self.eq]):
             return None
-        return eq_null_space(_unit(self.a0[self.eq]), self.a0.shape[1])
+        return eq_null_space(unit_rows(self.a0[self.eq]), self.a0.shape[1])
 
 
 @dataclass(frozen=True)
 class ConeRows:
     """The 3D pattern SOCP (module doc). eq (E, d), lin (L, d): unit rows;
     rn (c, d), rt (c, 2, d): the cone nodes `nodes`, each node's three rows scaled
-    by one common factor; norm (d,): sum r_n. Z (d, p): orthonormal basis of the
-    null space of eq (the solver's coordinates, x = Z w). lin_nodes (L,): the node
-    of each lin row."""
+    by one common factor (scale (c,), applied as rows / scale); norm (d,): sum r_n.
+    lin_nodes (L,): the node of each lin row, lin_scale (L,) the norm it was scaled by.
+    zero_u, zero_r (m,): the pattern; reactions: the parametrisation in x' = (r, beta)
+    (problem.ReactionCoordinates), for socp.reaction_socp."""
 
     eq: np.ndarray
     lin: np.ndarray
@@ -88,8 +89,18 @@ class ConeRows:
     rt: np.ndarray
     norm: np.ndarray
     nodes: np.ndarray
-    Z: np.ndarray
     lin_nodes: np.ndarray
+    scale: np.ndarray
+    lin_scale: np.ndarray
+    zero_u: np.ndarray
+    zero_r: np.ndarray
+    reactions: ReactionCoordinates
+
+    @functools.cached_property
+    def Z(self) -> np.ndarray:
+        """(d, p) orthonormal basis of the null space of eq (socp.pattern_socp's
+        coordinates, x = Z w), computed on first use."""
+        return eq_null_space(self.eq, self.norm.shape[0])
 
 
 def problem_dim(param: Parametrization, m: int) -> int:
@@ -97,15 +108,15 @@ def problem_dim(param: Parametrization, m: int) -> int:
     return param.U.shape[0] // m
 
 
-def _unit(A: np.ndarray) -> np.ndarray:
+def unit_rows(A: np.ndarray) -> np.ndarray:
     """Rows scaled to unit norm; rows that are identically zero (relative to the
     largest) dropped."""
-    A = A[_kept(A)]
+    A = A[kept_rows(A)]
     return A / np.linalg.norm(A, axis=1, keepdims=True)
 
 
-def _kept(A: np.ndarray) -> np.ndarray:
-    """The rows of A that `_unit` keeps (boolean mask)."""
+def kept_rows(A: np.ndarray) -> np.ndarray:
+    """The rows of A that `unit_rows` keeps (boolean mask)."""
     s = np.linalg.norm(A, axis=1)
     return s > ZERO_ROW_RTOL * max(s.max(initial=0.0), 1e-300)
 
@@ -144,12 +155,14 @@ def _pattern_rows_3d(param, m, zu, zr, friction):
     U, R = param.U, param.R
     Un, (Rn, Rt1, Rt2) = blocks(U, m, 3)[0], blocks(R, m, 3)
     norm = Rn.sum(axis=0)
-    eq = _unit(np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]]))
-    lin = _unit(Un[~zu])
-    lin_nodes = np.flatnonzero(~zu)[_kept(Un[~zu])]
+    eq = unit_rows(np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]]))
+    lin_kept = kept_rows(Un[~zu])
+    lin_nodes = np.flatnonzero(~zu)[lin_kept]
+    lin_scale = np.linalg.norm(Un[lin_nodes], axis=1)
+    lin = Un[lin_nodes] / lin_scale[:, None]
     fr = ~zr
     if not friction:
-        rn = _unit(Rn[fr])
+        rn = unit_rows(Rn[fr])
         A0 = np.vstack([eq, lin, rn])
         E = np.concatenate([np.ones(len(eq), bool), np.zeros(len(lin) + len(rn), bool)])
         return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=norm)
@@ -157,7 +170,8 @@ def _pattern_rows_3d(param, m, zu, zr, friction):
     rn, rt = Rn[fr], np.stack([Rt1[fr], Rt2[fr]], axis=1)
     sc = _cone_scale(Rn, Rt1, Rt2)[fr]
     return ConeRows(eq=eq, lin=lin, rn=rn / sc[:, None], rt=rt / sc[:, None, None], norm=norm,
-                    nodes=nodes, Z=eq_null_space(eq, param.d), lin_nodes=lin_nodes)
+                    nodes=nodes, lin_nodes=lin_nodes, scale=sc, lin_scale=lin_scale,
+                    zero_u=zu, zero_r=zr, reactions=param.reactions)
 
 
 def eq_null_space(eq: np.ndarray, d: int) -> np.ndarray:
@@ -213,7 +227,7 @@ def node_rows(param: Parametrization, m: int) -> NodeRows:
     U, R = param.U, param.R
     Un, (Rn, Rt1, Rt2) = blocks(U, m, 3)[0], blocks(R, m, 3)
     un = np.zeros_like(Un)
-    keep = _kept(Un)
+    keep = kept_rows(Un)
     un[keep] = Un[keep] / np.linalg.norm(Un[keep], axis=1, keepdims=True)
     cone = np.stack([Rn, Rt1, Rt2], axis=1) / _cone_scale(Rn, Rt1, Rt2)[:, None, None]
     return NodeRows(un=un, cone=cone, norm=Rn.sum(axis=0))
