@@ -4,7 +4,9 @@ no module state), the retry ladder of attempts, and the checks of what Clarabel 
 
 Every conic problem here has the form  min 1/2 w'Pw + q.w  s.t.  A w + s = b,  s in K,
 with K = [zero cone (n_zero) | nonnegative (n_lin) | second-order cones of size 3 (n_soc)]
-(`ConicProblem`). The pattern SOCP (`pattern_socp`, rows.ConeRows) is one; Dinkelbach's
+(`ConicProblem`). The pattern SOCP (rows.ConeRows) is one, built twice: in reaction
+coordinates for the first attempt (`reaction_socp`, sparse), in the null space of its
+equalities for the retries (`pattern_socp`); Dinkelbach's
 steps (dinkelbach.py) and the signed KKT multipliers (kkt.py) are others.
 
 The ladder (`attempts`): attempt k uses `settings(k, tight)`. 0: plain; 1: the least-norm

@@ -68,3 +68,35 @@ def test_first_attempt_settles_the_search_socps_of_a_body_without_symmetry():
     retried = sum(v for k, v in stats.statuses.items() if k.startswith("retry1_") and k[7:8].isupper())
     assert len(found) == 25 and stats.solves > 500
     assert retried <= 0.01 * stats.solves, stats.statuses
+
+
+def test_reaction_form_agrees_with_the_null_space_form():
+    """The first attempt (reaction coordinates) and the null-space form decide every
+    partial pattern of plug3d 2 x 4 at two mu alike; a reaction point is verified in
+    x-space and a reaction certificate, carried into pattern_socp's layout, passes the
+    Farkas check there."""
+    from hpcwedge.socp import reaction_socp, solve, violation, VERIFY_TOL
+    p, m = plug3d_param(2, 4)
+    rng = np.random.default_rng(5)
+    kinds = {"Solved": 0, "PrimalInfeasible": 0}
+    for mu in (0.4, 0.9):
+        for _ in range(60):
+            state = rng.integers(0, 3, m)
+            zu, zr = state == 1, state == 2
+            if not (~zr).any():
+                continue
+            rows = pattern_rows(p, m, zu, zr)
+            first = reaction_socp(rows, mu)
+            sol = solve(first.problem, 0, False)
+            ref = solve(pattern_socp(rows, mu), 2, False)
+            assert sol.status == ref.status in kinds
+            kinds[sol.status] += 1
+            if sol.status == "Solved":
+                assert violation(rows, mu, first.to_x(np.asarray(sol.x))) <= VERIFY_TOL
+            else:
+                plain = pattern_socp(rows, mu)
+                assert certificate_ok(first.problem.A, first.problem.b, sol.z, first.problem.n_zero,
+                                      first.problem.n_lin)
+                z = first.farkas(sol.z)
+                assert z is not None and certificate_ok(plain.A, plain.b, z, 1, plain.n_lin)
+    assert min(kinds.values()) >= 10
