@@ -152,26 +152,61 @@ def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.
 
 
 def _pattern_rows_3d(param, m, zu, zr, friction):
-    U, R = param.U, param.R
-    Un, (Rn, Rt1, Rt2) = blocks(U, m, 3)[0], blocks(R, m, 3)
-    norm = Rn.sum(axis=0)
-    eq = unit_rows(np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]]))
-    lin_kept = kept_rows(Un[~zu])
-    lin_nodes = np.flatnonzero(~zu)[lin_kept]
-    lin_scale = np.linalg.norm(Un[lin_nodes], axis=1)
-    lin = Un[lin_nodes] / lin_scale[:, None]
+    nb = _node_blocks(param, m)
+    unit = nb.unit
+    # equalities: u_n of contact nodes, (r_n, r_t1, r_t2) of gap nodes, unit rows
+    pick = np.concatenate([zu, zr, zr, zr])
+    sel = nb.size[pick]
+    kept = sel > ZERO_ROW_RTOL * max(sel.max(initial=0.0), 1e-300)
+    eq = unit[pick][kept]
+    free_u = np.flatnonzero(~zu)
+    s = nb.size[free_u]
+    lin_nodes = free_u[s > ZERO_ROW_RTOL * max(s.max(initial=0.0), 1e-300)]
+    lin_scale = nb.size[lin_nodes]
+    lin = unit[lin_nodes]
     fr = ~zr
     if not friction:
-        rn = unit_rows(Rn[fr])
+        rn = unit_rows(nb.rows[m:2 * m][fr])
         A0 = np.vstack([eq, lin, rn])
         E = np.concatenate([np.ones(len(eq), bool), np.zeros(len(lin) + len(rn), bool)])
-        return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=norm)
+        return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=nb.norm)
     nodes = np.flatnonzero(fr)
-    rn, rt = Rn[fr], np.stack([Rt1[fr], Rt2[fr]], axis=1)
-    sc = _cone_scale(Rn, Rt1, Rt2)[fr]
-    return ConeRows(eq=eq, lin=lin, rn=rn / sc[:, None], rt=rt / sc[:, None, None], norm=norm,
-                    nodes=nodes, lin_nodes=lin_nodes, scale=sc, lin_scale=lin_scale,
+    return ConeRows(eq=eq, lin=lin, rn=nb.rn[fr], rt=nb.rt[fr], norm=nb.norm,
+                    nodes=nodes, lin_nodes=lin_nodes, scale=nb.scale[fr], lin_scale=lin_scale,
                     zero_u=zu, zero_r=zr, reactions=param.reactions)
+
+
+@dataclass(frozen=True)
+class _NodeBlocks:
+    """The rows of a 3D parametrisation that every pattern's rows are cut from: rows (4m, d)
+    [u_n; r_n; r_t1; r_t2], each row's norm `size` and the rows over it `unit` (zero rows
+    stay zero); rn (m, d), rt (m, 2, d) over each node's cone factor `scale` (m,); norm (d,)
+    sum r_n."""
+
+    rows: np.ndarray
+    size: np.ndarray
+    unit: np.ndarray
+    rn: np.ndarray
+    rt: np.ndarray
+    scale: np.ndarray
+    norm: np.ndarray
+
+
+def _node_blocks(param: Parametrization, m: int) -> _NodeBlocks:
+    """_NodeBlocks of (param, m), computed once per parametrisation (kept on it)."""
+    key = f"_node_blocks_{m}"
+    nb = param.__dict__.get(key)
+    if nb is None:
+        Un, (Rn, Rt1, Rt2) = blocks(param.U, m, 3)[0], blocks(param.R, m, 3)
+        rows = np.ascontiguousarray(np.vstack([Un, Rn, Rt1, Rt2]))
+        size = np.linalg.norm(rows, axis=1)
+        unit = rows / np.where(size > 0, size, 1.0)[:, None]
+        sc = _cone_scale(Rn, Rt1, Rt2)
+        nb = _NodeBlocks(rows=rows, size=size, unit=unit, rn=Rn / sc[:, None],
+                         rt=np.stack([Rt1, Rt2], axis=1) / sc[:, None, None], scale=sc,
+                         norm=Rn.sum(axis=0))
+        param.__dict__[key] = nb
+    return nb
 
 
 def eq_null_space(eq: np.ndarray, d: int) -> np.ndarray:
@@ -224,11 +259,8 @@ class NodeRows:
 
 def node_rows(param: Parametrization, m: int) -> NodeRows:
     """Every node's rows (NodeRows) of the parametrisation's m contact nodes (3D)."""
-    U, R = param.U, param.R
-    Un, (Rn, Rt1, Rt2) = blocks(U, m, 3)[0], blocks(R, m, 3)
-    un = np.zeros_like(Un)
-    keep = kept_rows(Un)
-    un[keep] = Un[keep] / np.linalg.norm(Un[keep], axis=1, keepdims=True)
-    cone = np.stack([Rn, Rt1, Rt2], axis=1) / _cone_scale(Rn, Rt1, Rt2)[:, None, None]
-    return NodeRows(un=un, cone=cone, norm=Rn.sum(axis=0))
-
+    nb = _node_blocks(param, m)
+    size = nb.size[:m]
+    keep = size > ZERO_ROW_RTOL * max(size.max(initial=0.0), 1e-300)
+    un = np.where(keep[:, None], nb.unit[:m], 0.0)
+    return NodeRows(un=un, cone=np.concatenate([nb.rn[:, None], nb.rt], axis=1), norm=nb.norm)

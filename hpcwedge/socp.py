@@ -36,6 +36,7 @@ from typing import Iterator
 import numpy as np
 import scipy.sparse as sp
 
+from .problem import ReactionCoordinates
 from .rows import ZERO_ROW_RTOL, ConeRows
 
 #: a returned x is feasible when every row holds to VERIFY_TOL * ||x|| (the order of
@@ -189,10 +190,7 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     c, nb = len(nodes), form.U.shape[1] - n
     cols = np.stack([nodes, nodes + m, nodes + 2 * m], axis=1).ravel()
     # [equilibrium; u_n of every node] on the kept columns, each row's norm
-    rest = np.zeros((form.E.shape[0] + m, 3 * c + nb))
-    rest[:form.E.shape[0], :3 * c] = form.E[:, cols]
-    rest[form.E.shape[0]:, :3 * c] = form.U[:m, cols]
-    rest[form.E.shape[0]:, 3 * c:] = form.U[:m, n:]
+    rest = np.ascontiguousarray(_equilibrium_normal_rows(form, m)[:, np.concatenate([cols, np.arange(n, n + nb)])])
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
     kept = size > ZERO_ROW_RTOL * max(size.max(initial=0.0), 1e-300)
     eq = kept.copy()
@@ -211,6 +209,20 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     b[0] = 1.0
     problem = ConicProblem(A, b, 1 + int(eq.sum()), len(lin_nodes), c)
     return ReactionSOCP(problem, rows, cols, lin_nodes, lin_scale)
+
+
+def _equilibrium_normal_rows(form: ReactionCoordinates, m: int) -> np.ndarray:
+    """[E 0; U_n] (E rows + m, n + n_beta): the rows `reaction_socp` cuts its dense block
+    from, computed once per parametrisation (kept on `form`)."""
+    key = f"_equilibrium_normal_rows_{m}"
+    rest = form.__dict__.get(key)
+    if rest is None:
+        k, n = form.E.shape
+        rest = np.zeros((k + m, form.U.shape[1]))
+        rest[:k, :n] = form.E
+        rest[k:] = form.U[:m]
+        form.__dict__[key] = rest
+    return rest
 
 
 def solve(problem: ConicProblem, attempt: int, tight: bool) -> Solution:

@@ -2,7 +2,7 @@
 per-node rows of the learnt cores against the pattern rows, the status values."""
 import numpy as np
 
-from hpcwedge.problem import parametrize
+from hpcwedge.problem import Parametrization, parametrize
 from hpcwedge.rows import ConeRows, Rows, Status, eq_null_space, node_rows, pattern_rows
 from instances import random_problem, random_problem_3d
 
@@ -16,6 +16,38 @@ def test_3d_rows_shapes_and_friction_free_relaxation_is_an_lp():
     assert rows.rn.shape == (2, p.d) and rows.rt.shape == (2, 2, p.d) and rows.lin.shape == (2, p.d)
     assert np.allclose(rows.eq @ rows.Z, 0, atol=1e-12)
     assert isinstance(pattern_rows(p, 3, zu, zr, friction=False), Rows)
+
+
+def test_3d_rows_are_the_unit_rows_of_u_and_r_of_their_own_body():
+    """pattern_rows cuts every pattern's rows from blocks computed once per parametrisation:
+    they must be the unit rows of U and R of *that* body (two bodies with the same m in
+    turn, each twice), zero u_n rows dropped, each cone's rows over one common factor."""
+    m = 5
+    rng = np.random.default_rng(7)
+    bodies = [parametrize(random_problem_3d(np.random.default_rng(s), m, bool(s))) for s in (3, 4)]
+    for p in bodies + bodies:
+        zu, zr = rng.random(m) < 0.3, np.zeros(m, bool)
+        zr[~zu] = rng.random((~zu).sum()) < 0.3
+        rows = pattern_rows(p, m, zu, zr)
+        Un, Rn, Rt1, Rt2 = (p.U[:m], *(p.R[k * m:(k + 1) * m] for k in range(3)))
+        unit = [a / np.linalg.norm(a) for a in np.vstack([Un[zu], Rn[zr], Rt1[zr], Rt2[zr]])]
+        assert np.allclose(rows.eq, np.array(unit).reshape(-1, p.d), rtol=0, atol=1e-15)
+        free = np.flatnonzero(~zu)
+        assert np.array_equal(rows.lin_nodes, free)
+        assert np.allclose(rows.lin * rows.lin_scale[:, None], Un[free], rtol=0, atol=1e-14)
+        assert np.array_equal(rows.nodes, np.flatnonzero(~zr))
+        cone = np.stack([Rn, Rt1, Rt2], axis=1)[~zr]
+        assert np.allclose(rows.scale, np.linalg.norm(cone, axis=(1, 2)), rtol=1e-15)
+        assert np.allclose(rows.rn * rows.scale[:, None], cone[:, 0], rtol=0, atol=1e-14)
+        assert np.allclose(rows.rt * rows.scale[:, None, None], cone[:, 1:], rtol=0, atol=1e-14)
+        assert np.array_equal(rows.norm, Rn.sum(axis=0))
+    # a u_n row that vanishes is no constraint: dropped (relative to the largest row)
+    p = bodies[0]
+    U = p.U.copy()
+    U[1] = 0.0
+    q = Parametrization(U=U, R=p.R, n_alpha=p.n_alpha)
+    assert pattern_rows(q, m, np.eye(m, dtype=bool)[1], np.zeros(m, bool)).eq.shape[0] == 0
+    assert np.array_equal(pattern_rows(q, m, np.zeros(m, bool), np.zeros(m, bool)).lin_nodes, [0, 2, 3, 4])
 
 
 def test_node_rows_scale_as_the_pattern_rows():
