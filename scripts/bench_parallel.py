@@ -79,6 +79,8 @@ def main() -> None:
                     help="configurations: 0 = serial, k = mpirun with k workers (1 must be among them)")
     ap.add_argument("--out", default=os.path.join(OUT, "bench_parallel"))
     args = ap.parse_args()
+    if 1 not in args.workers:
+        ap.error("--workers must include 1: the speedups are against 1 worker")
     text = scene_text(args.levels, args.ring, args.mu, args.mu_c, not args.no_symmetry)
     tmp = tempfile.mkdtemp(prefix="bench_parallel_")
     scene = os.path.join(tmp, "scene.toml")
