@@ -9,8 +9,9 @@
   `ur_sandwich`), and a plain bisection (`bisect`);
 - brute-force extreme rays of a small cone {A x >= 0} (`brute_force_rays`);
 - the peers (bench extras, imported lazily): pycddlib's double description (`cdd_generators`,
-  `cdd_zero`, `complementary_filter`) and SCIP on the indicator MILP of a wedged configuration
-  (`scip_wedged`).
+  `cdd_zero`, `complementary_filter`) and SCIP on the indicator MILP (2D) / MISOCP (3D) of a
+  wedged configuration (`scip_model`: one solve `scip_wedged`, all contact sets by a no-good
+  loop `scip_patterns`).
 
 Contact sets are int bitsets (bit i: node i in contact); a full pattern's gap set is the rest.
 Nothing here is used by a run of the program.
@@ -238,14 +239,14 @@ def complementary_filter(zero: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]
 
 # ----------------------------------------------------------------------- peer: SCIP
 
-def scip_wedged(param, m: int, mu: float, counts: dict) -> bool:
-    """SCIP (pyscipopt) on issue 13's indicator MILP at mu: is there a wedged configuration?
-    x in the (r, alpha) form, u_n >= 0, friction, sum r_n = 1, r_n,i <= z_i, indicator
-    z_i = 1 => u_n,i <= 0. Counts milp_solves / milp_nodes / undecided; a run SCIP does
-    not finish counts as wedged (keeps a bisection's upper end valid)."""
-    from pyscipopt import Model, quicksum
+def scip_model(param, m: int, mu: float):
+    """SCIP (pyscipopt) model of issue 13's indicator MILP / MISOCP at mu: (model, z). x in the
+    parametrisation, u_n >= 0, friction (2D: |r_t| <= mu r_n; 3D: the cone ||r_t|| <= mu r_n,
+    a nonlinear constraint SCIP recognises as second-order), sum r_n = 1, r_n,i <= z_i, and
+    the indicator z_i = 1 => u_n,i <= 0: z is the contact set (SPEC's weak sign pattern)."""
+    from pyscipopt import Model, quicksum, sqrt
     U, R = param.U, param.R
-    d = param.d
+    d, dim = param.d, param.U.shape[0] // m
     model = Model()
     model.hideOutput()
     x = [model.addVar(lb=None, ub=None, name=f"x{j}") for j in range(d)]
@@ -255,18 +256,61 @@ def scip_wedged(param, m: int, mu: float, counts: dict) -> bool:
         return quicksum(float(row[j]) * x[j] for j in range(d) if row[j] != 0.0)
 
     for i in range(m):
-        un, rn, rt = lin(U[i]), lin(R[i]), lin(R[m + i])
+        un, rn = lin(U[i]), lin(R[i])
         model.addCons(un >= 0)
-        model.addCons(mu * rn + rt >= 0)
-        model.addCons(mu * rn - rt >= 0)
+        if dim == 2:
+            rt = lin(R[m + i])
+            model.addCons(mu * rn + rt >= 0)
+            model.addCons(mu * rn - rt >= 0)
+        else:
+            # the cone on variables of its own: SCIP detects sqrt(t1^2 + t2^2) <= mu n as a
+            # second-order cone only on variables
+            n_, t1, t2 = (model.addVar(lb=0.0 if k == 0 else None, ub=None, name=f"r{k}_{i}")
+                          for k in range(3))
+            model.addCons(n_ == rn)
+            model.addCons(t1 == lin(R[m + i]))
+            model.addCons(t2 == lin(R[2 * m + i]))
+            model.addCons(sqrt(t1 * t1 + t2 * t2) <= mu * n_)
         model.addCons(rn <= z[i])
         model.addConsIndicator(un <= 0, binvar=z[i])
     model.addCons(lin(R[:m].sum(0)) == 1)
+    return model, z
+
+
+def _scip_solve(model, counts: dict) -> str:
+    """Optimise `model`; count milp_solves / milp_nodes; its status."""
     model.optimize()
     counts["milp_solves"] = counts.get("milp_solves", 0) + 1
     counts["milp_nodes"] = counts.get("milp_nodes", 0) + int(model.getNNodes())
-    status = model.getStatus()
+    return model.getStatus()
+
+
+def scip_wedged(param, m: int, mu: float, counts: dict) -> bool:
+    """SCIP on `scip_model` at mu: is there a wedged configuration? Counts milp_solves /
+    milp_nodes / undecided; a run SCIP does not finish counts as wedged (keeps a bisection's
+    upper end valid)."""
+    model, _ = scip_model(param, m, mu)
+    status = _scip_solve(model, counts)
     if status not in ("optimal", "infeasible"):
         counts["undecided"] = counts.get("undecided", 0) + 1
         return True
     return status == "optimal"
+
+
+def scip_patterns(param, m: int, mu: float, counts: dict) -> list[int] | None:
+    """All contact sets z (int bitsets, sorted) for which `scip_model` at mu is feasible, by
+    a no-good loop: solve, record z, cut it off (sum of the flipped z_i >= 1), until SCIP
+    proves the rest infeasible. None when a solve ends otherwise (time limit, numerics)."""
+    model, z = scip_model(param, m, mu)
+    found = []
+    while True:
+        status = _scip_solve(model, counts)
+        if status == "infeasible":
+            return sorted(found)
+        if status != "optimal":
+            counts["undecided"] = counts.get("undecided", 0) + 1
+            return None
+        bits = [int(round(model.getVal(v))) for v in z]
+        found.append(sum(1 << i for i, b in enumerate(bits) if b))
+        model.freeTransform()
+        model.addCons(sum((1 - v) if b else v for v, b in zip(z, bits)) >= 1)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The 3D sign-pattern search on a body without symmetry (issue 13): counts and times.
 
-    PYTHONPATH=. python scripts/bench_search_3d.py [--quick] [--full] [--limit 600]
+    PYTHONPATH=. python scripts/bench_search_3d.py [--quick] [--full] [--no-peers] [--limit 600]
                                                    [--out results/bench_search_3d]
 
 Scenes: plug3d LEVELS x RING (m = LEVELS * RING contact nodes), `run.symmetry = false`
@@ -11,6 +11,13 @@ through `hpcwedge run`'s route (pipeline.run_scene):
              and with --full 4 x 6 (about 4 minutes)
   global     the global mu^c (`enumerate = false`, `mu_c = "global"`, mu = 0.3): 2 x 6, 3 x 6,
              and with --full 4 x 6 and 4 x 8 (m = 32, about 2.5 minutes)
+The peer (`engine = "scip"`; bench extras, "missing" without pyscipopt; --no-peers: none), SCIP
+on issue 13's indicator MISOCP (reference.scip_model: friction as second-order cones, z_i = 1
+=> u_n,i <= 0, r_n,i <= z_i, sum r_n = 1):
+  enumerate  every feasible contact set by a no-good loop (reference.scip_patterns; its set's
+             hash compares with ours): 2 x 6, 3 x 5, with --full 3 x 6
+  global     bisection on mu in (0, 0.3] to 1e-6 relative (reference.scip_wedged): 2 x 6,
+             3 x 6, with --full 4 x 6
 Per row: the patterns (their set's hash, to compare runs), tree nodes, SOCPs, SOCPs per
 feasible pattern, undecided, the share of SOCPs that Clarabel's first attempt settled
 (`first_attempt`: the SOCPs that needed no retry over all SOCPs, from the result's solver
@@ -35,6 +42,10 @@ ENUMERATE = ((2, 6), (3, 5), (3, 6))
 GLOBAL = ((2, 6), (3, 6))
 FULL = ((4, 6),)
 FULL_GLOBAL = ((4, 6), (4, 8))
+SCIP_ENUMERATE, SCIP_FULL_ENUMERATE = ((2, 6), (3, 5)), ((3, 6),)
+SCIP_GLOBAL, SCIP_FULL_GLOBAL = ((2, 6), (3, 6)), ((4, 6),)
+#: the peer's bisection: relative width of its final bracket
+BISECT_RTOL = 1e-6
 MU_ENUMERATE = 0.65
 MU_GLOBAL = 0.3
 
@@ -57,6 +68,34 @@ def first_attempt(statuses: dict) -> tuple[int, int]:
     return first - retried, first
 
 
+def patterns_hash(contacts) -> str:
+    """The hash of a set of contact sets (each a sorted tuple of node indices)."""
+    return hashlib.sha1(repr(sorted(tuple(c) for c in contacts)).encode()).hexdigest()[:12]
+
+
+def scip_worker(task: str, levels: int, ring: int) -> dict:
+    """The SCIP peer on the scene's parametrisation (the program's own condensation)."""
+    from hpcwedge.build import contact_problem
+    from hpcwedge.problem import parametrize
+    from hpcwedge.reference import bisect, scip_patterns, scip_wedged
+    prob = contact_problem(scene(task, levels, ring))
+    param, m = parametrize(prob), prob.m
+    counts: dict = {}
+    t, c = time.perf_counter(), time.process_time()
+    out = {"m": m}
+    if task == "enumerate":
+        found = scip_patterns(param, m, MU_ENUMERATE, counts)
+        if found is not None:
+            contacts = [tuple(i for i in range(m) if b >> i & 1) for b in found]
+            out.update(patterns=len(contacts), patterns_hash=patterns_hash(contacts))
+    else:
+        out["mu_c"] = bisect(lambda mu: scip_wedged(param, m, mu, counts), 0.0, MU_GLOBAL, BISECT_RTOL)
+    out.update(seconds=time.process_time() - c, wall_in_process=time.perf_counter() - t,
+               milp_solves=counts.get("milp_solves", 0), milp_nodes=counts.get("milp_nodes", 0),
+               undecided=counts.get("undecided", 0))
+    return out
+
+
 def worker(task: str, levels: int, ring: int) -> dict:
     from hpcwedge.pipeline import run_scene
     t, c = time.perf_counter(), time.process_time()
@@ -67,9 +106,9 @@ def worker(task: str, levels: int, ring: int) -> dict:
     out = {"m": res.m, "nodes": bnb.get("nodes"), "socps": bnb.get("solves"), "undecided": bnb.get("undecided"),
            "seconds": cpu, "wall_in_process": wall}
     if task == "enumerate":
-        pats = sorted(tuple(p["contact"]) for p in res.runs[0].patterns)
+        pats = [tuple(p["contact"]) for p in res.runs[0].patterns]
         out["patterns"] = len(pats)
-        out["patterns_hash"] = hashlib.sha1(repr(pats).encode()).hexdigest()[:12]
+        out["patterns_hash"] = patterns_hash(pats)
         out["socps_per_pattern"] = out["socps"] / max(len(pats), 1)
         good, total = first_attempt(statuses)
         out["first_attempt"] = good / total if total else None
@@ -82,21 +121,38 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2 x 6 only")
     ap.add_argument("--full", action="store_true", help="also 4 x 6 (m = 24)")
+    ap.add_argument("--no-peers", action="store_true", help="ours only (no SCIP runs)")
     ap.add_argument("--limit", type=float, default=600.0, help="seconds per run")
     ap.add_argument("--out", default=os.path.join(bench_2d.ROOT, "results", "bench_search_3d"))
-    ap.add_argument("--worker", nargs=3, metavar=("TASK", "LEVELS", "RING"), help=argparse.SUPPRESS)
+    ap.add_argument("--worker", nargs=4, metavar=("ENGINE", "TASK", "LEVELS", "RING"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
-        out = worker(args.worker[0], int(args.worker[1]), int(args.worker[2]))
+        engine, task, levels, ring = args.worker[0], args.worker[1], int(args.worker[2]), int(args.worker[3])
+        out = (worker if engine == "ours" else scip_worker)(task, levels, ring)
         print(bench_2d.MARK + json.dumps(out))
         return
-    plan = [("enumerate", lr) for lr in (ENUMERATE[:1] if args.quick else ENUMERATE + (FULL if args.full else ()))]
-    plan += [("global", lr) for lr in (GLOBAL[:1] if args.quick else GLOBAL + (FULL_GLOBAL if args.full else ()))]
+    plan = [("ours", "enumerate", lr) for lr in (ENUMERATE[:1] if args.quick else ENUMERATE + (FULL if args.full else ()))]
+    plan += [("ours", "global", lr) for lr in (GLOBAL[:1] if args.quick else GLOBAL + (FULL_GLOBAL if args.full else ()))]
+    if not args.no_peers:
+        plan += [("scip", "enumerate", lr) for lr in
+                 (SCIP_ENUMERATE[:1] if args.quick else SCIP_ENUMERATE + (SCIP_FULL_ENUMERATE if args.full else ()))]
+        plan += [("scip", "global", lr) for lr in
+                 (SCIP_GLOBAL[:1] if args.quick else SCIP_GLOBAL + (SCIP_FULL_GLOBAL if args.full else ()))]
+    try:
+        import pyscipopt  # noqa: F401
+        have_scip = True
+    except ImportError:
+        have_scip = False
     records = []
-    for task, (levels, ring) in plan:
+    for engine, task, (levels, ring) in plan:
+        rec = {"engine": engine, "task": task, "levels": levels, "ring": ring, "m": levels * ring}
+        if engine == "scip" and not have_scip:
+            records.append(dict(rec, status="missing"))
+            print(line(records[-1]), flush=True)
+            continue
         status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__),
-                                                     ["--worker", task, str(levels), str(ring)], args.limit)
-        rec = {"task": task, "levels": levels, "ring": ring, "m": levels * ring, "status": status, "wall": wall}
+                                                     ["--worker", engine, task, str(levels), str(ring)], args.limit)
+        rec.update(status=status, wall=wall)
         if res is not None:
             rec.update(res)
         elif err:
@@ -107,13 +163,15 @@ def main() -> None:
 
 
 def line(r: dict) -> str:
-    keys = ("patterns", "nodes", "socps", "socps_per_pattern", "first_attempt", "undecided", "mu_c", "seconds")
-    return f"{r['task']:9s} m={r['m']:3d} {r['status']:7s} {bench_2d.fields(r, keys, 4)}"
+    keys = ("patterns", "patterns_hash", "nodes", "socps", "socps_per_pattern", "first_attempt", "milp_solves",
+            "milp_nodes", "undecided", "mu_c", "seconds")
+    return f"{r['engine']:4s} {r['task']:9s} m={r['m']:3d} {r['status']:7s} {bench_2d.fields(r, keys, 4)}"
 
 
 #: the CSV's columns
-COLUMNS = ["task", "levels", "ring", "m", "status", "patterns", "patterns_hash", "nodes", "socps",
-           "socps_per_pattern", "first_attempt", "undecided", "mu_c", "seconds", "wall"]
+COLUMNS = ["engine", "task", "levels", "ring", "m", "status", "patterns", "patterns_hash", "nodes", "socps",
+           "socps_per_pattern", "first_attempt", "milp_solves", "milp_nodes", "undecided", "mu_c", "seconds",
+           "wall"]
 
 
 if __name__ == "__main__":

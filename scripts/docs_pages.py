@@ -499,14 +499,17 @@ GLOBAL_MU_C_FILES = ("bench_global_mu_c.json", "bench_global_mu_c_large.json", "
 
 def bench_search_3d() -> str:
     """results/bench_search_3d.json: the 3D pattern search without symmetry (scripts/bench_search_3d.py),
-    beside results/bench_search_3d_before.json (the same script on the code before issue 13)."""
-    recs = _load("bench_search_3d.json")["records"]
+    beside results/bench_search_3d_before.json (the same script on the code before issue 13) and
+    the SCIP peer of the same run (records with engine "scip")."""
+    every = _load("bench_search_3d.json")["records"]
+    recs = [r for r in every if r.get("engine", "ours") == "ours"]
+    peer = {(r["task"], r["m"]): r for r in every if r.get("engine") == "scip"}
     before = {(r["task"], r["m"]): r for r in _load("bench_search_3d_before.json")["records"]}
     rows = []
     for r in recs:
         b = before.get((r["task"], r["m"]), {"status": "–"})
         if r["status"] != "ok":
-            rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]), r["status"]] + [""] * 6)
+            rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]), r["status"]] + [""] * 4)
             continue
         enum = r["task"] == "enumerate"
 
@@ -519,9 +522,24 @@ def bench_search_3d() -> str:
         now, was = cells(r), cells(b)
         rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]),
                      f"{r['patterns']:,} patterns" if enum else f"mu^c {r['mu_c']:.12g}",
-                     *[f"{a} (was {w})" for a, w in zip(now, was)]])
+                     *[f"{a} (was {w})" for a, w in zip(now, was)], _scip_cell(peer.get((r["task"], r["m"])), r)])
     return table(["search", "plug3d", "m", "answer", "SOCPs", "first attempt settled / undecided",
-                  "CPU s"], rows)
+                  "CPU s", "SCIP, same run"], rows)
+
+
+def _scip_cell(p: dict | None, ours: dict) -> str:
+    """The SCIP peer's answer and CPU seconds beside ours: the same pattern set (hash) or its
+    mu^c's distance from ours."""
+    if p is None:
+        return "–"
+    if p["status"] != "ok":
+        return p["status"]
+    if ours["task"] == "enumerate":
+        same = "the same set" if p.get("patterns_hash") == ours["patterns_hash"] else "another set"
+        answer = f"{p['patterns']:,} patterns ({same})"
+    else:
+        answer = f"mu^c off by {abs(p['mu_c'] - ours['mu_c']) / ours['mu_c']:.1e}"
+    return f"{answer}, {p['milp_solves']:,} solves, {_s(p['seconds'], 3)} s"
 
 
 def examples() -> str:

@@ -12,7 +12,7 @@ from hpcwedge.dd import FLOAT_ZERO_TOL, complementary_rays
 from hpcwedge.cones import implied_patterns
 from hpcwedge.problem import friction_rows_2d, parametrize
 from hpcwedge.reference import (bisect, brute_force_patterns, cdd_generators, cdd_zero, complementary_filter,
-                                contact_mask, patterns_of_rays, scip_wedged)
+                                contact_mask, patterns_of_rays, scip_patterns, scip_wedged)
 from instances import random_problem
 
 
@@ -101,6 +101,22 @@ def test_scip_wedged_brackets_tan_taper():
     counts = {}
     assert scip_wedged(p, m, 1.01 * t, counts) and not scip_wedged(p, m, 0.99 * t, counts)
     assert counts["milp_solves"] == 2 and "undecided" not in counts
+
+
+@pytest.mark.skipif(importlib.util.find_spec("pyscipopt") is None, reason="pyscipopt not installed (bench extra)")
+@pytest.mark.parametrize("dim", [2, 3])
+def test_scip_patterns_are_the_brute_force_patterns(dim):
+    """SCIP's no-good loop (the peer of scripts/bench_search_3d.py) finds exactly the contact
+    sets that 2^m feasibility problems find: plug2d rows 3 (LP) at 5 tan 10 deg, plug3d 2 x 4
+    without symmetry (SOCP; friction a second-order cone in SCIP) at mu 0.65."""
+    from instances import plug3d_param
+    p, m = _plug(3) if dim == 2 else plug3d_param(2, 4)
+    mu = 5 * math.tan(math.radians(10.0)) if dim == 2 else 0.65
+    counts = {}
+    got = scip_patterns(p, m, mu, counts)
+    want = brute_force_patterns(p, m, mu)
+    assert got == want and len(want) >= 2
+    assert counts["milp_solves"] == len(want) + 1 and "undecided" not in counts
 
 
 @pytest.mark.skipif(importlib.util.find_spec("cdd") is None, reason="pycddlib not installed (bench extra)")
