@@ -501,7 +501,8 @@ def bench_search_3d() -> str:
     """results/bench_search_3d.json: the 3D pattern search without symmetry (scripts/bench_search_3d.py),
     beside results/bench_search_3d_before.json (the same script on the code before issue 13) and
     the SCIP peer of the same run (records with engine "scip")."""
-    every = _load("bench_search_3d.json")["records"]
+    data = _load("bench_search_3d.json")
+    every, limit = data["records"], data.get("limit_s")
     recs = [r for r in every if r.get("engine", "ours") == "ours"]
     peer = {(r["task"], r["m"]): r for r in every if r.get("engine") == "scip"}
     before = {(r["task"], r["m"]): r for r in _load("bench_search_3d_before.json")["records"]}
@@ -522,16 +523,18 @@ def bench_search_3d() -> str:
         now, was = cells(r), cells(b)
         rows.append([r["task"], f"{r['levels']} × {r['ring']}", str(r["m"]),
                      f"{r['patterns']:,} patterns" if enum else f"mu^c {r['mu_c']:.12g}",
-                     *[f"{a} (was {w})" for a, w in zip(now, was)], _scip_cell(peer.get((r["task"], r["m"])), r)])
+                     *[f"{a} (was {w})" for a, w in zip(now, was)], _scip_cell(peer.get((r["task"], r["m"])), r, limit)])
     return table(["search", "plug3d", "m", "answer", "SOCPs", "first attempt settled / undecided",
                   "CPU s", "SCIP, same run"], rows)
 
 
-def _scip_cell(p: dict | None, ours: dict) -> str:
+def _scip_cell(p: dict | None, ours: dict, limit: float | None) -> str:
     """The SCIP peer's answer and CPU seconds beside ours: the same pattern set (hash) or its
-    mu^c's distance from ours."""
+    mu^c's distance from ours; a run cut at the time limit as "> limit s"."""
     if p is None:
         return "–"
+    if p["status"] == "timeout" and limit:
+        return f"> {limit:g} s (cut)"
     if p["status"] != "ok":
         return p["status"]
     if ours["task"] == "enumerate":
