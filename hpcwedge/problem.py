@@ -114,6 +114,15 @@ class ReactionCoordinates:
         return np.concatenate([self.B.T @ r, beta])
 
 
+def kept_on(obj, key: str, build):
+    """build(), computed once per `obj` and kept in its __dict__ under `key` (derived data
+    of a frozen Parametrization / ReactionCoordinates that depends on an argument, e.g. m)."""
+    value = obj.__dict__.get(key)
+    if value is None:
+        value = obj.__dict__[key] = build()
+    return value
+
+
 def blocks(M: np.ndarray, m: int, dim: int) -> tuple[np.ndarray, ...]:
     """The dim row blocks of M (dim*m rows in the block order of SPEC §1): (normal,
     tangent) in 2D, (normal, tangent 1, tangent 2) in 3D, m rows each; views of M."""

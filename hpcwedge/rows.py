@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .problem import Parametrization, ReactionCoordinates, blocks
+from .problem import Parametrization, ReactionCoordinates, blocks, kept_on
 
 
 class Status(enum.StrEnum):
@@ -117,8 +117,13 @@ def unit_rows(A: np.ndarray) -> np.ndarray:
 
 def kept_rows(A: np.ndarray) -> np.ndarray:
     """The rows of A that `unit_rows` keeps (boolean mask)."""
-    s = np.linalg.norm(A, axis=1)
-    return s > ZERO_ROW_RTOL * max(s.max(initial=0.0), 1e-300)
+    return kept_sizes(np.linalg.norm(A, axis=1))
+
+
+def kept_sizes(size: np.ndarray) -> np.ndarray:
+    """Of rows with norms `size`, those not identically zero: above ZERO_ROW_RTOL times the
+    largest (boolean mask)."""
+    return size > ZERO_ROW_RTOL * max(size.max(initial=0.0), 1e-300)
 
 
 def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
@@ -156,12 +161,9 @@ def _pattern_rows_3d(param, m, zu, zr, friction):
     unit = nb.unit
     # equalities: u_n of contact nodes, (r_n, r_t1, r_t2) of gap nodes, unit rows
     pick = np.concatenate([zu, zr, zr, zr])
-    sel = nb.size[pick]
-    kept = sel > ZERO_ROW_RTOL * max(sel.max(initial=0.0), 1e-300)
-    eq = unit[pick][kept]
+    eq = unit[pick][kept_sizes(nb.size[pick])]
     free_u = np.flatnonzero(~zu)
-    s = nb.size[free_u]
-    lin_nodes = free_u[s > ZERO_ROW_RTOL * max(s.max(initial=0.0), 1e-300)]
+    lin_nodes = free_u[kept_sizes(nb.size[free_u])]
     lin_scale = nb.size[lin_nodes]
     lin = unit[lin_nodes]
     fr = ~zr
@@ -194,19 +196,16 @@ class _NodeBlocks:
 
 def _node_blocks(param: Parametrization, m: int) -> _NodeBlocks:
     """_NodeBlocks of (param, m), computed once per parametrisation (kept on it)."""
-    key = f"_node_blocks_{m}"
-    nb = param.__dict__.get(key)
-    if nb is None:
+    def build() -> _NodeBlocks:
         Un, (Rn, Rt1, Rt2) = blocks(param.U, m, 3)[0], blocks(param.R, m, 3)
         rows = np.ascontiguousarray(np.vstack([Un, Rn, Rt1, Rt2]))
         size = np.linalg.norm(rows, axis=1)
         unit = rows / np.where(size > 0, size, 1.0)[:, None]
         sc = _cone_scale(Rn, Rt1, Rt2)
-        nb = _NodeBlocks(rows=rows, size=size, unit=unit, rn=Rn / sc[:, None],
-                         rt=np.stack([Rt1, Rt2], axis=1) / sc[:, None, None], scale=sc,
-                         norm=Rn.sum(axis=0))
-        param.__dict__[key] = nb
-    return nb
+        return _NodeBlocks(rows=rows, size=size, unit=unit, rn=Rn / sc[:, None],
+                           rt=np.stack([Rt1, Rt2], axis=1) / sc[:, None, None], scale=sc,
+                           norm=Rn.sum(axis=0))
+    return kept_on(param, f"_node_blocks_{m}", build)
 
 
 def eq_null_space(eq: np.ndarray, d: int) -> np.ndarray:
@@ -260,7 +259,5 @@ class NodeRows:
 def node_rows(param: Parametrization, m: int) -> NodeRows:
     """Every node's rows (NodeRows) of the parametrisation's m contact nodes (3D)."""
     nb = _node_blocks(param, m)
-    size = nb.size[:m]
-    keep = size > ZERO_ROW_RTOL * max(size.max(initial=0.0), 1e-300)
-    un = np.where(keep[:, None], nb.unit[:m], 0.0)
+    un = np.where(kept_sizes(nb.size[:m])[:, None], nb.unit[:m], 0.0)
     return NodeRows(un=un, cone=np.concatenate([nb.rn[:, None], nb.rt], axis=1), norm=nb.norm)

@@ -36,8 +36,8 @@ from typing import Iterator
 import numpy as np
 import scipy.sparse as sp
 
-from .problem import ReactionCoordinates
-from .rows import ZERO_ROW_RTOL, ConeRows
+from .problem import ReactionCoordinates, kept_on
+from .rows import ConeRows, kept_sizes
 
 #: a returned x is feasible when every row holds to VERIFY_TOL * ||x|| (the order of
 #: Clarabel's own feasibility tolerance: an optimum on the boundary misses by 1e-9..3e-9;
@@ -192,7 +192,7 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     # [equilibrium; u_n of every node] on the kept columns, each row's norm
     rest = np.ascontiguousarray(_equilibrium_normal_rows(form, m)[:, np.concatenate([cols, np.arange(n, n + nb)])])
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
-    kept = size > ZERO_ROW_RTOL * max(size.max(initial=0.0), 1e-300)
+    kept = kept_sizes(size)
     eq = kept.copy()
     eq[form.E.shape[0]:] &= rows.zero_u
     lin = kept.copy()
@@ -214,15 +214,13 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
 def _equilibrium_normal_rows(form: ReactionCoordinates, m: int) -> np.ndarray:
     """[E 0; U_n] (E rows + m, n + n_beta): the rows `reaction_socp` cuts its dense block
     from, computed once per parametrisation (kept on `form`)."""
-    key = f"_equilibrium_normal_rows_{m}"
-    rest = form.__dict__.get(key)
-    if rest is None:
+    def build() -> np.ndarray:
         k, n = form.E.shape
         rest = np.zeros((k + m, form.U.shape[1]))
         rest[:k, :n] = form.E
         rest[k:] = form.U[:m]
-        form.__dict__[key] = rest
-    return rest
+        return rest
+    return kept_on(form, f"_equilibrium_normal_rows_{m}", build)
 
 
 def solve(problem: ConicProblem, attempt: int, tight: bool) -> Solution:
