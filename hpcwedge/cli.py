@@ -3,6 +3,8 @@
 Exit status: 0 done; 2 a failure the user can fix (one line `hpcwedge: error: ...` naming the
 key or file); 75 stopped by a signal with a checkpoint; 1 an internal error (a bug: one line
 naming the exception, HPCWEDGE_DEBUG=1 prints the traceback); 141 stdout closed by its reader.
+A closed stderr (a progress reader gone, `hpcwedge run ... 2>&1 | head`) stops no command:
+the lines meant for it are dropped and the run writes its result (`_Stderr`).
 Under mpirun an error on any rank ends the whole job (MPI_Abort) with that status.
 """
 from __future__ import annotations
@@ -26,6 +28,8 @@ def main(argv: list[str] | None = None) -> int:
              } if main_thread and argv is not None else {}
     if main_thread:
         signal.signal(signal.SIGUSR1, signal.SIG_IGN)
+    stderr = sys.stderr
+    sys.stderr = _Stderr(stderr)
     p = _Parser(prog="hpcwedge", description="Wedged configurations and critical friction "
                 "coefficients of elastic bodies in frictional contact.")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -73,7 +77,43 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
+        if argv is not None:
+            sys.stderr = stderr
     return code
+
+
+class _Stderr:
+    """sys.stderr that outlives its reader: once a write finds the pipe closed (EPIPE), the
+    file descriptor is pointed at /dev/null and every later line is dropped, so that
+    progress and notes never end a run (nor the interpreter's final flush complain)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._silence()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._silence()
+
+    def _silence(self) -> None:
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError):
+            pass
+        self._stream = open(os.devnull, "w")
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 class _UserError(Exception):

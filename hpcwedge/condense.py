@@ -162,13 +162,18 @@ def schur_dense(model: Model) -> tuple[np.ndarray, np.ndarray]:
 def _petsc():
     import sys
     import petsc4py
+    # -no_signal_handler: PETSc's handler would take SIGPIPE (and SIGHUP, SIGSEGV, ...) from
+    # Python: a progress reader gone (`hpcwedge run ... 2>&1 | head`) ended the run with
+    # PETSc's status 59, no result and the output lock left behind; the signals a run
+    # answers (SIGTERM, SIGUSR1, SIGINT) are the engine's. The command line is not PETSc's.
+    args = ["-no_signal_handler"]
     if "mpi4py.MPI" in sys.modules:
         # under mpirun only the master condenses: PETSc's world must be this rank
         # alone (PetscInitialize is collective over its world)
         from mpi4py import MPI
-        petsc4py.init(comm=MPI.COMM_SELF)
+        petsc4py.init(args, comm=MPI.COMM_SELF)
     else:
-        petsc4py.init()
+        petsc4py.init(args)
     from petsc4py import PETSc
     return PETSc
 

@@ -456,6 +456,26 @@ def test_show_into_a_closed_pipe_exits_quietly(tmp_path):
     assert p.returncode == 128 + signal.SIGPIPE
 
 
+def test_run_whose_stderr_reader_is_gone_writes_its_result(tmp_path):
+    """`hpcwedge run S -o R.h5 2>&1 | true` through a real shell pipe: the reader has exited
+    before the first progress line, every write to stderr meets EPIPE. The run still writes
+    its result, exits 0 and leaves no lock (before: PETSc's SIGPIPE handler ended it with
+    status 59, no result, the lock left behind); an error in that state keeps status 2."""
+    scene = write(tmp_path, _t(PLUG))
+    out = tmp_path / "r.h5"
+
+    def piped(*args):
+        cmd = " ".join(f"'{a}'" for a in command(None, *args))
+        return subprocess.run(["bash", "-c", f"{cmd} 2>&1 | true; exit ${{PIPESTATUS[0]}}"], env=env(),
+                              capture_output=True, text=True, timeout=300)
+
+    p = piped("run", scene, "-o", str(out))
+    assert p.returncode == 0, p
+    assert sorted(os.listdir(tmp_path)) == ["r.h5", "s.toml"]
+    assert main(["show", str(out), "--json"]) == 0
+    assert piped("run", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "x.h5")).returncode == 2
+
+
 def _stderr_of_ending(p, pids, where: str) -> str:
     """The stderr of an mpirun job that must end by itself within 60 s; a job still running
     then is killed (launcher and ranks) and the test fails."""
