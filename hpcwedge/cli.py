@@ -104,12 +104,7 @@ class _Stderr:
             self._silence()
 
     def _silence(self) -> None:
-        try:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, self._stream.fileno())
-            os.close(devnull)
-        except (OSError, ValueError):
-            pass
+        _to_devnull(self._stream)
         self._stream = open(os.devnull, "w")
 
     def __getattr__(self, name):
@@ -143,13 +138,19 @@ def _broken_pipe() -> int:
     """stdout was closed by its reader (`hpcwedge show R.h5 | head`): stop quietly, as Unix
     tools do, with the status of a process ended by SIGPIPE (128 + 13); stdout is pointed at
     /dev/null so that the interpreter's final flush does not complain either."""
+    _to_devnull(sys.stdout)
+    return 128 + signal.SIGPIPE
+
+
+def _to_devnull(stream) -> None:
+    """Point the file descriptor of `stream` at /dev/null (a stream without one: nothing)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
+        os.dup2(devnull, stream.fileno())
     except (OSError, ValueError):
         pass
-    return 128 + signal.SIGPIPE
+    finally:
+        os.close(devnull)
 
 
 def _run(args) -> int:
