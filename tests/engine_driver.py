@@ -1,4 +1,4 @@
-"""Run under mpirun by test_parallel.py: measure, from /proc, the CPU time of idle
+"""Run under mpirun by test_mpi.py and test_worker.py: measure, from /proc, the CPU time of idle
 ranks while (A) the master is busy and no worker has a task, (B) one worker
 runs a long task and the others have nothing, and (C, the control) a worker
 waits in a plain blocking comm.recv, which Open MPI busy-polls. Prints one

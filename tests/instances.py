@@ -40,6 +40,15 @@ def random_problem(rng: np.random.Generator, m: int, free: bool) -> ContactProbl
     return ContactProblem(2, 0.5 * (K + K.T), N)
 
 
+def tree_factory(seed: int, m: int = 5, free: bool = False):
+    """(make_tree, problem): make_tree(mu) -> the PatternTree of a random 2D problem at mu
+    (picklable: the engine's subtree tasks take it)."""
+    from functools import partial
+    from hpcwedge.patterns import PatternTree
+    prob = random_problem(np.random.default_rng(seed), m, free=free)
+    return partial(PatternTree, parametrize(prob), m), prob
+
+
 def frames_3d(rng: np.random.Generator, m: int) -> np.ndarray:
     """(m, 3, 3) random right-handed contact frames (n, t1, t2): normals pointing
     roughly upward into the body, t1 at a random angle in the tangent plane."""

@@ -1,11 +1,18 @@
 """faces.py: the face split of the DD (SPEC §5). Every face run gives exactly the full
 run's rays on its face, the merge of the 2^k faces is the full run (canonical order,
 whatever order the faces arrive in), on random bodies and on plug2d, float and exact."""
+import json
+import os
+import signal
+
 import numpy as np
 import pytest
 
+from hpcwedge import parallel
 from hpcwedge.dd import complementary_rays
-from hpcwedge.faces import merge_results, split_faces
+from hpcwedge.faces import branching_nodes, face_task, merge_results, run_faces, split_faces
+from hpcwedge.nodesets import canonical_order
+from hpcwedge.parallel.checkpoint import CheckpointError, read_checkpoint
 from hpcwedge.problem import friction_rows_2d, parametrize
 from instances import random_problem
 
@@ -111,3 +118,78 @@ def test_faces_plug2d_exact(plug2d_rows):
     merged = merge_results([complementary_rays(A, 6, exact=True, face=f) for f in split_faces(6, (5, 2))])
     assert int(merged.wedged().sum()) == 44
     assert set(map(tuple, merged.zero)) == set(map(tuple, full.zero))
+
+
+def _plug_rows(rows: int, mus, exact: bool = False):
+    """friction_rows_2d of plug2d (rows x 3, taper 10 deg) at every mu; m = 2 rows."""
+    from hpcwedge.condense import condense
+    from hpcwedge.models.library import plug2d
+    from hpcwedge.problem import ContactProblem
+    param = parametrize(ContactProblem(2, *condense(plug2d(rows, 3, 10.0))), exact=exact)
+    return [friction_rows_2d(param, mu, 2 * rows, exact=exact) for mu in mus]
+
+
+def test_branching_nodes():
+    assert branching_nodes(16) == [13, 14, 15] and branching_nodes(15) == []    # "auto"
+    assert branching_nodes(12, 2) == [10, 11] and branching_nodes(12, 0) == []
+    assert branching_nodes(3, 4) == [1, 2] and branching_nodes(1, 4) == []
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_face_tasks_checkpoint_resume_in_process(tmp_path, exact):
+    """run_faces gives the unsplit DD's zero flags (and, exact, its rays). SIGTERM
+    during the 5th face task: the task is dropped at its first task_tick(), the
+    checkpoint holds the 4 finished faces (HDF5 round trip: float rays, exact ones
+    as decimal strings), and a resumed engine asked for another split (as another
+    rank count would choose) keeps the saved one, runs only the 12 missing faces
+    and gives bit for bit the uninterrupted answer."""
+    rows_n, nodes = (3, [3, 4, 5]) if exact else (5, [7, 8, 9])
+    m, mus = 2 * rows_n, [0.65, 1.0]
+    rows = _plug_rows(rows_n, mus, exact)
+    ref = run_faces(rows, m, exact, nodes=nodes)
+    for A, dd in zip(rows, ref):
+        full = complementary_rays(A, m, exact=exact)
+        order = canonical_order(full.zero)
+        assert dd.stats["faces"] == 8 and dd.stats["branching_nodes"] == nodes
+        assert np.array_equal(dd.zero, full.zero[order])
+        if exact:
+            assert dd.X.dtype == object and np.array_equal(dd.X, full.X[order])
+        else:
+            assert np.allclose(dd.X, full.X[order], rtol=0, atol=1e-11)
+    ckpt = str(tmp_path / "f.ckpt")
+    calls, kill_at = [], [5]
+
+    def task(ctx, payload):
+        calls.append(payload)
+        if len(calls) in kill_at:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return face_task(ctx, payload)
+
+    eng = parallel.Engine(tick_every_s=0.0)                # cancel at the first tick
+    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
+    eng.install_signals()
+    try:
+        with parallel.registered("face", task), pytest.raises(parallel.Interrupted):
+            run_faces(rows, m, exact, engine=eng, nodes=nodes)
+        assert eng.write_checkpoint("SIGTERM")
+    finally:
+        eng.close()
+    saved = read_checkpoint(ckpt)["jobs"]["rays"]
+    assert not saved["attrs"]["finished"]
+    assert saved["data"]["done"].tolist() == [0, 1, 2, 3]
+    assert saved["data"]["X"].dtype.kind == ("S" if exact else "f")
+    assert json.loads(saved["attrs"]["layout"]) == {"branching_nodes": nodes}
+    calls.clear()
+    kill_at.clear()
+    eng = parallel.Engine()
+    assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True) and eng.restored("rays")
+    with parallel.registered("face", task):
+        out = run_faces(rows, m, exact, engine=eng, nodes=[m - 1])
+    assert len(calls) == 2 * 8 - 4
+    for a, b in zip(out, ref):
+        assert a.stats["branching_nodes"] == nodes and a.stats["faces"] == 8
+        assert np.array_equal(a.zero, b.zero) and np.array_equal(a.X, b.X) and a.X.dtype == b.X.dtype
+    # without payloads_for, another layout is refused
+    with pytest.raises(CheckpointError, match="layout"):
+        job = parallel.TaskJob("rays", "face", None, [], layout={"branching_nodes": [1]})
+        job.load(read_checkpoint(ckpt)["jobs"]["rays"])

@@ -10,7 +10,7 @@ import pytest
 from hpcwedge.cones import maximal_cones
 from hpcwedge.dd import complementary_rays
 from hpcwedge.global_mu_c import global_mu_critical
-from hpcwedge.mu_critical import mu_critical
+from hpcwedge.mu_critical import mu_critical, run_mu_c
 from hpcwedge.problem import ContactProblem, friction_rows_2d, parametrize
 from instances import plug3d_param, random_problem
 
@@ -119,3 +119,18 @@ def test_3d_mu_c_task_stops_within_one_solve():
     stopped = time.perf_counter() - t
     assert stopped < 0.5 * full, (stopped, full)   # the old code ran the whole task (~full); a
     # bound of 0.2 failed once on a loaded machine (1.65 s of 6.8 s: the first solves are the slow ones)
+
+
+def test_run_mu_c_equals_direct_calls():
+    rng = np.random.default_rng(5)
+    m = 4
+    param = parametrize(random_problem(rng, m, free=False))
+    from functools import partial
+    items = []
+    for zu_bits in range(1, 1 << m, 3):
+        zu = np.array([(zu_bits >> i) & 1 for i in range(m)], dtype=bool)
+        items.append((zu, ~zu, 50.0))
+    got = run_mu_c(partial(mu_critical, param, m, mu_max=100.0), items)
+    for (zu, zr, mu_hi), r in zip(items, got):
+        want = mu_critical(param, m, zu, zr, mu_hi=mu_hi, mu_max=100.0)
+        assert (r.mu_c, r.polished, r.solves, r.undecided) == (want.mu_c, want.polished, want.solves, want.undecided)

@@ -84,3 +84,11 @@ def test_canonical_order_is_lexsort(R, k):
     z[R // 2:] = z[:R - R // 2]                       # duplicates: the order must be stable
     ref = np.lexsort(z.T[::-1]) if k else np.arange(R)
     assert np.array_equal(canonical_order(z), ref)
+
+
+def test_bit_words_beyond_64_nodes():
+    vals = [0, 1, (1 << 64) | 5, (1 << 130) - 1, 1 << 127]
+    words = bits_to_words(vals, 3)
+    assert words.shape == (5, 3) and words.dtype == np.uint64
+    assert words_to_bits(words) == vals
+    assert words_to_bits(np.zeros((0, 1), dtype=np.uint64)) == []

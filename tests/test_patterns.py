@@ -3,10 +3,13 @@ finds exactly what one uninterrupted depth-first search finds."""
 import numpy as np
 import pytest
 
-from hpcwedge.patterns import PatternTree, Subtree
+from hpcwedge.nodesets import pattern_key, to_bits
+from hpcwedge.patterns import PatternTree, Subtree, run_patterns
+from hpcwedge.pipeline import run_scene
 from hpcwedge.problem import parametrize
 from hpcwedge.reference import patterns_of_supports
-from instances import brute_3d, random_problem
+from hpcwedge.scene import parse_scene
+from instances import brute_3d, random_problem, tree_factory
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -144,3 +147,48 @@ def test_symmetry_saves_solves_on_plug3d_and_changes_no_pattern():
     assert 2 * b.stats.solves < a.stats.solves
 
 
+@pytest.mark.parametrize("seed,budget", [(0, 1), (1, 3), (2, 1000)])
+def test_run_patterns_equals_serial_search(seed, budget):
+    make, prob = tree_factory(700 + seed, free=bool(seed % 2))
+    mus = [0.5, 2.0, 8.0]
+    out = run_patterns(make, mus, budget=budget)
+    for k, mu in enumerate(mus):
+        tree = make(mu)
+        whole = tree.explore(tree.root())
+        # the engine's order is the one canonical order (nodesets.pattern_key), whatever the split
+        assert out.found[k] == sorted(whole.found, key=lambda s: pattern_key(s.contact))
+        masks = [s.masks(tree.m) for s in out.found[k]]
+        ref = sorted(sign_patterns(tree.param, tree.m, mu), key=lambda ab: pattern_key(to_bits(np.flatnonzero(ab[0]))))
+        assert [(a.tolist(), b.tolist()) for a, b in masks] == [(a.tolist(), b.tolist()) for a, b in ref]
+    # every tree node is visited exactly once, however the work is split
+    nodes = sum(make(mu).explore(make(mu).root()).stats.nodes for mu in mus)
+    assert out.counters["nodes"] == nodes
+    if budget == 1:
+        assert out.counters["handed_back"] > 0
+
+
+@pytest.mark.parametrize("rows,taper,mus", [(2, 10.0, [0.2, 0.65]), (3, 10.0, [0.65]),
+                                            (3, 31.0, [0.62, 2.0]), (4, 20.0, [0.5])])
+def test_2d_patterns_agree_with_rays(rows, taper, mus):
+    """SPEC §2: (C, G) is feasible iff some wedged ray has supp(r_n) in C and
+    supp(u_n) in G — the engine's patterns against the double description's rays."""
+    from hpcwedge.reference import patterns_of_supports
+
+    def scene(enum):
+        return parse_scene({"name": "t", "dim": 2, "model": {"kind": "plug2d", "rows": rows, "taper_deg": taper},
+                            "friction": {"mu": mus}, "compute": {"enumerate": enum, "mu_c": "cones"},
+                            "run": {"task_budget": 3}})
+    pat, ray = run_scene(scene("patterns")), run_scene(scene(True))
+    m = pat.m
+    assert pat.stages == ["condense", "enumerate", "mu_c"]
+    assert abs(pat.mu_c - ray.mu_c) <= 1e-9 * ray.mu_c
+    for rp, rr in zip(pat.runs, ray.runs):
+        assert rp.rays is None and rp.cones is None and rr.patterns is None
+        un, rn = rr.rays[:, :m], rr.rays[:, 2 * m:3 * m]
+        scale = np.abs(rr.rays).max(axis=1, keepdims=True)
+        supp_u, supp_r = np.abs(un) > 1e-9 * scale, np.abs(rn) > 1e-9 * scale
+        want = [[i for i in range(m) if bits >> i & 1]                   # canonical: by contact bits
+                for bits in sorted(patterns_of_supports(supp_r, supp_u, m))]
+        assert [p["contact"] for p in rp.patterns] == want
+        for p in rp.patterns:               # a pattern's mu^c: at most the run's mu, at least the global one
+            assert ray.mu_c * (1 - 1e-9) <= p["mu_c"] <= rp.mu * (1 + 1e-9)

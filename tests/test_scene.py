@@ -156,3 +156,10 @@ def test_plan_steps_in_the_order_they_run():
     assert steps(compute={"enumerate": "patterns", "mu_c": "cones"}) == ("patterns", "mu_c", "global_mu_c")
     assert steps(compute={"enumerate": False, "mu_c": "none"}) == ()
     assert steps(dim=3, model={"kind": "plug3d"}) == ("patterns", "mu_c", "global_mu_c")
+
+
+def test_plan_patterns_2d():
+    s = parse_scene({"name": "t", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": [1.0]},
+                     "compute": {"enumerate": "patterns"}})
+    p = s.plan()
+    assert p.patterns and not p.rays and not p.cones and s.task_budget == 64

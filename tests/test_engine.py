@@ -1,0 +1,144 @@
+"""The master/worker engine (hpcwedge/parallel/engine.py): a signal in the middle of a job
+checkpoints and resumes in-process; a task's error reaches the caller; under the real
+mpirun with 1-4 ranks the serial answers (bit for bit: tests/test_determinism.py), exact
+rays split over faces included; a bad scene under mpirun is one error, no hang. The
+engine's jobs: test_parallel_jobs.py; its tasks beside their engines (test_patterns,
+test_faces, test_mu_critical); MPI plumbing and the worker loop: test_mpi, test_worker."""
+import os
+import signal
+
+import pytest
+
+from hpcwedge import parallel
+from hpcwedge.parallel.checkpoint import CheckpointError
+from hpcwedge.patterns import explore_task, run_patterns
+from instances import tree_factory
+from mpi_helpers import THREADS_1, THREADS_2, THREADS_UNSET, answers, needs_mpirun, run, show, show_json, write_scene
+
+
+# ---------------------------------------------------------------- in-process
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
+def test_engine_signal_checkpoint_resume_in_process(tmp_path, sig):
+    """A signal in the middle of a job (sent by a task to its own process):
+    SIGTERM -> Interrupted at the next safe point, checkpoint, a new engine
+    resumes; SIGUSR1 -> a checkpoint and the job goes on. Same patterns, every
+    tree node counted once."""
+    make, _ = tree_factory(41, m=6)
+    mus = [1.0, 4.0]
+    ref = run_patterns(make, mus, budget=2)
+    ckpt = str(tmp_path / "x.ckpt")
+    calls = []
+
+    def task(ctx, payload):
+        calls.append(1)
+        if len(calls) == 5:
+            os.kill(os.getpid(), sig)
+        return explore_task(ctx, payload)
+
+    eng = parallel.Engine()
+    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
+    eng.install_signals()
+    try:
+        with parallel.registered("subtree", task):
+            if sig == signal.SIGTERM:
+                with pytest.raises(parallel.Interrupted):
+                    run_patterns(make, mus, engine=eng, budget=2)
+                assert eng.write_checkpoint("SIGTERM")
+            else:
+                out = run_patterns(make, mus, engine=eng, budget=2)
+                assert eng.checkpoints_written == 1 and eng.checkpoint_reason == "SIGUSR1"
+    finally:
+        eng.close()
+    if sig == signal.SIGTERM:
+        assert len(calls) == 5                          # stopped at the safe point after the 5th task
+        eng = parallel.Engine()
+        assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True)
+        out = run_patterns(make, mus, engine=eng, budget=2)
+        with pytest.raises(CheckpointError, match="another scene"):
+            parallel.Engine().use_checkpoint(ckpt, "other", "scene", 1000.0, resume=True)
+    assert out.found == ref.found and out.counters["nodes"] == ref.counters["nodes"]
+
+
+def test_worker_error_in_serial_mode_propagates():
+    parallel.register("boom", lambda ctx, p: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        parallel.run_tasks("boom", None, [1])
+
+
+# ---------------------------------------------------------------- the real mpirun
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The uninterrupted serial run of the pattern scene, its caller asking for 2 BLAS
+    threads: (scene path, show JSON)."""
+    tmp = tmp_path_factory.mktemp("ref")
+    scene = write_scene(tmp, raw=False)     # plug2d: condensation (PETSc) under mpirun too
+    out = str(tmp / "ref.h5")
+    run(None, "run", scene, "-o", out, "-q", caller=THREADS_2)
+    return scene, show(out)
+
+
+@pytest.mark.mpi
+@needs_mpirun
+@pytest.mark.parametrize("ranks", [((1, THREADS_1), (2, THREADS_UNSET)), ((3, THREADS_2), (4, THREADS_UNSET))])
+def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
+    """The pattern scene on 1-4 ranks, whatever BLAS threads the caller asks for: the
+    serial run's answers (mu^c and stats.environment included)."""
+    scene, want = reference
+    for n, threads in ranks:
+        out = str(tmp_path / f"r{n}.h5")
+        p = run(n, "run", scene, "-o", out, caller=threads)
+        assert p.stdout == ""                                  # nobody prints on stdout
+        assert p.stderr.count("wrote") == 1                    # only the master reports
+        got = show_json(out)
+        assert answers(got) == want, f"{n} ranks"
+        st = got["stats"]["parallel"]
+        jobs = st["jobs"]
+        assert st["ranks"] == n and jobs["patterns"]["nodes"] == want["stats"]["bnb"]["nodes"]
+        assert jobs["patterns"]["handed_back"] > 0 and jobs["patterns"]["tasks"] > 10
+        assert not os.path.exists(out + ".ckpt")
+        if n >= 3:
+            assert all(t > 0 for t in st["tasks_per_rank"][1:])   # work reached every worker
+            assert st["tasks_per_rank"][0] == 0                   # the master only dispatches
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_2d_exact_rays_identical_under_mpirun(tmp_path):
+    """Exact arithmetic: a ray is a primitive integer vector, whatever the DD's path,
+    so the face split (8 faces) under mpirun gives the unsplit serial answers bit for
+    bit, ray vectors included (the exact rays travel and are checkpointed as decimal
+    strings)."""
+    text = ('name = "plug6-exact"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 3\n[friction]\n'
+            'mu = [0.65, 1.0]\n[compute]\nenumerate = true\nmu_c = "cones"\nexact = true\n[run]\nface_split = {}\n')
+    whole, split = tmp_path / "whole.toml", tmp_path / "split.toml"
+    whole.write_text(text.format(0))
+    split.write_text(text.format(3))
+    want = str(tmp_path / "s.h5")
+    run(None, "run", str(whole), "-o", want, "-q")
+    got = str(tmp_path / "p.h5")
+    run(3, "run", str(split), "-o", got, "-q")
+    a, b = show_json(got), show_json(want)
+    assert a["stats"]["dd"][0]["faces"] == 8 and b["stats"]["dd"][0]["faces"] == 1
+    a, b = answers(a), answers(b)
+    for d in (a, b):
+        d["stats"].pop("dd")
+        d.pop("scene_hash")
+    assert a == b and a["runs"][0]["n_wedged_rays"] == 44
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_bad_scene_under_mpirun_exit_2_once(tmp_path):
+    """Input errors under mpirun: one message (from the master), status 2, nothing
+    written, the workers stopped (no hang)."""
+    bad = write_scene(tmp_path, name="bad.toml",
+                      text='name = "x"\ndim = 2\n[model]\nkind = "plug2d"\n[friction]\nmu = [-1.0]\n')
+    out = tmp_path / "r.h5"
+    p = run(3, "run", bad, "-o", str(out), timeout=60, check=False)
+    assert p.returncode == 2
+    assert p.stderr.count("hpcwedge: error: friction.mu") == 1 and p.stdout == ""
+    assert not out.exists() and not os.path.exists(str(out) + ".ckpt")

@@ -1,0 +1,28 @@
+"""The worker loop (hpcwedge/parallel/worker.py) under the real mpirun: workers drop their
+tasks at the master's stop."""
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from mpi_helpers import MPIRUN, ROOT, env, needs_mpirun
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigterm_cancels_long_tasks():
+    """SIGTERM to the master while every worker is in a 60 s task that calls
+    task_tick(): the workers drop their tasks at the master's stop, close()
+    returns within seconds, and the whole job ends long before the tasks would."""
+    t = time.monotonic()
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
+                        sys.executable, os.path.join(ROOT, "tests", "engine_driver.py"), "cancel"],
+                       env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    assert got["interrupted"] is not None and got["interrupted"] < 10, got
+    assert got["closed"] - got["interrupted"] < 5, got
+    assert time.monotonic() - t < 40, got
