@@ -49,6 +49,13 @@ def tree_factory(seed: int, m: int = 5, free: bool = False):
     return partial(PatternTree, parametrize(prob), m), prob
 
 
+def kernel_dim(K, rtol: float = 1e-10) -> tuple[int, np.ndarray]:
+    """(number of eigenvalues of the sparse K within rtol of zero relative to the largest,
+    all eigenvalues ascending)."""
+    ev = np.linalg.eigvalsh(K.toarray())
+    return int((np.abs(ev) <= rtol * ev[-1]).sum()), ev
+
+
 def frames_3d(rng: np.random.Generator, m: int) -> np.ndarray:
     """(m, 3, 3) random right-handed contact frames (n, t1, t2): normals pointing
     roughly upward into the body, t1 at a random angle in the tangent plane."""
