@@ -142,3 +142,21 @@ def test_bad_scene_under_mpirun_exit_2_once(tmp_path):
     assert p.returncode == 2
     assert p.stderr.count("hpcwedge: error: friction.mu") == 1 and p.stdout == ""
     assert not out.exists() and not os.path.exists(str(out) + ".ckpt")
+
+
+def test_progress_lines_count_patterns_and_tree_nodes():
+    """With a progress callback, a line after every merge (progress_every_s = 0) says how many
+    patterns and tree nodes the subtree job has so far: non-decreasing, and the last line
+    gives the job's final counts."""
+    import io
+    import re
+    from hpcwedge.progress import Progress
+    make, _ = tree_factory(41, m=6)
+    buf = io.StringIO()
+    eng = parallel.Engine(progress=Progress(stream=buf), progress_every_s=0.0)
+    out = run_patterns(make, [1.0, 4.0], engine=eng, budget=2)
+    counts = [tuple(map(int, re.search(r"(\d+) patterns found, (\d+) tree nodes", line).groups()))
+              for line in buf.getvalue().splitlines()]
+    assert len(counts) == out.counters["tasks"] > 5
+    assert all(a <= c and b <= d for (a, b), (c, d) in zip(counts, counts[1:]))
+    assert counts[-1] == (sum(map(len, out.found)), out.counters["nodes"])

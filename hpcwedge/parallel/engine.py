@@ -125,13 +125,17 @@ class Engine:
     checkpoint: set with use_checkpoint(); signals: install_signals() (master,
     command line only). summary(): how the work was split (depends on the rank
     count and on resumes, unlike every answer). tick_every_s: how often a task
-    run in-process looks at signals and the checkpoint timer (tasks.run_cancellable)."""
+    run in-process looks at signals and the checkpoint timer (tasks.run_cancellable).
+    progress: called with a line every `progress_every_s` seconds while a job runs (its
+    task counts and what the job says of itself: job.progress())."""
 
-    def __init__(self, comm=None, progress=None, tick_every_s: float = TICK_EVERY_S):
+    def __init__(self, comm=None, progress=None, tick_every_s: float = TICK_EVERY_S,
+                 progress_every_s: float = 10.0):
         self.comm = comm
         self.size = comm.size if comm is not None else 1
         self.rank = comm.rank if comm is not None else 0
         self.progress = progress
+        self.progress_every_s = progress_every_s
         self.tick_every_s = tick_every_s
         #: progress.MemoryGuard of the run (run.max_memory_gb), checked after merges (pipeline sets it)
         self.guard = None
@@ -341,14 +345,14 @@ class Engine:
         self.master.stop(set(self._inflight), timeout, answer)
 
     def _note(self, job, last: float) -> float:
-        """After a merge: the memory guard (at most every GUARD_EVERY_S), and every 10 s a
-        progress line."""
+        """After a merge: the memory guard (at most every GUARD_EVERY_S), and every
+        progress_every_s a progress line."""
         now = time.monotonic()
         if self.guard is not None and now - self._guarded >= GUARD_EVERY_S:
             self._guarded = now
             self.guard.check(0, f"the {job.name!r} stage holds its results and {job.pending()} "
                                 f"open tasks after {job.counters.get('tasks', 0)} tasks")
-        if self.progress is None or now - last < 10.0:
+        if self.progress is None or now - last < self.progress_every_s:
             return last
         from ..progress import eta
         done = job.counters.get("tasks", 0)
@@ -358,7 +362,8 @@ class Engine:
             total = len(job.payloads)
             left = eta(now - t0, done - done0, total - done0)
         self.progress.note(f"{job.name}: {done} tasks done, {job.pending()} pending, "
-                           f"{len(self._inflight)} running ({self.size} rank(s), {self.elapsed():.0f} s{left})")
+                           f"{len(self._inflight)} running{job.progress()} ({self.size} rank(s), "
+                           f"{self.elapsed():.0f} s{left})")
         return now
 
     def summary(self) -> dict:

@@ -69,6 +69,14 @@ class SubtreeJob:
     def pending(self) -> int:
         return len(self._pool)
 
+    def progress(self) -> str:
+        """What the engine's progress line adds for this job: patterns found so far (the
+        orbit representatives where a tree has a symmetry, expanded at the end) and tree
+        nodes visited."""
+        reps = any(getattr(self.context.tree(i), "symmetry", None) is not None for i in range(len(self.mus)))
+        return (f", {sum(map(len, self.found))} {'pattern representatives' if reps else 'patterns'} found, "
+                f"{self.counters.get('nodes', 0)} tree nodes")
+
     def take(self, n_workers: int):
         if not self._pool:
             return None
@@ -196,6 +204,10 @@ class TaskJob:
 
     def pending(self) -> int:
         return len(self._todo)
+
+    def progress(self) -> str:
+        """Nothing beyond the task counts (the engine adds the time left)."""
+        return ""
 
     def take(self, n_workers: int):
         if not self._todo:
