@@ -121,13 +121,28 @@ class PatternTree:
     Every orbit of feasible patterns keeps a representative among the leaves
     (a pattern below the node with some j of the orbit in contact is mapped by the
     h in H with h(j) = i into the first child; otherwise it lies in the second);
-    `expand` gives back all of them."""
+    `expand` gives back all of them.
+
+    Each child also gets orbital fixing (Ostrowski, Linderoth, Rossi and Smriglio,
+    "Orbital branching", 2011): every free node whose orbit under the stabiliser of the
+    child's contact set alone (a larger group than H) meets its gap set is put in gap too.
+    A pattern P dropped by it, with such a node j in contact, has an image h(P) (h fixing
+    the contact set, h(j) in the gap set) that agrees with every contact fixing on the
+    path from the root and breaks a gap fixing; at the highest node where it first does
+    so, either a branching put an orbit in gap, and an element of that node's H maps
+    h(P) into its contact child, or an orbital fixing dropped it, and the same holds
+    there (induction on depth): the orbit is represented in a contact child to the left
+    of the path, and moving left ends at a leaf. plug3d 3 x 6 at mu = 1: 5,293 SOCPs and
+    467 leaves instead of 8,375 and 831, the same 3,796 patterns; the fixing is a
+    function of the node alone, so the tree and its counters stay split-invariant."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None, symmetry: Symmetry | None = None,
-                 learn_cores: bool = False):
+                 learn_cores: bool = False, orbital_fixing: bool = True):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
         self.symmetry = symmetry if symmetry is not None and symmetry.order > 1 else None
+        #: with a symmetry: orbital fixing of every child (class doc; off only to measure it)
+        self.orbital_fixing = orbital_fixing
         self.dim = problem_dim(param, m)
         #: 3D with friction and no order given: the node branched on is chosen from the
         #: relaxed solution (explore); otherwise the static order below
@@ -218,11 +233,13 @@ class PatternTree:
                 if contact and no_contact:
                     count(stats.statuses, "contact_child_infeasible_by_parent")
                     continue
-                fixed = [i] if contact else orbit
-                bits = to_bits(fixed)
-                kid = Subtree(node.depth + len(fixed), node.contact | bits if contact else node.contact,
-                              node.gap if contact else node.gap | bits)
-                kids.append((kid, None if x is None else self._witness(kid, x, fixed, contact, mu)))
+                kc = node.contact | (1 << i) if contact else node.contact
+                kg = node.gap if contact else node.gap | to_bits(orbit)
+                kg |= self._orbital_fixing(kc, kg)
+                contacts = [i] if contact else []
+                gaps = [j for j in range(m) if (kg & ~node.gap) >> j & 1]
+                kid = Subtree(node.depth + len(contacts) + len(gaps), kc, kg)
+                kids.append((kid, None if x is None else self._witness(kid, x, contacts, gaps, mu)))
             stack.extend(reversed(kids))
         stats.lps = stats.statuses.get("lp_calls", 0)
         rest = stack[::-1]
@@ -258,14 +275,23 @@ class PatternTree:
         """expand_orbits with this tree's symmetry."""
         return expand_orbits(found, self.symmetry, self.m)
 
-    def _witness(self, kid: Subtree, x: np.ndarray, nodes: list[int], contact: bool,
+    def _orbital_fixing(self, contact: int, gap: int) -> int:
+        """Orbital fixing (class doc): the free nodes whose orbit under the stabiliser of the
+        contact set alone meets the gap set, as bits; 0 without a symmetry."""
+        if self.symmetry is None or not self.orbital_fixing or not gap:
+            return 0
+        reach = int(np.bitwise_or.reduce(self.symmetry.stabilizer(contact, 0).images(gap)))
+        return reach & ~(contact | gap)
+
+    def _witness(self, kid: Subtree, x: np.ndarray, contacts: list[int], gaps: list[int],
                  mu: float) -> np.ndarray | None:
-        """x, or a point derived from it, that proves `kid` (whose `nodes` are the ones
-        newly fixed) feasible; None if it does not."""
+        """x, or a point derived from it, that proves `kid` (whose newly fixed nodes are
+        `contacts` and `gaps`) feasible; None if it does not."""
         param, m = self.param, self.m
+        new = [(i, True) for i in contacts] + [(i, False) for i in gaps]
         if self.dim == 2:
-            return x if all(_meets(param, m, x, i, contact) for i in nodes) else None
-        if not all(_meets(param, m, x, i, contact, NEAR_TOL, dim=3) for i in nodes):
+            return x if all(_meets(param, m, x, i, c) for i, c in new) else None
+        if not all(_meets(param, m, x, i, c, NEAR_TOL, dim=3) for i, c in new):
             return None
         zu, zr = kid.masks(m)
         rows = pattern_rows(param, m, zu, zr, self.friction)

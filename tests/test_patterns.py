@@ -147,6 +147,24 @@ def test_symmetry_saves_solves_on_plug3d_and_changes_no_pattern():
     assert 2 * b.stats.solves < a.stats.solves
 
 
+def test_orbital_fixing_drops_no_orbit_and_saves_solves():
+    """plug3d 2 x 4 at mu = 1 (m = 8, dihedral group of order 8): the tree with orbital
+    fixing, expanded over the group, gives the brute force's 77 patterns, as the tree
+    without it does, from fewer leaves and fewer SOCPs (81 and 103 measured)."""
+    from hpcwedge.build import contact_problem
+    from hpcwedge.scene import parse_scene
+    from hpcwedge.symmetry import node_symmetries
+    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d", "ring": 4}, "friction": {"mu": 1.0}})
+    prob = contact_problem(sc)
+    p, G = parametrize(prob), node_symmetries(prob.K, 3)
+    fixed, plain = (PatternTree(p, 8, 1.0, symmetry=G, orbital_fixing=f) for f in (True, False))
+    a, b = fixed.explore(fixed.root()), plain.explore(plain.root())
+    want = brute_3d(p, 8, 1.0)
+    assert {s.contact for s in fixed.expand(a.found)} == want == {s.contact for s in plain.expand(b.found)}
+    assert len(want) == 77
+    assert len(a.found) < len(b.found) and a.stats.solves < b.stats.solves
+
+
 @pytest.mark.parametrize("seed,budget", [(0, 1), (1, 3), (2, 1000)])
 def test_run_patterns_equals_serial_search(seed, budget):
     make, prob = tree_factory(700 + seed, free=bool(seed % 2))
