@@ -19,7 +19,7 @@ import numpy as np
 from .cores import Cores, infeasible_core
 from .feasibility import decide
 from .lp import lp_violation
-from .nodesets import bits_to_mask, to_bits
+from .nodesets import bits_to_mask, bits_to_nodes, to_bits
 from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
 from .parallel.tasks import task_stopping
 from .problem import Parametrization, blocks
@@ -237,7 +237,7 @@ class PatternTree:
                 kg = node.gap if contact else node.gap | to_bits(orbit)
                 kg |= self._orbital_fixing(kc, kg)
                 contacts = [i] if contact else []
-                gaps = [j for j in range(m) if (kg & ~node.gap) >> j & 1]
+                gaps = list(bits_to_nodes(kg & ~node.gap, m))
                 kid = Subtree(node.depth + len(contacts) + len(gaps), kc, kg)
                 kids.append((kid, None if x is None else self._witness(kid, x, contacts, gaps, mu)))
             stack.extend(reversed(kids))

@@ -25,6 +25,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from .feasibility import decide
+from .nodesets import to_bits
 from .rows import Status, pattern_rows
 
 CDD_HELP = ("pycddlib is not installed (needed for the cddlib peers). Install it with\n"
@@ -311,6 +312,6 @@ def scip_patterns(param, m: int, mu: float, counts: dict) -> list[int] | None:
             counts["undecided"] = counts.get("undecided", 0) + 1
             return None
         bits = [int(round(model.getVal(v))) for v in z]
-        found.append(sum(1 << i for i, b in enumerate(bits) if b))
+        found.append(to_bits(i for i, b in enumerate(bits) if b))
         model.freeTransform()
         model.addCons(sum((1 - v) if b else v for v, b in zip(z, bits)) >= 1)

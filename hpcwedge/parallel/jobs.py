@@ -54,6 +54,8 @@ class SubtreeJob:
         self.context = PatternContext(make_tree, self.mus)
         trees = [self.context.tree(i) for i in range(len(self.mus))]
         self.m = trees[0].m if trees else 0
+        #: the trees find orbit representatives (a symmetry), expanded at the end
+        self._representatives = any(getattr(t, "symmetry", None) is not None for t in trees)
         self.found = [[] for _ in self.mus]
         self.undecided = [[] for _ in self.mus]
         self.counters = {"tasks": 0, "handed_back": 0, **{k: 0 for k in STAT_KEYS}}
@@ -73,8 +75,8 @@ class SubtreeJob:
         """What the engine's progress line adds for this job: patterns found so far (the
         orbit representatives where a tree has a symmetry, expanded at the end) and tree
         nodes visited."""
-        reps = any(getattr(self.context.tree(i), "symmetry", None) is not None for i in range(len(self.mus)))
-        return (f", {sum(map(len, self.found))} {'pattern representatives' if reps else 'patterns'} found, "
+        what = "pattern representatives" if self._representatives else "patterns"
+        return (f", {sum(map(len, self.found))} {what} found, "
                 f"{self.counters.get('nodes', 0)} tree nodes")
 
     def take(self, n_workers: int):
