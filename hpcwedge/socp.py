@@ -186,29 +186,23 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     rows that vanish on the kept columns dropped (as rows.kept_rows does)."""
     form = rows.reactions
     n, m = form.B.shape[0], rows.zero_u.shape[0]
+    k = form.E.shape[0]
     nodes = rows.nodes
     c, nb = len(nodes), form.U.shape[1] - n
-    cols = np.stack([nodes, nodes + m, nodes + 2 * m], axis=1).ravel()
+    cols = (nodes[:, None] + _THREE * m).ravel()
     # [equilibrium; u_n of every node] on the kept columns, each row's norm
     rest = np.ascontiguousarray(_equilibrium_normal_rows(form, m)[:, np.concatenate([cols, np.arange(n, n + nb)])])
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
     kept = kept_sizes(size)
-    eq = kept.copy()
-    eq[form.E.shape[0]:] &= rows.zero_u
-    lin = kept.copy()
-    lin[:form.E.shape[0]] = False
-    lin[form.E.shape[0]:] &= ~rows.zero_u
-    lin_nodes, lin_scale = np.flatnonzero(lin) - form.E.shape[0], size[lin]
-    dense = np.empty((1 + eq.sum() + lin.sum(), 3 * c + nb))
-    dense[0] = 0.0
-    dense[0, 0:3 * c:3] = 1.0
-    dense[1:1 + eq.sum()] = rest[eq] / size[eq, None]
-    dense[1 + eq.sum():] = rest[lin] / -lin_scale[:, None]
-    A = _csc_dense_diag(dense, np.tile([-mu, -1.0, -1.0], c))
+    eq = np.flatnonzero(kept & np.concatenate([np.ones(k, bool), rows.zero_u]))
+    lin = np.flatnonzero(kept & np.concatenate([np.zeros(k, bool), ~rows.zero_u]))
+    lin_scale = size[lin]
+    body = rest[np.concatenate([eq, lin])] / np.concatenate([size[eq], -lin_scale])[:, None]
+    A = DenseDiag.of(body, 3 * c, mu)
     b = np.zeros(A.shape[0])
     b[0] = 1.0
-    problem = ConicProblem(A, b, 1 + int(eq.sum()), len(lin_nodes), c)
-    return ReactionSOCP(problem, rows, cols, lin_nodes, lin_scale)
+    problem = ConicProblem(A, b, 1 + len(eq), len(lin), c)
+    return ReactionSOCP(problem, rows, cols, lin - k, lin_scale)
 
 
 def _equilibrium_normal_rows(form: ReactionCoordinates, m: int) -> np.ndarray:
@@ -232,12 +226,11 @@ def solve(problem: ConicProblem, attempt: int, tight: bool) -> Solution:
     cones += [clarabel.SecondOrderConeT(3) for _ in range(problem.n_soc)]
     n = problem.A.shape[1]
     if problem.q is None:
-        P, q = (_csc_eye(n) if attempt == LEAST_NORM_ATTEMPT else _csc_zero(n)), np.zeros(n)
+        P, q = _csc_square(n, attempt == LEAST_NORM_ATTEMPT), np.zeros(n)
     else:
-        P, q = _csc_zero(n), problem.q
+        P, q = _csc_square(n, False), problem.q
     opts = settings(attempt, tight, feasibility=problem.q is None)
-    A = problem.A if sp.issparse(problem.A) else _csc_dense(problem.A)
-    sol = clarabel.DefaultSolver(P, q, A, problem.b, cones, opts).solve()
+    sol = clarabel.DefaultSolver(P, q, _clarabel_csc(problem.A), problem.b, cones, opts).solve()
     return Solution(str(sol.status), np.asarray(sol.x), np.asarray(sol.z))
 
 
@@ -294,9 +287,7 @@ def _outcome(attempt: int, sol: Solution, plain: ConicProblem, steered: ConicPro
         if steered is not None:
             # the optimal dual z (A^T z + q = 0, z in K*) with b^T z < 0 is a Farkas
             # certificate of {A w + s = b, q . w = 0}: check it like any other
-            positive = certificate_ok(sp.vstack([sp.csr_matrix(steered.q[None, :]), plain.A]),
-                                      np.concatenate([[0.0], plain.b]),
-                                      np.concatenate([[1.0], sol.z]), plain.n_zero + 1, plain.n_lin)
+            positive = certificate_ok(plain.A, plain.b, sol.z, plain.n_zero, plain.n_lin, q=steered.q)
         return Outcome(attempt, sol.status, x=to_x(sol.x), positive=positive)
     if sol.status == "PrimalInfeasible":
         certified = certificate_ok(plain.A, plain.b, sol.z, plain.n_zero, plain.n_lin)
@@ -305,17 +296,20 @@ def _outcome(attempt: int, sol: Solution, plain: ConicProblem, steered: ConicPro
     return Outcome(attempt, sol.status)
 
 
-def certificate_ok(A, b, z, n_zero, n_lin) -> bool:
+def certificate_ok(A, b, z, n_zero, n_lin, q: np.ndarray | None = None) -> bool:
     """Farkas check of {A w + s = b, s in K} infeasible, rows laid out [zero cone
     (n_zero) | nonnegative (n_lin) | second-order cones of size 3]: with z scaled to
     b^T z = -1, ||A^T z||_inf and z's distance from the dual cone (K* = K here; free
     on the zero cone) must be <= CERT_TOL, i.e. no point w with ||w||_1 below about
-    1 / CERT_TOL is feasible."""
+    1 / CERT_TOL is feasible. q: the check of {q . w = 0, A w + s = b} instead, the
+    multiplier of the extra row 1 (an optimal dual z of min q . w over the set, for
+    which A^T z + q = 0)."""
     bz = b @ z
     if not np.isfinite(bz) or bz >= 0:
         return False
     z = z / -bz
-    if np.abs(A.T @ z).max() > CERT_TOL:
+    ATz = _rmatvec(A, z) if q is None else _rmatvec(A, z) + q / -bz
+    if np.abs(ATz).max() > CERT_TOL:
         return False
     zl = z[n_zero:n_zero + n_lin]
     if n_lin and zl.min() < -CERT_TOL:
@@ -326,48 +320,103 @@ def certificate_ok(A, b, z, n_zero, n_lin) -> bool:
     return True
 
 
-def _csc_dense(A: np.ndarray) -> sp.csc_matrix:
-    """A dense matrix as CSC with every entry stored (the from-dense conversion of
-    scipy costs more than the solve here)."""
-    r, c = A.shape
-    return sp.csc_matrix((np.ascontiguousarray(A.T).ravel(), np.tile(np.arange(r, dtype=np.int64), c),
-                          np.arange(0, r * c + 1, r, dtype=np.int64)), shape=(r, c))
+_THREE = np.arange(3)
 
 
-def _csc_dense_diag(D: np.ndarray, diag: np.ndarray) -> sp.csc_matrix:
-    """[D; diag(diag) 0] as CSC: D (k, n) with every entry stored, below it one entry per
-    column of the first len(diag) columns."""
-    k, n = D.shape
-    nd = len(diag)
-    data = np.empty(k * n + nd)
-    cols = data[:nd * (k + 1)].reshape(nd, k + 1)
-    cols[:, :k] = D[:, :nd].T
-    cols[:, k] = diag
-    data[nd * (k + 1):] = D[:, nd:].T.ravel()
-    A = sp.csc_matrix((k + nd, n))
-    A.data, (A.indices, A.indptr) = data, _dense_diag_pattern(k, nd, n)
-    return A
+@dataclass(frozen=True)
+class DenseDiag:
+    """The matrix [1_r; D; diag(d) 0] of `reaction_socp` (shape (k + nd, n), k = 1 + rows
+    of D): a first row with 1 on every nd column that is an r_n (columns 0, 3, 6, ...),
+    D (k - 1, n) dense with every entry stored, d = (-mu, -1, -1, ...) on the first nd
+    columns. Kept as Clarabel reads a CSC matrix: `data` column by column (one column: its
+    k dense entries, then its diagonal entry if it has one)."""
+
+    data: np.ndarray
+    k: int
+    nd: int
+    n: int
+
+    @classmethod
+    def of(cls, D: np.ndarray, nd: int, mu: float) -> "DenseDiag":
+        k, n = D.shape[0] + 1, D.shape[1]
+        data = np.empty(nd * (k + 1) + (n - nd) * k)
+        head = data[:nd * (k + 1)].reshape(nd, k + 1)
+        head[:, 0] = 0.0
+        head[0::3, 0] = 1.0
+        head[:, 1:k] = D[:, :nd].T
+        head[:, k] = -1.0
+        head[0::3, k] = -mu
+        tail = data[nd * (k + 1):].reshape(n - nd, k)
+        tail[:, 0] = 0.0
+        tail[:, 1:] = D[:, nd:].T
+        return cls(data, k, nd, n)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.k + self.nd, self.n
+
+    def rmatvec(self, z: np.ndarray) -> np.ndarray:
+        """A^T z."""
+        k, nd = self.k, self.nd
+        head = self.data[:nd * (k + 1)].reshape(nd, k + 1)
+        tail = self.data[nd * (k + 1):].reshape(self.n - nd, k)
+        return np.concatenate([head[:, :k] @ z[:k] + head[:, k] * z[k:], tail @ z[:k]])
+
+    def toarray(self) -> np.ndarray:
+        out = np.zeros(self.shape)
+        out[:self.k] = np.concatenate([self.data[:self.nd * (self.k + 1)].reshape(self.nd, self.k + 1)[:, :self.k],
+                                       self.data[self.nd * (self.k + 1):].reshape(self.n - self.nd, self.k)]).T
+        out[self.k + np.arange(self.nd), np.arange(self.nd)] = self.data[self.k:self.nd * (self.k + 1):self.k + 1]
+        return out
+
+
+def _rmatvec(A, z: np.ndarray) -> np.ndarray:
+    """A^T z for a ConicProblem's A (dense, DenseDiag or scipy sparse)."""
+    return A.rmatvec(z) if isinstance(A, DenseDiag) else A.T @ z
+
+
+class _ClarabelCsc:
+    """A CSC matrix as Clarabel's binding reads one (the attributes of a scipy csc_matrix in
+    canonical format), its arrays as Python lists: the binding copies them element by
+    element, which costs less from a list than from a numpy array (plug3d 3 x 6's tree
+    SOCPs: setup 120 against 162 us)."""
+
+    __slots__ = ("data", "indices", "indptr", "shape", "nnz")
+    has_canonical_format = True
+
+    def __init__(self, data: list, indices: list, indptr: list, shape: tuple[int, int]):
+        self.data, self.indices, self.indptr, self.shape, self.nnz = data, indices, indptr, shape, len(data)
+
+
+def _clarabel_csc(A) -> _ClarabelCsc:
+    """A ConicProblem's A for Clarabel: a DenseDiag or a dense array with every entry
+    stored (scipy's from-dense conversion costs more than the solve here), or a scipy
+    sparse matrix as it is."""
+    if isinstance(A, DenseDiag):
+        return _ClarabelCsc(A.data.tolist(), *_dense_diag_pattern(A.k, A.nd, A.n), A.shape)
+    if isinstance(A, np.ndarray):
+        r, c = A.shape
+        return _ClarabelCsc(A.T.ravel().tolist(), *_dense_diag_pattern(r, 0, c), (r, c))
+    A = sp.csc_matrix(A)
+    A.sort_indices()
+    return _ClarabelCsc(A.data.tolist(), A.indices.tolist(), A.indptr.tolist(), A.shape)
 
 
 @functools.lru_cache(maxsize=1024)
-def _dense_diag_pattern(k: int, nd: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(indices, indptr) of `_csc_dense_diag`'s matrix (shared: not to be modified)."""
-    head = np.arange(k, dtype=np.int32)
-    indices = np.concatenate([np.hstack([np.tile(head, (nd, 1)),
-                                         (k + np.arange(nd, dtype=np.int32))[:, None]]).ravel(),
+def _dense_diag_pattern(k: int, nd: int, n: int) -> tuple[list, list]:
+    """(indices, indptr) of a (k + nd, n) CSC matrix with every entry of its first k rows
+    stored and one entry below them in each of its first nd columns (shared: not to be
+    modified)."""
+    head = np.arange(k)
+    indices = np.concatenate([np.hstack([np.tile(head, (nd, 1)), (k + np.arange(nd))[:, None]]).ravel(),
                               np.tile(head, n - nd)])
-    indptr = np.concatenate([np.arange(nd + 1, dtype=np.int32) * (k + 1),
-                             nd * (k + 1) + np.arange(1, n - nd + 1, dtype=np.int32) * k])
-    indices.flags.writeable = indptr.flags.writeable = False
-    return indices, indptr
+    indptr = np.concatenate([np.arange(nd + 1) * (k + 1), nd * (k + 1) + np.arange(1, n - nd + 1) * k])
+    return indices.tolist(), indptr.tolist()
 
 
 @functools.lru_cache(maxsize=256)
-def _csc_eye(n: int) -> sp.csc_matrix:
-    return sp.identity(n, format="csc")
-
-
-@functools.lru_cache(maxsize=256)
-def _csc_zero(n: int) -> sp.csc_matrix:
-    return sp.csc_matrix((np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(n + 1, dtype=np.int64)),
-                         shape=(n, n))
+def _csc_square(n: int, identity: bool) -> _ClarabelCsc:
+    """The (n, n) identity or zero matrix for Clarabel (shared: not to be modified)."""
+    if identity:
+        return _ClarabelCsc([1.0] * n, list(range(n)), list(range(n + 1)), (n, n))
+    return _ClarabelCsc([], [], [0] * (n + 1), (n, n))

@@ -100,3 +100,35 @@ def test_reaction_form_agrees_with_the_null_space_form():
                 z = first.farkas(sol.z)
                 assert z is not None and certificate_ok(plain.A, plain.b, z, 1, plain.n_lin)
     assert min(kinds.values()) >= 10
+
+
+def test_reaction_matrix_is_stored_as_clarabel_reads_it():
+    """reaction_socp's DenseDiag: its dense form has the sum-r_n row on the r_n columns and
+    (-mu, -1, -1) below the reactions; A^T z agrees with the dense product; the CSC handed
+    to Clarabel, rebuilt by scipy, is the same matrix entry for entry (sorted indices, no
+    duplicates), as is a dense matrix's."""
+    import scipy.sparse as sp
+    from hpcwedge.socp import DenseDiag, _clarabel_csc, reaction_socp
+    p, m = plug3d_param(2, 4)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        state = rng.integers(0, 3, m)
+        zu, zr = state == 1, state == 2
+        if not (~zr).any():
+            continue
+        mu = rng.uniform(0.2, 1.0)
+        rows = pattern_rows(p, m, zu, zr)
+        A = reaction_socp(rows, mu).problem.A
+        assert isinstance(A, DenseDiag)
+        dense = A.toarray()
+        c = len(rows.nodes)
+        assert np.array_equal(dense[0, :3 * c], np.tile([1.0, 0.0, 0.0], c)) and not dense[0, 3 * c:].any()
+        assert np.array_equal(dense[A.k:, :3 * c], np.diag(np.tile([-mu, -1.0, -1.0], c)))
+        assert not dense[A.k:, 3 * c:].any()
+        z = rng.standard_normal(A.shape[0])
+        assert np.allclose(A.rmatvec(z), dense.T @ z, rtol=0, atol=1e-13)
+        for M, ref in ((A, dense), (dense, dense)):
+            h = _clarabel_csc(M)
+            assert h.has_canonical_format and h.nnz == len(h.data) and h.shape == ref.shape
+            back = sp.csc_matrix((h.data, h.indices, h.indptr), shape=h.shape)
+            assert back.has_canonical_format and np.array_equal(back.toarray(), ref)
