@@ -63,7 +63,8 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     if route not in ("auto", "tree", "milp"):
         raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
     stats = stats if stats is not None else BnBStats()
-    search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry)
+    # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
+    search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry, long_steps=False)
     solve = partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale)
     best = None
     if (route == "milp" or (route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:

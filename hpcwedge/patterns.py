@@ -138,8 +138,11 @@ class PatternTree:
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None, symmetry: Symmetry | None = None,
-                 learn_cores: bool = False, orbital_fixing: bool = True):
+                 learn_cores: bool = False, orbital_fixing: bool = True, long_steps: bool = True):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
+        #: 3D: Clarabel's first attempt takes long steps (socp.settings); False for a search
+        #: near mu^c (global_mu_c), where they left nodes undecided
+        self.long_steps = long_steps
         self.symmetry = symmetry if symmetry is not None and symmetry.order > 1 else None
         #: with a symmetry: orbital fixing of every child (class doc; off only to measure it)
         self.orbital_fixing = orbital_fixing
@@ -204,7 +207,7 @@ class PatternTree:
                 zu, zr = node.masks(m)
                 steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
                 rows = pattern_rows(param, m, zu, zr, self.friction)
-                dec = decide(rows, mu, counts=stats.statuses, objective=steer)
+                dec = decide(rows, mu, counts=stats.statuses, objective=steer, long_steps=self.long_steps)
                 if dec.status == Status.INFEASIBLE:
                     if dec.farkas is not None and self._cores is not None:
                         self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
@@ -316,12 +319,13 @@ def expand_orbits(found: list[Subtree], symmetry: Symmetry | None, m: int) -> li
 def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = True,
                   first_only: bool = False, stats: BnBStats | None = None,
                   order: list[int] | None = None, symmetry: Symmetry | None = None,
-                  representatives: bool = False) -> list[tuple[np.ndarray, np.ndarray]]:
+                  representatives: bool = False, long_steps: bool = True) -> list[tuple[np.ndarray, np.ndarray]]:
     """Feasible full patterns (zero_u, zero_r) at mu, serially: depth first, in
     contact-before-gap order at each level; with a symmetry, every orbit's
     patterns sorted by (contact, gap) bits — or, with representatives=True (and
-    first_only), only the leaves the tree found: one or more per orbit."""
-    tree = PatternTree(param, m, mu, friction, order, symmetry)
+    first_only), only the leaves the tree found: one or more per orbit. long_steps: as
+    PatternTree's."""
+    tree = PatternTree(param, m, mu, friction, order, symmetry, long_steps=long_steps)
     out = tree.explore(Subtree(0), first_only=first_only)
     if stats is not None:
         stats.add(out.stats)

@@ -5,8 +5,8 @@ import numpy as np
 from hpcwedge.feasibility import decide
 from hpcwedge.problem import parametrize
 from hpcwedge.rows import Status, pattern_rows
-from hpcwedge.socp import (ATTEMPTS, LEAST_NORM_ATTEMPT, attempts, certificate_ok, pattern_attempts, pattern_socp,
-                           settings)
+from hpcwedge.socp import (ATTEMPTS, LEAST_NORM_ATTEMPT, LONG_STEP, attempts, certificate_ok, pattern_attempts,
+                           pattern_socp, settings)
 from instances import plug3d_param, random_problem_3d
 
 
@@ -31,6 +31,10 @@ def test_settings_are_values():
     assert settings(2, False).static_regularization_constant == 1e-7
     assert not settings(0, False).equilibrate_enable and settings(3, False).equilibrate_enable
     assert settings(1, True) is settings(1, True)               # cached: one object per (attempt, tight)
+    # long steps: only on a feasibility problem's first attempt, and only when asked for
+    assert settings(0, False, True, long_steps=True).max_step_fraction == LONG_STEP > 0.99
+    assert settings(0, False, True).max_step_fraction == settings(0, False).max_step_fraction == 0.99
+    assert settings(1, False, True, long_steps=True).max_step_fraction == 0.99
 
 
 def test_farkas_certificates_are_checked():
