@@ -37,20 +37,20 @@ mu_c = "cones"
 """
 # Long enough (10-40 s on 2 cores) to be signalled while it runs, with a small
 # result, and all of it work that the engine distributes and checkpoints: the
-# 3D sign-pattern tree of plug3d (m = 12) and the mu^c of its 223 patterns.
-LONG = """name = "plug3d-2x6"
+# 3D sign-pattern tree of plug3d (m = 14) and the mu^c of its 400 patterns.
+LONG = """name = "plug3d-2x7"
 dim = 3
 [model]
 kind = "plug3d"
 levels = 2
-ring = 6
+ring = 7
 [friction]
 mu = [1.0]
 [compute]
 enumerate = true
 mu_c = "cones"
 [run]
-symmetry = false           # the long way round (~10 s), so that signals land mid-run
+symmetry = false           # the long way round (~10 s serially), so that signals land mid-run
 checkpoint_every_s = 2
 """
 
