@@ -39,9 +39,11 @@ PYRAMID_SIDES = (16, 64, 256)
 class SolverOptions:
     """tolerances: "default", or "tight" (Clarabel's feasibility and gap tolerances 1e-10
     on every attempt; the LPs always run at LP_OPTIONS' 1e-10) — for benchmarks of run
-    time against error."""
+    time against error. long_steps: Clarabel's first attempt takes long interior-point
+    steps (socp.settings), for problems away from their mu^c (TREE_OPTIONS)."""
 
     tolerances: str = "default"
+    long_steps: bool = False
 
     def __post_init__(self):
         if self.tolerances not in ("default", "tight"):
@@ -54,6 +56,8 @@ class SolverOptions:
 
 #: the options of every run (the product never changes them)
 DEFAULT_OPTIONS = SolverOptions()
+#: the options of the enumeration tree's solves (patterns.PatternTree)
+TREE_OPTIONS = SolverOptions(long_steps=True)
 
 
 @dataclass
@@ -85,15 +89,14 @@ def pyramid_sides_for(spread: float) -> tuple[int, ...]:
 
 def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OPTIONS,
            counts: dict | None = None, *, objective: np.ndarray | None = None,
-           pyramid_sides: tuple[int, ...] = PYRAMID_SIDES, long_steps: bool = False) -> Decision:
+           pyramid_sides: tuple[int, ...] = PYRAMID_SIDES) -> Decision:
     """Feasibility of the pattern problem at mu (module doc), x normalised to sum r_n = 1.
     counts (optional) accumulates how each problem was decided. objective (x-space, 3D only,
     ignored for LPs): minimised over the feasible set: the branch and bound passes the next
     node's u_n row, so that the returned x lies on u_n = 0 when the contact child is
     feasible (the skip-solve rule then takes it), and `positive` proves the contact child
     infeasible when it is not. pyramid_sides: the levels of the pyramid LP fallback (step 3),
-    e.g. pyramid_sides_for(spread). long_steps: Clarabel's first attempt takes long steps
-    (socp.settings; for problems away from their mu^c)."""
+    e.g. pyramid_sides_for(spread)."""
     if isinstance(rows, Rows):
         status, x = lp_feasible(rows, mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_" + status)
@@ -106,7 +109,7 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
         return Decision(Status.INFEASIBLE)
     # retries are plain feasibility problems (an optimum on the boundary is the first thing
     # to miss a verification)
-    for o in pattern_attempts(rows, mu, options.tight, objective, long_steps):
+    for o in pattern_attempts(rows, mu, options.tight, objective, options.long_steps):
         tag = f"retry{o.attempt}_" if o.attempt else ""
         count(counts, tag + o.status)
         if o.certified is not None:

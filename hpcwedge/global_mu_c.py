@@ -9,7 +9,7 @@ from functools import partial
 
 import numpy as np
 
-from .feasibility import decide
+from .feasibility import DEFAULT_OPTIONS, decide
 from .milp import WedgeMilp, wedge_milp
 from .mu_critical import MuC, mu_critical
 from .parallel import task_tick
@@ -64,7 +64,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
     stats = stats if stats is not None else BnBStats()
     # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
-    search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry, long_steps=False)
+    search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry, options=DEFAULT_OPTIONS)
     solve = partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale)
     best = None
     if (route == "milp" or (route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:

@@ -143,6 +143,10 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
     F = residual(w, mu, lam, gam, eta)
     norms = []
     for _ in range(iters):
+        f0 = np.linalg.norm(F)
+        norms.append(f0)
+        if len(norms) > STALL_STEPS and f0 > STALL_RATIO * norms[-1 - STALL_STEPS]:
+            break
         Tw, nt, t, G = parts(w, mu)
         if np.any(nt <= 0):
             return None
@@ -169,10 +173,6 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         # Levenberg-Marquardt with nu = ||F|| (Yamashita & Fukushima): a descent step
         # even where the system is singular (minimisers of the ratio not isolated),
         # quadratic convergence under a local error bound
-        f0 = np.linalg.norm(F)
-        norms.append(f0)
-        if len(norms) > STALL_STEPS and f0 > STALL_RATIO * norms[-1 - STALL_STEPS]:
-            break
         JtJ, JtF = J.T @ J, J.T @ F
         nu = min(f0, 1.0)
         for trial in range(31):

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from .cores import Cores, infeasible_core
-from .feasibility import decide
+from .feasibility import TREE_OPTIONS, SolverOptions, decide
 from .lp import lp_violation
 from .nodesets import bits_to_mask, bits_to_nodes, to_bits
 from .parallel import DEFAULT_BUDGET, Engine, Patterns, SubtreeJob
@@ -138,11 +138,12 @@ class PatternTree:
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None, symmetry: Symmetry | None = None,
-                 learn_cores: bool = False, orbital_fixing: bool = True, long_steps: bool = True):
+                 learn_cores: bool = False, orbital_fixing: bool = True,
+                 options: SolverOptions = TREE_OPTIONS):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
-        #: 3D: Clarabel's first attempt takes long steps (socp.settings); False for a search
-        #: near mu^c (global_mu_c), where they left nodes undecided
-        self.long_steps = long_steps
+        #: the solver options of every solve (3D: long steps by default; DEFAULT_OPTIONS for
+        #: a search near mu^c, global_mu_c, where long steps left nodes undecided)
+        self.options = options
         self.symmetry = symmetry if symmetry is not None and symmetry.order > 1 else None
         #: with a symmetry: orbital fixing of every child (class doc; off only to measure it)
         self.orbital_fixing = orbital_fixing
@@ -207,7 +208,7 @@ class PatternTree:
                 zu, zr = node.masks(m)
                 steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
                 rows = pattern_rows(param, m, zu, zr, self.friction)
-                dec = decide(rows, mu, counts=stats.statuses, objective=steer, long_steps=self.long_steps)
+                dec = decide(rows, mu, self.options, stats.statuses, objective=steer)
                 if dec.status == Status.INFEASIBLE:
                     if dec.farkas is not None and self._cores is not None:
                         self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
@@ -319,13 +320,14 @@ def expand_orbits(found: list[Subtree], symmetry: Symmetry | None, m: int) -> li
 def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = True,
                   first_only: bool = False, stats: BnBStats | None = None,
                   order: list[int] | None = None, symmetry: Symmetry | None = None,
-                  representatives: bool = False, long_steps: bool = True) -> list[tuple[np.ndarray, np.ndarray]]:
+                  representatives: bool = False,
+                  options: SolverOptions = TREE_OPTIONS) -> list[tuple[np.ndarray, np.ndarray]]:
     """Feasible full patterns (zero_u, zero_r) at mu, serially: depth first, in
     contact-before-gap order at each level; with a symmetry, every orbit's
     patterns sorted by (contact, gap) bits — or, with representatives=True (and
-    first_only), only the leaves the tree found: one or more per orbit. long_steps: as
+    first_only), only the leaves the tree found: one or more per orbit. options: as
     PatternTree's."""
-    tree = PatternTree(param, m, mu, friction, order, symmetry, long_steps=long_steps)
+    tree = PatternTree(param, m, mu, friction, order, symmetry, options=options)
     out = tree.explore(Subtree(0), first_only=first_only)
     if stats is not None:
         stats.add(out.stats)

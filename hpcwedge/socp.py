@@ -325,7 +325,9 @@ def certificate_ok(A, b, z, n_zero, n_lin, q: np.ndarray | None = None) -> bool:
     if not np.isfinite(bz) or bz >= 0:
         return False
     z = z / -bz
-    ATz = _rmatvec(A, z) if q is None else _rmatvec(A, z) + q / -bz
+    ATz = _rmatvec(A, z)
+    if q is not None:
+        ATz += q / -bz
     if np.abs(ATz).max() > CERT_TOL:
         return False
     zl = z[n_zero:n_zero + n_lin]
@@ -356,17 +358,23 @@ class DenseDiag:
     @classmethod
     def of(cls, D: np.ndarray, nd: int, mu: float) -> "DenseDiag":
         k, n = D.shape[0] + 1, D.shape[1]
-        data = np.empty(nd * (k + 1) + (n - nd) * k)
-        head = data[:nd * (k + 1)].reshape(nd, k + 1)
+        A = cls(np.empty(nd * (k + 1) + (n - nd) * k), k, nd, n)
+        head, tail = A._columns()
         head[:, 0] = 0.0
         head[0::3, 0] = 1.0
         head[:, 1:k] = D[:, :nd].T
         head[:, k] = -1.0
         head[0::3, k] = -mu
-        tail = data[nd * (k + 1):].reshape(n - nd, k)
         tail[:, 0] = 0.0
         tail[:, 1:] = D[:, nd:].T
-        return cls(data, k, nd, n)
+        return A
+
+    def _columns(self) -> tuple[np.ndarray, np.ndarray]:
+        """Views of `data`: the first nd columns (nd, k + 1: dense part, then the diagonal
+        entry) and the others (n - nd, k)."""
+        split = self.nd * (self.k + 1)
+        return (self.data[:split].reshape(self.nd, self.k + 1),
+                self.data[split:].reshape(self.n - self.nd, self.k))
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -374,16 +382,15 @@ class DenseDiag:
 
     def rmatvec(self, z: np.ndarray) -> np.ndarray:
         """A^T z."""
-        k, nd = self.k, self.nd
-        head = self.data[:nd * (k + 1)].reshape(nd, k + 1)
-        tail = self.data[nd * (k + 1):].reshape(self.n - nd, k)
+        head, tail = self._columns()
+        k = self.k
         return np.concatenate([head[:, :k] @ z[:k] + head[:, k] * z[k:], tail @ z[:k]])
 
     def toarray(self) -> np.ndarray:
+        head, tail = self._columns()
         out = np.zeros(self.shape)
-        out[:self.k] = np.concatenate([self.data[:self.nd * (self.k + 1)].reshape(self.nd, self.k + 1)[:, :self.k],
-                                       self.data[self.nd * (self.k + 1):].reshape(self.n - self.nd, self.k)]).T
-        out[self.k + np.arange(self.nd), np.arange(self.nd)] = self.data[self.k:self.nd * (self.k + 1):self.k + 1]
+        out[:self.k] = np.concatenate([head[:, :self.k], tail]).T
+        out[self.k + np.arange(self.nd), np.arange(self.nd)] = head[:, self.k]
         return out
 
 
