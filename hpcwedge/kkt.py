@@ -170,25 +170,12 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         r4 = slice(p + 1 + nS, p + 1 + nS + nE)
         J[r4, iw] = E
         J[n - 1, iw] = nrm
-        # Levenberg-Marquardt with nu = ||F|| (Yamashita & Fukushima): a descent step
-        # even where the system is singular (minimisers of the ratio not isolated),
-        # quadratic convergence under a local error bound
-        JtJ, JtF = J.T @ J, J.T @ F
-        nu = min(f0, 1.0)
-        for trial in range(31):
-            if trial == 0:            # the plain Newton (least-squares) step first
-                step = np.linalg.lstsq(J, -F, rcond=None)[0]
-            else:
-                try:
-                    step = np.linalg.solve(JtJ + nu * np.eye(n), -JtF)
-                except np.linalg.LinAlgError:
-                    break
-                nu *= 10.0
+        for step, ratio in _trial_steps(J, F, f0):
             w1, mu1 = w + step[iw], mu + step[imu]
             lam1, gam1, eta1 = lam + step[il], gam + step[ig], eta + step[ie]
             if np.all(np.linalg.norm(np.einsum("ckp,p->ck", TS, w1), axis=1) > 0):
                 F_new = residual(w1, mu1, lam1, gam1, eta1)
-                if np.linalg.norm(F_new) < (0.5 if trial == 0 else 1.0) * f0:
+                if np.linalg.norm(F_new) < ratio * f0:
                     break
         else:
             break
@@ -213,6 +200,30 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         if support is None:
             return w, float(mu), np.asarray(Ap, dtype=int), False, S[lam < 0], Lin[gam[3 * nA:] > 0]
     return w, float(mu), support, True, S[:0], Lin[:0]
+
+
+def _trial_steps(J: np.ndarray, F: np.ndarray, f0: float):
+    """The steps a Newton iteration tries on J step = -F, each with the fraction of ||F||
+    (f0) it must bring the residual under: the plain Newton step (LU; least squares
+    where LU fails on a singular J) to 0.5; then 30 Levenberg-Marquardt steps with
+    nu = min(||F||, 1) growing tenfold (Yamashita & Fukushima: a descent step even where
+    the system is singular, minimisers of the ratio not isolated; quadratic convergence
+    under a local error bound), each to 1."""
+    try:
+        step = np.linalg.solve(J, -F)
+    except np.linalg.LinAlgError:
+        step = None
+    if step is None or not np.isfinite(step).all():
+        step = np.linalg.lstsq(J, -F, rcond=None)[0]
+    yield step, 0.5
+    JtJ, JtF = J.T @ J, J.T @ F
+    nu, eye = min(f0, 1.0), np.eye(J.shape[0])
+    for _ in range(30):
+        try:
+            yield np.linalg.solve(JtJ + nu * eye, -JtF), 1.0
+        except np.linalg.LinAlgError:
+            return
+        nu *= 10.0
 
 
 def _signed_support(lam, gam, S, Ap, nA, nL, mu, rtol: float = SIGN_RTOL):

@@ -40,3 +40,27 @@ def test_3d_pattern_mu_c_certified_and_against_bisection(seed, m, free):
         assert decide(rows, r.mu_c * (1 + 1e-6)).status != Status.INFEASIBLE
         b = mu_critical(p, m, zu, zr, mu_hi=4.0, method="bisection", tol=1e-8)
         assert r.mu_c * (1 - 1e-4) <= b.mu_c <= r.mu_c * (1 + 1e-8)
+
+
+def test_newton_trial_steps_plain_then_levenberg_marquardt():
+    """The plain Newton step solves J s = -F (LU); on an exactly singular J it is the
+    minimum-norm least-squares step; the Levenberg-Marquardt steps after it shrink as
+    nu grows tenfold, towards the steepest-descent direction -J^T F."""
+    from hpcwedge.kkt import _trial_steps
+    rng = np.random.default_rng(3)
+    J = rng.standard_normal((6, 6))
+    F = rng.standard_normal(6)
+    steps = list(_trial_steps(J, F, float(np.linalg.norm(F))))
+    assert len(steps) == 31 and steps[0][1] == 0.5 and all(r == 1.0 for _, r in steps[1:])
+    np.testing.assert_allclose(J @ steps[0][0], -F, atol=1e-12)
+    sizes = [np.linalg.norm(s) for s, _ in steps[1:]]
+    assert all(a > b for a, b in zip(sizes, sizes[1:]))
+    g = -J.T @ F
+    last = steps[-1][0]
+    assert last @ g / (np.linalg.norm(last) * np.linalg.norm(g)) > 1 - 1e-9
+    Js = J.copy()
+    Js[:, 5] = 0.0                                     # singular: column 5 unused
+    Fs = Js @ rng.standard_normal(6)                   # consistent right-hand side
+    plain = next(_trial_steps(Js, Fs, float(np.linalg.norm(Fs))))[0]
+    np.testing.assert_allclose(plain, np.linalg.lstsq(Js, -Fs, rcond=None)[0], atol=1e-12)
+    assert plain[5] == pytest.approx(0.0, abs=1e-12)
