@@ -1,0 +1,123 @@
+#!/usr/bin/env python3
+"""How much conflict learning could save in the 3D sign-pattern tree (issue 13): counts.
+
+    PYTHONPATH=. python scripts/bench_cores.py [--scenes 2x6 3x5 3x6] [--mu 0.65]
+                                               [--out results/bench_cores]
+
+Each scene is plug3d LEVELSxRING at mu without symmetry (bench_search_3d.scene), its
+enumeration tree walked node by node through the product's own PatternTree.explore
+(budget 1, each open child handed back with its witness: the same tree as one pass).
+Every tree node that the SOCP proves infeasible is then shrunk to a minimal infeasible
+subset of its fixings by a deletion filter (drop one fixed node; keep it dropped when the
+rest is still infeasible; feasibility.decide on rows.pattern_rows, the tree's own test).
+Reported per scene: tree nodes, SOCPs, feasible patterns; infeasible nodes and their
+depths; minimal cores' sizes and how many are distinct; the infeasible nodes that an
+earlier node's minimal core covers (the most that learning minimal cores, at any price,
+could prune in this tree order); the deletion filter's SOCPs; and what the tree's own core
+learning (PatternTree(learn_cores=True): the part of the interior-point certificate that is
+used) prunes. Counts only: the same on every machine.
+Writes <out>.json; prints a summary.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from bench_search_3d import scene  # noqa: E402
+
+
+def tree_nodes(param, m: int, mu: float):
+    """The enumeration tree's nodes in depth-first order: (masks of each infeasible node,
+    tree nodes, SOCPs, feasible patterns)."""
+    from hpcwedge.patterns import PatternTree
+    tree = PatternTree(param, m, mu)
+    stack, infeasible = [(tree.root(), None)], []
+    nodes = solves = found = 0
+    while stack:
+        node, x = stack.pop()
+        ex = tree.explore(node, budget=1, x=x)
+        nodes += ex.stats.nodes
+        solves += ex.stats.solves
+        found += len(ex.found)
+        if not ex.found and not ex.open and not ex.stats.undecided:
+            infeasible.append(node.masks(m))
+        stack.extend(reversed(list(zip(ex.open, ex.open_x))))
+    return infeasible, nodes, solves, found
+
+
+def minimal_core(param, m: int, mu: float, zu: np.ndarray, zr: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """A minimal infeasible subset of the fixings (zu, zr) by a deletion filter, and its SOCPs."""
+    from hpcwedge.feasibility import TREE_OPTIONS, decide
+    from hpcwedge.rows import Status, pattern_rows
+    cu, cr, socps = zu.copy(), zr.copy(), 0
+    for i in np.flatnonzero(zu | zr):
+        tu, tr = cu.copy(), cr.copy()
+        tu[i] = tr[i] = False
+        socps += 1
+        if decide(pattern_rows(param, m, tu, tr), mu, TREE_OPTIONS).status == Status.INFEASIBLE:
+            cu, cr = tu, tr
+    return cu, cr, socps
+
+
+def study(levels: int, ring: int, mu: float) -> dict:
+    from hpcwedge.build import contact_problem
+    from hpcwedge.patterns import PatternTree
+    from hpcwedge.problem import parametrize
+    prob = contact_problem(scene("enumerate", levels, ring))
+    param, m = parametrize(prob), prob.m
+    t0 = time.process_time()
+    infeasible, nodes, solves, found = tree_nodes(param, m, mu)
+    cores, filter_socps = [], 0
+    for zu, zr in infeasible:
+        cu, cr, k = minimal_core(param, m, mu, zu, zr)
+        cores.append((cu, cr))
+        filter_socps += k
+    covered = sum(any(not (cu & ~zu).any() and not (cr & ~zr).any() for cu, cr in cores[:k])
+                  for k, (zu, zr) in enumerate(infeasible))
+    learnt = PatternTree(param, m, mu, learn_cores=True)
+    own = learnt.explore(learnt.root()).stats
+    sizes = [int(cu.sum() + cr.sum()) for cu, cr in cores]
+    depths = [int(zu.sum() + zr.sum()) for zu, zr in infeasible]
+    return {"scene": f"plug3d {levels}x{ring}", "m": m, "mu": mu, "tree_nodes": nodes, "socps": solves,
+            "patterns": found, "infeasible_nodes": len(infeasible),
+            "infeasible_depths": np.bincount(depths, minlength=m + 1).tolist(),
+            "minimal_core_sizes": np.bincount(sizes, minlength=m + 1).tolist(),
+            "minimal_core_size_median": float(np.median(sizes)) if sizes else None,
+            "distinct_minimal_cores": len({(cu.tobytes(), cr.tobytes()) for cu, cr in cores}),
+            "covered_by_earlier_minimal_core": int(covered), "deletion_filter_socps": filter_socps,
+            "learnt_cores_tree": {"socps": own.solves, "pruned": own.pruned},
+            "cpu_seconds": round(time.process_time() - t0, 1)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", nargs="+", default=["2x6", "3x5", "3x6"])
+    ap.add_argument("--mu", type=float, default=0.65)
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(HERE), "results", "bench_cores"))
+    args = ap.parse_args(argv)
+    rows = []
+    for s in args.scenes:
+        levels, ring = (int(v) for v in s.split("x"))
+        r = study(levels, ring, args.mu)
+        rows.append(r)
+        print(f"{r['scene']} (m = {r['m']}, mu = {r['mu']}): {r['tree_nodes']} nodes, {r['socps']} SOCPs, "
+              f"{r['patterns']} patterns; {r['infeasible_nodes']} infeasible nodes, minimal cores of "
+              f"median size {r['minimal_core_size_median']} ({r['distinct_minimal_cores']} distinct), "
+              f"{r['covered_by_earlier_minimal_core']} covered by an earlier one "
+              f"(deletion filter: {r['deletion_filter_socps']} SOCPs); learnt cores prune "
+              f"{r['learnt_cores_tree']['pruned']} ({r['learnt_cores_tree']['socps']} SOCPs)", flush=True)
+    from hpcwedge.environment import environment
+    with open(args.out + ".json", "w") as f:
+        json.dump({"rows": rows, "environment": environment()}, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

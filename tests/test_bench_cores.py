@@ -1,0 +1,55 @@
+"""scripts/bench_cores.py's two routes on plug3d 2 x 4 (m = 8) at mu = 0.65: the node-by-node
+walk of the tree (explore with budget 1) is the tree of one pass, and the deletion filter's
+cores are minimal infeasible subsets of the node's fixings (each infeasible, each one
+smaller by a fixing feasible), checked against feasibility.decide."""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "scripts"))
+import bench_cores   # noqa: E402
+from bench_search_3d import scene   # noqa: E402
+
+from hpcwedge.build import contact_problem
+from hpcwedge.feasibility import TREE_OPTIONS, decide
+from hpcwedge.patterns import PatternTree
+from hpcwedge.problem import parametrize
+from hpcwedge.rows import Status, pattern_rows
+
+MU = 0.65
+
+
+@pytest.fixture(scope="module")
+def body():
+    prob = contact_problem(scene("enumerate", 2, 4))
+    return parametrize(prob), prob.m
+
+
+def infeasible(param, m, zu, zr) -> bool:
+    return decide(pattern_rows(param, m, zu, zr), MU, TREE_OPTIONS).status == Status.INFEASIBLE
+
+
+def test_node_by_node_walk_is_the_one_pass_tree(body):
+    param, m = body
+    tree = PatternTree(param, m, MU)
+    one = tree.explore(tree.root())
+    nodes, count, solves, found = bench_cores.tree_nodes(param, m, MU)
+    assert (count, solves, found) == (one.stats.nodes, one.stats.solves, len(one.found))
+    assert len(nodes) == one.stats.statuses.get("PrimalInfeasible", 0) > 0
+    assert all(infeasible(param, m, zu, zr) for zu, zr in nodes)
+
+
+def test_deletion_filter_cores_are_minimal(body):
+    param, m = body
+    nodes = bench_cores.tree_nodes(param, m, MU)[0]
+    for zu, zr in nodes[:: max(1, len(nodes) // 6)]:
+        cu, cr, socps = bench_cores.minimal_core(param, m, MU, zu, zr)
+        assert socps == int((zu | zr).sum())
+        assert not (cu & ~zu).any() and not (cr & ~zr).any()
+        assert infeasible(param, m, cu, cr)
+        for i in np.flatnonzero(cu | cr):
+            tu, tr = cu.copy(), cr.copy()
+            tu[i] = tr[i] = False
+            assert not infeasible(param, m, tu, tr)
