@@ -291,3 +291,22 @@ def test_run_condense_key_checked():
     assert parse_scene({**base, "run": {"condense": "distributed"}}).condense == "distributed"
     with pytest.raises(SceneError, match=r"run.condense: one of auto, serial, distributed, got 'mumps'"):
         parse_scene({**base, "run": {"condense": "mumps"}})
+
+
+@pytest.mark.parametrize("user, expected", [(None, "ob1"), ("^ucx", "^ucx")])
+def test_serial_petsc_starts_mpi_with_the_ob1_layer_unless_the_user_chose(user, expected):
+    """A serial run's PETSc starts MPI as a singleton with Open MPI's ob1 message layer
+    (its default probes UCX's devices first, for nothing); OMPI_MCA_pml set by the user
+    stands. The condensation's answer is the same either way."""
+    env = {k: v for k, v in os.environ.items() if k != "OMPI_MCA_pml" and not k.startswith(("OMPI_COMM", "PMIX"))}
+    if user is not None:
+        env["OMPI_MCA_pml"] = user
+    code = ("import os, json; from hpcwedge.condense import condense; from hpcwedge.models import plug3d; "
+            "K, N = condense(plug3d(levels=2, ring=3)); "
+            "print(json.dumps([os.environ.get('OMPI_MCA_pml'), float(abs(K).sum())]))")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    pml, size = json.loads(out.stdout.strip().splitlines()[-1])
+    assert pml == expected
+    K, _ = condense(plug3d(levels=2, ring=3))
+    assert size == pytest.approx(float(abs(K).sum()), rel=1e-12)
