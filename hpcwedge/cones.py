@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import networkx as nx
 import numpy as np
 
 from .nodesets import bits_to_nodes, masks_to_bits, pack_rows
@@ -53,6 +52,7 @@ def maximal_cones(gap: np.ndarray, load: np.ndarray, wedged: np.ndarray) -> list
     classes = sig[first]
     cg, cl = classes[:, :m], classes[:, m:]
     adj = cross_complementary(cg, cl, cg, cl)
+    import networkx as nx                  # here: ~0.1 s of import that a 3D run never needs
     G = nx.Graph()
     G.add_nodes_from(range(len(classes)))
     ii, jj = np.nonzero(np.triu(adj, 1))
