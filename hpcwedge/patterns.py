@@ -229,8 +229,8 @@ class PatternTree:
                     stack.clear()
                     break
                 continue
-            ux, rx = (None, None) if x is None else (param.U @ x, param.R @ x)
-            i = self._branch_node(node, ux, rx)
+            pt = None if x is None else RelaxedPoint.of(param, x)
+            i = self._branch_node(node, pt)
             orbit = [i] if self.symmetry is None else \
                 self.symmetry.stabilizer(node.contact, node.gap).orbit(i).tolist()
             kids = []
@@ -244,7 +244,7 @@ class PatternTree:
                 contacts = [i] if contact else []
                 gaps = list(bits_to_nodes(kg & ~node.gap, m))
                 kid = Subtree(node.depth + len(contacts) + len(gaps), kc, kg)
-                kids.append((kid, None if x is None else self._witness(kid, x, ux, rx, contacts, gaps, mu)))
+                kids.append((kid, None if pt is None else self._witness(kid, pt, contacts, gaps, mu)))
             stack.extend(reversed(kids))
         stats.lps = stats.statuses.get("lp_calls", 0)
         rest = stack[::-1]
@@ -261,19 +261,18 @@ class PatternTree:
         fixed = node.contact | node.gap
         return next(i for i in self.order if not fixed >> i & 1)
 
-    def _branch_node(self, node: Subtree, ux: np.ndarray | None, rx: np.ndarray | None) -> int:
+    def _branch_node(self, node: Subtree, pt: RelaxedPoint | None) -> int:
         """The free node to branch on. Static: the next one in `order`. Dynamic (3D):
-        the free node whose relaxed solution x (ux = U x, rx = R x) violates
-        complementarity most, min(u_n,i / max|u_n|, |r_i| / max|r|), ties and x = None
-        (undecided solve) by `order`: a function of (node, x), so the tree is
-        deterministic."""
-        if not self.dynamic or ux is None:
+        the free node whose relaxed solution pt violates complementarity most,
+        min(u_n,i / max|u_n|, |r_i| / max|r|), ties and pt = None (undecided solve) by
+        `order`: a function of (node, x), so the tree is deterministic."""
+        if not self.dynamic or pt is None:
             return self._static_next(node)
         m = self.m
         fixed = node.contact | node.gap
         free = [i for i in self.order if not fixed >> i & 1]
-        u = ux[:m]
-        r = np.linalg.norm(rx[:3 * m].reshape(3, m), axis=0)
+        u = pt.ux[:m]
+        r = np.linalg.norm(pt.rx[:3 * m].reshape(3, m), axis=0)
         v = np.minimum(np.maximum(u, 0) / max(np.abs(u).max(), 1e-300), r / max(r.max(), 1e-300))
         return max(free, key=lambda i: v[i])          # first maximum in `order`
 
@@ -289,15 +288,15 @@ class PatternTree:
         reach = int(np.bitwise_or.reduce(self.symmetry.stabilizer(contact, 0).images(gap)))
         return reach & ~(contact | gap)
 
-    def _witness(self, kid: Subtree, x: np.ndarray, ux: np.ndarray, rx: np.ndarray,
-                 contacts: list[int], gaps: list[int], mu: float) -> np.ndarray | None:
-        """x (ux = U x, rx = R x), or a point derived from it, that proves `kid` (whose
+    def _witness(self, kid: Subtree, pt: RelaxedPoint, contacts: list[int], gaps: list[int],
+                 mu: float) -> np.ndarray | None:
+        """The parent's point pt.x, or a point derived from it, that proves `kid` (whose
         newly fixed nodes are `contacts` and `gaps`) feasible; None if it does not."""
-        param, m = self.param, self.m
+        param, m, x = self.param, self.m, pt.x
         new = [(i, True) for i in contacts] + [(i, False) for i in gaps]
         if self.dim == 2:
-            return x if all(_meets(ux, rx, m, i, c) for i, c in new) else None
-        if not all(_meets(ux, rx, m, i, c, NEAR_TOL, dim=3) for i, c in new):
+            return x if all(pt.meets(m, i, c) for i, c in new) else None
+        if not all(pt.meets(m, i, c, NEAR_TOL, dim=3) for i, c in new):
             return None
         zu, zr = kid.masks(m)
         rows = pattern_rows(param, m, zu, zr, self.friction)
@@ -335,14 +334,27 @@ def sign_patterns(param: Parametrization, m: int, mu: float, friction: bool = Tr
     return [node.masks(m) for node in found]
 
 
-def _meets(ux: np.ndarray, rx: np.ndarray, m: int, i: int, contact: bool,
-           tol: float = MEETS_TOL, dim: int = 2) -> bool:
-    """Node i's contact (u_n,i = 0) or gap (r_i = 0) condition holds at the point x with
-    ux = U x, rx = R x, to tol relative to max(|U x|, |R x|)."""
-    scale = max(np.abs(ux).max(), np.abs(rx).max(), 1e-300)
-    if contact:
-        return abs(ux[i]) <= tol * scale
-    return max(abs(rx[k * m + i]) for k in range(dim)) <= tol * scale
+@dataclass(frozen=True)
+class RelaxedPoint:
+    """A tree node's relaxed point x with ux = U x, rx = R x and scale = max(|U x|, |R x|),
+    formed once for the branching rule and both children's witness tests."""
+
+    x: np.ndarray
+    ux: np.ndarray
+    rx: np.ndarray
+    scale: float
+
+    @classmethod
+    def of(cls, param: Parametrization, x: np.ndarray) -> "RelaxedPoint":
+        ux, rx = param.U @ x, param.R @ x
+        return cls(x, ux, rx, max(np.abs(ux).max(), np.abs(rx).max(), 1e-300))
+
+    def meets(self, m: int, i: int, contact: bool, tol: float = MEETS_TOL, dim: int = 2) -> bool:
+        """Node i's contact (u_n,i = 0) or gap (r_i = 0) condition holds here, to tol
+        relative to `scale`."""
+        if contact:
+            return abs(self.ux[i]) <= tol * self.scale
+        return max(abs(self.rx[k * m + i]) for k in range(dim)) <= tol * self.scale
 
 
 # ---------------------------------------------------------------- the "subtree" task of the engine
