@@ -113,7 +113,11 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         return Tw, nt, t, G
 
     def residual(w, mu, lam, gam, eta):
-        Tw, nt, t, G = parts(w, mu)
+        """F at the point, or None where a cone's ||T_i w|| vanishes (F is not smooth there)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            Tw, nt, t, G = parts(w, mu)
+        if np.any(nt <= 0):
+            return None
         F1 = G.T @ lam + E.T @ gam + eta * nrm
         F2 = 1.0 - lam @ (aS @ w)
         F3 = nt - mu * (aS @ w)
@@ -173,10 +177,9 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         for step, ratio in _trial_steps(J, F, f0):
             w1, mu1 = w + step[iw], mu + step[imu]
             lam1, gam1, eta1 = lam + step[il], gam + step[ig], eta + step[ie]
-            if np.all(np.linalg.norm(np.einsum("ckp,p->ck", TS, w1), axis=1) > 0):
-                F_new = residual(w1, mu1, lam1, gam1, eta1)
-                if np.linalg.norm(F_new) < ratio * f0:
-                    break
+            F_new = residual(w1, mu1, lam1, gam1, eta1)
+            if F_new is not None and np.linalg.norm(F_new) < ratio * f0:
+                break
         else:
             break
         w, mu, lam, gam, eta = w1, mu1, lam1, gam1, eta1
