@@ -241,7 +241,8 @@ def _faces_done(ckpt: str, since: float):
 
 def _interrupt_mid_dd(tmp_path, how, attempts: int = 6):
     """Run the DD scene under mpirun -n 3 until a checkpoint holds some but not all
-    faces, then how(proc, pids). A run whose DD ends first is started again.
+    faces, then how(proc, pids). A run whose DD ends first, or whose faces in flight all
+    finish before the stop is read (its last checkpoint holds every face), is started again.
     Returns (scene, out, faces done in that checkpoint, exit status)."""
     scene = _dd_scene(tmp_path)
     out = str(tmp_path / "r.h5")
@@ -266,6 +267,12 @@ def _interrupt_mid_dd(tmp_path, how, attempts: int = 6):
             p.stderr.close()
             assert all_gone(pids.values()), "ranks left behind"
             if code != 0:
+                final = _faces_done(ckpt, since)
+                if final is not None and final[0] == final[1]:
+                    # the faces in flight finished before the master read the stop: the
+                    # checkpoint holds them all, nothing is left to resume; start again
+                    print(f"attempt {attempt + 1}: every face done by the stop")
+                    continue
                 print(f"interrupted in attempt {attempt + 1}, {state[0]} of {state[1]} faces done")
                 return scene, out, state[0], code
         assert p.wait(timeout=120) == 0, p.stderr.read()
