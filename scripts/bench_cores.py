@@ -10,8 +10,10 @@ enumeration tree walked node by node through the product's own PatternTree.explo
 Every tree node that the SOCP proves infeasible is then shrunk to a minimal infeasible
 subset of its fixings by a deletion filter (drop one fixed node; keep it dropped when the
 rest is still infeasible; feasibility.decide on rows.pattern_rows, the tree's own test).
-Reported per scene: tree nodes, SOCPs, feasible patterns; infeasible nodes and their
-depths; minimal cores' sizes and how many are distinct; the infeasible nodes that an
+Reported per scene: tree nodes, SOCPs, feasible patterns; the nodes with a feasible
+relaxation, split into live ones (a pattern found below them) and dead ones (none), by
+depth: the live nodes are what a tree that never solved a node without a pattern below
+would solve; infeasible nodes and their depths; minimal cores' sizes and how many are distinct; the infeasible nodes that an
 earlier node's minimal core covers (the most that learning minimal cores, at any price,
 could prune in this tree order); the deletion filter's SOCPs; and what the tree's own core
 learning (PatternTree(learn_cores=True): the part of the interior-point certificate that is
@@ -25,6 +27,7 @@ import json
 import os
 import sys
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,23 +36,47 @@ sys.path.insert(0, HERE)
 from bench_search_3d import scene  # noqa: E402
 
 
-def tree_nodes(param, m: int, mu: float):
-    """The enumeration tree's nodes in depth-first order: (masks of each infeasible node,
-    tree nodes, SOCPs, feasible patterns)."""
+class Walk(NamedTuple):
+    """The enumeration tree walked node by node: the masks (zu, zr) of its infeasible nodes
+    and of its nodes with a feasible relaxation, in depth-first order; its node and SOCP
+    counts; the masks of the feasible patterns found."""
+
+    infeasible: list
+    feasible: list
+    nodes: int
+    solves: int
+    patterns: list
+
+
+def tree_nodes(param, m: int, mu: float) -> Walk:
+    """The enumeration tree's nodes in depth-first order (Walk)."""
     from hpcwedge.patterns import PatternTree
     tree = PatternTree(param, m, mu)
-    stack, infeasible = [(tree.root(), None)], []
-    nodes = solves = found = 0
+    stack, infeasible, feasible, patterns = [(tree.root(), None)], [], [], []
+    nodes = solves = 0
     while stack:
         node, x = stack.pop()
         ex = tree.explore(node, budget=1, x=x)
         nodes += ex.stats.nodes
         solves += ex.stats.solves
-        found += len(ex.found)
+        patterns += [f.masks(m) for f in ex.found]
         if not ex.found and not ex.open and not ex.stats.undecided:
             infeasible.append(node.masks(m))
+        else:
+            feasible.append(node.masks(m))
         stack.extend(reversed(list(zip(ex.open, ex.open_x))))
-    return infeasible, nodes, solves, found
+    return Walk(infeasible, feasible, nodes, solves, patterns)
+
+
+def live(feasible: list, patterns: list) -> np.ndarray:
+    """Of the nodes `feasible` (masks), those with a pattern of `patterns` below them (its
+    contact set holds the node's, its gap set the node's gap set): boolean, in order."""
+    if not patterns:
+        return np.zeros(len(feasible), bool)
+    PU = np.array([zu for zu, _ in patterns])
+    PR = np.array([zr for _, zr in patterns])
+    return np.array([bool(((PU | ~zu).all(axis=1) & (PR | ~zr).all(axis=1)).any()) for zu, zr in feasible],
+                    dtype=bool)
 
 
 def minimal_core(param, m: int, mu: float, zu: np.ndarray, zr: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
@@ -73,7 +100,9 @@ def study(levels: int, ring: int, mu: float) -> dict:
     prob = contact_problem(scene("enumerate", levels, ring))
     param, m = parametrize(prob), prob.m
     t0 = time.process_time()
-    infeasible, nodes, solves, found = tree_nodes(param, m, mu)
+    walk = tree_nodes(param, m, mu)
+    infeasible, nodes, solves, found = walk.infeasible, walk.nodes, walk.solves, len(walk.patterns)
+    alive = live(walk.feasible, walk.patterns)
     cores, filter_socps = [], 0
     for zu, zr in infeasible:
         cu, cr, k = minimal_core(param, m, mu, zu, zr)
@@ -85,9 +114,15 @@ def study(levels: int, ring: int, mu: float) -> dict:
     own = learnt.explore(learnt.root()).stats
     sizes = [int(cu.sum() + cr.sum()) for cu, cr in cores]
     depths = [int(zu.sum() + zr.sum()) for zu, zr in infeasible]
+    fdepths = np.array([int(zu.sum() + zr.sum()) for zu, zr in walk.feasible], dtype=int)
     return {"scene": f"plug3d {levels}x{ring}", "m": m, "mu": mu, "tree_nodes": nodes, "socps": solves,
             "patterns": found, "infeasible_nodes": len(infeasible),
             "infeasible_depths": np.bincount(depths, minlength=m + 1).tolist(),
+            "feasible_nodes": len(walk.feasible), "live_nodes": int(alive.sum()),
+            "dead_nodes": int((~alive).sum()),
+            "live_depths": np.bincount(fdepths[alive], minlength=m + 1).tolist(),
+            "dead_depths": np.bincount(fdepths[~alive], minlength=m + 1).tolist(),
+            "live_nodes_per_pattern": round(int(alive.sum()) / max(found, 1), 1),
             "minimal_core_sizes": np.bincount(sizes, minlength=m + 1).tolist(),
             "minimal_core_size_median": float(np.median(sizes)) if sizes else None,
             "distinct_minimal_cores": len({(cu.tobytes(), cr.tobytes()) for cu, cr in cores}),
@@ -108,7 +143,9 @@ def main(argv=None) -> int:
         r = study(levels, ring, args.mu)
         rows.append(r)
         print(f"{r['scene']} (m = {r['m']}, mu = {r['mu']}): {r['tree_nodes']} nodes, {r['socps']} SOCPs, "
-              f"{r['patterns']} patterns; {r['infeasible_nodes']} infeasible nodes, minimal cores of "
+              f"{r['patterns']} patterns; {r['feasible_nodes']} nodes with a feasible relaxation, "
+              f"{r['live_nodes']} of them with a pattern below ({r['live_nodes_per_pattern']} per pattern), "
+              f"{r['dead_nodes']} without; {r['infeasible_nodes']} infeasible nodes, minimal cores of "
               f"median size {r['minimal_core_size_median']} ({r['distinct_minimal_cores']} distinct), "
               f"{r['covered_by_earlier_minimal_core']} covered by an earlier one "
               f"(deletion filter: {r['deletion_filter_socps']} SOCPs); learnt cores prune "

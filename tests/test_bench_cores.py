@@ -35,15 +35,35 @@ def test_node_by_node_walk_is_the_one_pass_tree(body):
     param, m = body
     tree = PatternTree(param, m, MU)
     one = tree.explore(tree.root())
-    nodes, count, solves, found = bench_cores.tree_nodes(param, m, MU)
-    assert (count, solves, found) == (one.stats.nodes, one.stats.solves, len(one.found))
-    assert len(nodes) == one.stats.statuses.get("PrimalInfeasible", 0) > 0
-    assert all(infeasible(param, m, zu, zr) for zu, zr in nodes)
+    walk = bench_cores.tree_nodes(param, m, MU)
+    assert (walk.nodes, walk.solves) == (one.stats.nodes, one.stats.solves)
+    assert sorted(p.tobytes() for zu, zr in walk.patterns for p in (zu, zr)) == \
+        sorted(p.tobytes() for f in one.found for p in f.masks(m))
+    assert len(walk.infeasible) == one.stats.statuses.get("PrimalInfeasible", 0) > 0
+    assert len(walk.infeasible) + len(walk.feasible) == one.stats.nodes
+    assert all(infeasible(param, m, zu, zr) for zu, zr in walk.infeasible)
+
+
+def test_live_nodes_are_those_with_a_pattern_below(body):
+    """live() against the brute force: every partition of plug3d 2 x 4 decided by the SOCP;
+    a feasible node is live iff some feasible full pattern completes its fixings."""
+    param, m = body
+    walk = bench_cores.tree_nodes(param, m, MU)
+    full = []
+    for code in range(2 ** m):
+        zr = np.array([not code >> i & 1 for i in range(m)])
+        if not infeasible(param, m, ~zr, zr):
+            full.append((~zr, zr))
+    alive = bench_cores.live(walk.feasible, walk.patterns)
+    for (zu, zr), a in zip(walk.feasible, alive):
+        assert a == any(not (zu & ~pu).any() and not (zr & ~pr).any() for pu, pr in full)
+    assert 0 < alive.sum() < len(alive)
+    assert alive.sum() >= len(walk.patterns)
 
 
 def test_deletion_filter_cores_are_minimal(body):
     param, m = body
-    nodes = bench_cores.tree_nodes(param, m, MU)[0]
+    nodes = bench_cores.tree_nodes(param, m, MU).infeasible
     for zu, zr in nodes[:: max(1, len(nodes) // 6)]:
         cu, cr, socps = bench_cores.minimal_core(param, m, MU, zu, zr)
         assert socps == int((zu | zr).sum())
