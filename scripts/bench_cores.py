@@ -13,7 +13,9 @@ rest is still infeasible; feasibility.decide on rows.pattern_rows, the tree's ow
 Reported per scene: tree nodes, SOCPs, feasible patterns; the nodes with a feasible
 relaxation, split into live ones (a pattern found below them) and dead ones (none), by
 depth: the live nodes are what a tree that never solved a node without a pattern below
-would solve; infeasible nodes and their depths; minimal cores' sizes and how many are distinct; the infeasible nodes that an
+would solve; the roots of the dead subtrees (a node without a pattern below, its parent
+with one): live nodes plus these are what a tree solves that recognises a dead subtree at
+its root at the price of one SOCP; infeasible nodes and their depths; minimal cores' sizes and how many are distinct; the infeasible nodes that an
 earlier node's minimal core covers (the most that learning minimal cores, at any price,
 could prune in this tree order); the deletion filter's SOCPs; and what the tree's own core
 learning (PatternTree(learn_cores=True): the part of the interior-point certificate that is
@@ -79,6 +81,18 @@ def live(feasible: list, patterns: list) -> np.ndarray:
                     dtype=bool)
 
 
+def dead_roots(walk: Walk, alive: np.ndarray) -> int:
+    """The tree nodes without a pattern below whose parent has one (the roots of the maximal
+    dead subtrees). A node's parent is the tree node one fixing shallower whose fixings it
+    holds (two tree nodes of one depth conflict in some fixing, so there is only one)."""
+    lu = np.array([zu for (zu, _), a in zip(walk.feasible, alive) if a])
+    lr = np.array([zr for (_, zr), a in zip(walk.feasible, alive) if a])
+    depth = lu.sum(axis=1) + lr.sum(axis=1)
+    dead = [f for f, a in zip(walk.feasible, alive) if not a] + list(walk.infeasible)
+    return sum(bool(((depth == zu.sum() + zr.sum() - 1) & (~lu | zu).all(axis=1) & (~lr | zr).all(axis=1)).any())
+               for zu, zr in dead)
+
+
 def minimal_core(param, m: int, mu: float, zu: np.ndarray, zr: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """A minimal infeasible subset of the fixings (zu, zr) by a deletion filter, and its SOCPs."""
     from hpcwedge.feasibility import TREE_OPTIONS, decide
@@ -123,6 +137,8 @@ def study(levels: int, ring: int, mu: float) -> dict:
             "live_depths": np.bincount(fdepths[alive], minlength=m + 1).tolist(),
             "dead_depths": np.bincount(fdepths[~alive], minlength=m + 1).tolist(),
             "live_nodes_per_pattern": round(int(alive.sum()) / max(found, 1), 1),
+            "dead_roots": (roots := dead_roots(walk, alive)),
+            "live_and_dead_roots_per_pattern": round((int(alive.sum()) + roots) / max(found, 1), 1),
             "minimal_core_sizes": np.bincount(sizes, minlength=m + 1).tolist(),
             "minimal_core_size_median": float(np.median(sizes)) if sizes else None,
             "distinct_minimal_cores": len({(cu.tobytes(), cr.tobytes()) for cu, cr in cores}),
@@ -145,7 +161,9 @@ def main(argv=None) -> int:
         print(f"{r['scene']} (m = {r['m']}, mu = {r['mu']}): {r['tree_nodes']} nodes, {r['socps']} SOCPs, "
               f"{r['patterns']} patterns; {r['feasible_nodes']} nodes with a feasible relaxation, "
               f"{r['live_nodes']} of them with a pattern below ({r['live_nodes_per_pattern']} per pattern), "
-              f"{r['dead_nodes']} without; {r['infeasible_nodes']} infeasible nodes, minimal cores of "
+              f"{r['dead_nodes']} without; {r['dead_roots']} roots of dead subtrees "
+              f"(live + roots: {r['live_and_dead_roots_per_pattern']} per pattern); "
+              f"{r['infeasible_nodes']} infeasible nodes, minimal cores of "
               f"median size {r['minimal_core_size_median']} ({r['distinct_minimal_cores']} distinct), "
               f"{r['covered_by_earlier_minimal_core']} covered by an earlier one "
               f"(deletion filter: {r['deletion_filter_socps']} SOCPs); learnt cores prune "

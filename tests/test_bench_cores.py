@@ -59,6 +59,10 @@ def test_live_nodes_are_those_with_a_pattern_below(body):
         assert a == any(not (zu & ~pu).any() and not (zr & ~pr).any() for pu, pr in full)
     assert 0 < alive.sum() < len(alive)
     assert alive.sum() >= len(walk.patterns)
+    # a binary tree without symmetry: every live node above the leaves has two children,
+    # the live ones other than the root and the dead roots
+    inner = sum(1 for (zu, zr), a in zip(walk.feasible, alive) if a and (zu | zr).sum() < m)
+    assert bench_cores.dead_roots(walk, alive) == 2 * inner - (alive.sum() - 1) > 0
 
 
 def test_deletion_filter_cores_are_minimal(body):
