@@ -36,6 +36,7 @@ import json
 import os
 import sys
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -49,103 +50,104 @@ BIG = float(np.finfo(float).max)
 
 class PyramidLP:
     """The LP of a node's problem at mu with every friction cone replaced by a k-facet
-    pyramid (inner: inscribed, outer: circumscribed), in the reaction coordinates
-    x' = (r, beta) of problem.ReactionCoordinates: E r = 0; u_n = U_n x' >= 0 (= 0 at a
-    contact node); r_n >= 0 (column bounds; a gap node's three reactions fixed to 0);
-    every facet (mu c) r_n - cos(t) r_t1 - sin(t) r_t2 >= 0, c = cos(pi / k) inside, 1
-    outside; sum r_n = 1. Rows unit-scaled. `run(zu, zr)`: (status "optimal" /
-    "infeasible" / other, x-space point or None)."""
+    pyramid (rows.pyramid_rows: inner inscribed, outer circumscribed), in the reaction
+    coordinates x' = (r, beta) of problem.ReactionCoordinates, one model for every node:
+    E r = 0; u_n = U_n x' >= 0 (= 0 at a contact node); the facets; sum r_n = 1; r_n >= 0
+    as column bounds (a gap node's three reactions fixed to 0). Rows unit-scaled.
+    `run(zu, zr)`: (status "optimal" / "infeasible" / "other", x-space point or None)."""
 
     def __init__(self, param, m: int, mu: float, facets: int, inner: bool, engine: str):
+        from hpcwedge.rows import pyramid_rows
         form = param.reactions
-        self.form, self.m, self.engine = form, m, engine
+        self.form, self.m = form, m
         n, nb, k = form.E.shape[1], form.U.shape[1] - form.E.shape[1], form.E.shape[0]
         self.n, self.k, nc = n, k, n + nb
-        t = 2 * np.pi * np.arange(facets) / facets
-        c = np.cos(np.pi / facets) if inner else 1.0
-        P = np.zeros((facets * m, nc))
-        for i in range(m):
-            P[i * facets:(i + 1) * facets, i] = mu * c
-            P[i * facets:(i + 1) * facets, i + m] = -np.cos(t)
-            P[i * facets:(i + 1) * facets, i + 2 * m] = -np.sin(t)
+        # the pattern rows of no fixing, in x': what pyramid_rows reads of a rows.ConeRows
+        # (eq, lin, the cones' rn and rt, norm); every cone a coordinate cone
+        cols = np.eye(nc)[:n].reshape(3, m, nc)
         Un = form.U[:m]
-        total = np.zeros((1, nc))
-        total[0, :m] = 1.0
-        A = np.vstack([np.hstack([form.E, np.zeros((k, nb))]),
-                       Un / np.linalg.norm(Un, axis=1, keepdims=True),
-                       P / np.linalg.norm(P, axis=1, keepdims=True), total])
-        self.row_lo = np.concatenate([np.zeros(k + m + facets * m), [1.0]])
-        self.row_hi = np.concatenate([np.zeros(k), np.full(m + facets * m, BIG), [1.0]])
+        free = SimpleNamespace(eq=np.hstack([form.E, np.zeros((k, nb))]),
+                               lin=Un / np.linalg.norm(Un, axis=1, keepdims=True),
+                               rn=cols[0], rt=cols[1:].transpose(1, 0, 2), norm=cols[0].sum(axis=0))
+        pyramid = pyramid_rows(free, facets, inner, phase=np.zeros(m))   # a facet normal on t1
+        A = pyramid.a0 + mu * pyramid.a1
+        A[k + m:] /= np.linalg.norm(A[k + m:], axis=1, keepdims=True)   # the facets; the rest are unit
+        A = np.vstack([A, free.norm])
+        rows = A.shape[0] - 1                         # [eq (k) | u_n (m) | facets] and sum r_n
+        self.row_lo = np.concatenate([np.zeros(rows), [1.0]])
+        self.row_hi = np.concatenate([np.zeros(k), np.full(rows - k, BIG), [1.0]])
         self.col_lo = np.concatenate([np.zeros(m), np.full(nc - m, -BIG)])
         self.col_hi = np.full(nc, BIG)
         self.seconds, self.calls, self.iterations = 0.0, 0, 0
-        getattr(self, "_load_" + engine)(A)
+        self._solve = getattr(self, "_load_" + engine)(A)
 
     def _load_clp(self, A):
+        """CLP's model of A; returns its solve(g, zu) -> (status, x' or None)."""
         import scipy.sparse as sp
         from cylp.cy import CyClpSimplex
         from cylp.cy.CyCoinPackedMatrix import CyCoinPackedMatrix
         C = sp.csc_matrix(A).tocoo()       # CoinPackedMatrix(colOrdered) wants column order
         M = CyCoinPackedMatrix(True, C.row.astype(np.int32), C.col.astype(np.int32), C.data.astype(float))
-        s = self.lp = CyClpSimplex()
+        s = CyClpSimplex()
         s.loadProblem(M, self.col_lo, self.col_hi, np.zeros(A.shape[1]), self.row_lo, self.row_hi)
         s.logLevel = 0
         s.dual()
         # views of CLP's own bound arrays, written in place (cylp's array setters hand CLP
         # the numpy buffer itself, which CLP then frees: a double free at exit)
-        self._cl, self._cu, self._ru = s.variablesLower, s.variablesUpper, s.constraintsUpper
+        cl, cu, ru = s.variablesLower, s.variablesUpper, s.constraintsUpper
+        m, k, lo = self.m, self.k, self.col_lo[:3 * self.m]
+        statuses = {0: "optimal", 1: "infeasible"}
+
+        def solve(g, zu):
+            cl[:3 * m] = np.where(g, 0.0, lo)
+            cu[:3 * m] = np.where(g, 0.0, BIG)
+            ru[k:k + m] = np.where(zu, 0.0, BIG)
+            s.dual(startFinishOptions="x")
+            self.iterations += s.iteration
+            status = statuses.get(s.getStatusCode(), "other")
+            return status, np.array(s.primalVariableSolution) if status == "optimal" else None
+        return solve
 
     def _load_highs(self, A):
+        """HiGHS's model of A; returns its solve(g, zu) -> (status, x' or None)."""
         import highspy
         import scipy.sparse as sp
-        h = self.lp = highspy.Highs()
+        h = highspy.Highs()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("presolve", "off")
         h.setOptionValue("solver", "simplex")
-        lo, hi = (_highs_inf(v) for v in (self.col_lo, self.col_hi))
-        h.addVars(A.shape[1], lo, hi)
+        inf = highspy.kHighsInf
+        h.addVars(A.shape[1], _highs_inf(self.col_lo, inf), _highs_inf(self.col_hi, inf))
         R = sp.csr_matrix(A)
-        rlo, rhi = (_highs_inf(v) for v in (self.row_lo, self.row_hi))
-        h.addRows(A.shape[0], rlo, rhi, R.nnz, R.indptr[:-1].astype(np.int32), R.indices.astype(np.int32), R.data)
-        self._inf = highspy.kHighsInf
-        self._cols = np.arange(3 * self.m, dtype=np.int32)
-        self._urows = np.arange(self.k, self.k + self.m, dtype=np.int32)
+        h.addRows(A.shape[0], _highs_inf(self.row_lo, inf), _highs_inf(self.row_hi, inf), R.nnz,
+                  R.indptr[:-1].astype(np.int32), R.indices.astype(np.int32), R.data)
+        m, k = self.m, self.k
+        cols, urows = np.arange(3 * m, dtype=np.int32), np.arange(k, k + m, dtype=np.int32)
+        lo, zeros = _highs_inf(self.col_lo[:3 * m], inf), np.zeros(m)
+        statuses = {highspy.HighsModelStatus.kOptimal: "optimal",
+                    highspy.HighsModelStatus.kInfeasible: "infeasible"}
+
+        def solve(g, zu):
+            h.changeColsBounds(3 * m, cols, np.where(g, 0.0, lo), np.where(g, 0.0, inf))
+            h.changeRowsBounds(m, urows, zeros, np.where(zu, 0.0, inf))
+            h.run()
+            self.iterations += h.getInfo().simplex_iteration_count
+            status = statuses.get(h.getModelStatus(), "other")
+            return status, np.array(h.getSolution().col_value) if status == "optimal" else None
+        return solve
 
     def run(self, zu: np.ndarray, zr: np.ndarray) -> tuple[str, np.ndarray | None]:
         t0 = time.process_time()
-        m, n = self.m, self.n
-        g = np.concatenate([zr, zr, zr])
-        if self.engine == "clp":
-            s = self.lp
-            self._cl[:3 * m] = np.where(g, 0.0, self.col_lo[:3 * m])
-            self._cu[:3 * m] = np.where(g, 0.0, BIG)
-            self._ru[self.k:self.k + m] = np.where(zu, 0.0, BIG)
-            s.dual(startFinishOptions="x")
-            self.iterations += s.iteration
-            status = {0: "optimal", 1: "infeasible"}.get(s.getStatusCode(), "other")
-            xp = np.array(s.primalVariableSolution) if status == "optimal" else None
-        else:
-            import highspy
-            h = self.lp
-            h.changeColsBounds(3 * m, self._cols, np.where(g, 0.0, np.maximum(self.col_lo[:3 * m], -self._inf)),
-                               np.where(g, 0.0, self._inf))
-            h.changeRowsBounds(m, self._urows, np.zeros(m), np.where(zu, 0.0, self._inf))
-            h.run()
-            self.iterations += h.getInfo().simplex_iteration_count
-            ms = h.getModelStatus()
-            status = ("optimal" if ms == highspy.HighsModelStatus.kOptimal else
-                      "infeasible" if ms == highspy.HighsModelStatus.kInfeasible else "other")
-            xp = np.array(h.getSolution().col_value) if status == "optimal" else None
-        x = None if xp is None else self.form.to_x(xp[:n], xp[n:])
+        status, xp = self._solve(np.concatenate([zr, zr, zr]), zu)
+        x = None if xp is None else self.form.to_x(xp[:self.n], xp[self.n:])
         self.seconds += time.process_time() - t0
         self.calls += 1
         return status, x
 
 
-def _highs_inf(v: np.ndarray) -> np.ndarray:
-    """v with the bounds at +-BIG as HiGHS's infinities."""
-    import highspy
-    return np.where(v >= BIG, highspy.kHighsInf, np.where(v <= -BIG, -highspy.kHighsInf, v))
+def _highs_inf(v: np.ndarray, inf: float) -> np.ndarray:
+    """v with the bounds at +-BIG as HiGHS's infinity inf."""
+    return np.where(v >= BIG, inf, np.where(v <= -BIG, -inf, v))
 
 
 def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: int) -> dict:
