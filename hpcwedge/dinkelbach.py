@@ -20,13 +20,14 @@ import math
 
 import numpy as np
 
+from .conic import ConicProblem
 from .feasibility import pyramid_sides_for
 from .kkt import APEX_RTOL, kkt_polish
 from .mu_bracket import BRACKET_RTOL, Probe, bisect
 from .parallel import task_tick
 from .problem import Parametrization
 from .rows import ConeRows, Status, count, pattern_rows
-from .socp import ConicProblem, attempts, pattern_socp
+from .socp import attempts, pattern_socp
 
 #: Dinkelbach stops when a step lowers mu by less than this (relative)
 DINKELBACH_RTOL = 1e-7

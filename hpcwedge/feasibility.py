@@ -40,7 +40,7 @@ class SolverOptions:
     """tolerances: "default", or "tight" (Clarabel's feasibility and gap tolerances 1e-10
     on every attempt; the LPs always run at LP_OPTIONS' 1e-10) — for benchmarks of run
     time against error. long_steps: Clarabel's first attempt takes long interior-point
-    steps (socp.settings), for problems away from their mu^c (TREE_OPTIONS)."""
+    steps (conic.settings), for problems away from their mu^c (TREE_OPTIONS)."""
 
     tolerances: str = "default"
     long_steps: bool = False

@@ -7,16 +7,17 @@ when the point satisfies every row of the pattern to POLISH3_TOL and the multipl
 have the right signs (λ >= 0 on the cones, >= 0 on the u_n rows, apex multipliers in
 the dual cone): then it is a certificate that no point exists below mu* (convexity at
 fixed mu), and mu* is exact to rounding. Where the active rows are dependent, signed
-multipliers are sought by a small conic problem (socp.py).
+multipliers are sought by a small conic problem (conic.py).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from .conic import ConicProblem, solve
 from .feasibility import DEFAULT_OPTIONS, SolverOptions
 from .parallel import task_tick
 from .rows import ConeRows
-from .socp import ConicProblem, solve, violation
+from .socp import violation
 
 #: the polished point must satisfy every row to this (relative to ||x||)
 POLISH3_TOL = 1e-12

@@ -1,12 +1,12 @@
-"""The Clarabel adapter (socp.py): the ladder of attempts, the settings as values, the
+"""The pattern SOCP for Clarabel (socp.py): the ladder of attempts, the two forms, the
 Farkas check of what Clarabel returns."""
 import numpy as np
 
 from hpcwedge.feasibility import decide
 from hpcwedge.problem import parametrize
 from hpcwedge.rows import Status, pattern_rows
-from hpcwedge.socp import (ATTEMPTS, LEAST_NORM_ATTEMPT, LONG_STEP, attempts, certificate_ok, pattern_attempts,
-                           pattern_socp, settings)
+from hpcwedge.conic import ATTEMPTS, LEAST_NORM_ATTEMPT
+from hpcwedge.socp import attempts, certificate_ok, pattern_attempts, pattern_socp
 from instances import plug3d_param, random_problem_3d
 
 
@@ -24,17 +24,6 @@ def test_ladder_skips_the_least_norm_attempt_of_a_problem_with_its_own_objective
     assert [k for k, _ in attempts(own, False)] == [k for k in range(ATTEMPTS) if k != LEAST_NORM_ATTEMPT]
     sols = [s for _, s in attempts(plain, False, steered=own)]
     assert len(sols) == ATTEMPTS and all(s.status for s in sols)
-
-
-def test_settings_are_values():
-    assert settings(0, True).tol_feas == 1e-10 and settings(0, False).tol_feas != 1e-10
-    assert settings(2, False).static_regularization_constant == 1e-7
-    assert not settings(0, False).equilibrate_enable and settings(3, False).equilibrate_enable
-    assert settings(1, True) is settings(1, True)               # cached: one object per (attempt, tight)
-    # long steps: only on a feasibility problem's first attempt, and only when asked for
-    assert settings(0, False, True, long_steps=True).max_step_fraction == LONG_STEP > 0.99
-    assert settings(0, False, True).max_step_fraction == settings(0, False).max_step_fraction == 0.99
-    assert settings(1, False, True, long_steps=True).max_step_fraction == 0.99
 
 
 def test_farkas_certificates_are_checked():
@@ -79,7 +68,8 @@ def test_reaction_form_agrees_with_the_null_space_form():
     partial pattern of plug3d 2 x 4 at two mu alike; a reaction point is verified in
     x-space and a reaction certificate, carried into pattern_socp's layout, passes the
     Farkas check there."""
-    from hpcwedge.socp import reaction_socp, solve, violation, VERIFY_TOL
+    from hpcwedge.conic import solve
+    from hpcwedge.socp import reaction_socp, violation, VERIFY_TOL
     p, m = plug3d_param(2, 4)
     rng = np.random.default_rng(5)
     kinds = {"Solved": 0, "PrimalInfeasible": 0}
@@ -104,35 +94,3 @@ def test_reaction_form_agrees_with_the_null_space_form():
                 z = first.farkas(sol.z)
                 assert z is not None and certificate_ok(plain.A, plain.b, z, 1, plain.n_lin)
     assert min(kinds.values()) >= 10
-
-
-def test_reaction_matrix_is_stored_as_clarabel_reads_it():
-    """reaction_socp's DenseDiag: its dense form has the sum-r_n row on the r_n columns and
-    (-mu, -1, -1) below the reactions; A^T z agrees with the dense product; the CSC handed
-    to Clarabel, rebuilt by scipy, is the same matrix entry for entry (sorted indices, no
-    duplicates), as is a dense matrix's."""
-    import scipy.sparse as sp
-    from hpcwedge.socp import DenseDiag, _clarabel_csc, reaction_socp
-    p, m = plug3d_param(2, 4)
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        state = rng.integers(0, 3, m)
-        zu, zr = state == 1, state == 2
-        if not (~zr).any():
-            continue
-        mu = rng.uniform(0.2, 1.0)
-        rows = pattern_rows(p, m, zu, zr)
-        A = reaction_socp(rows, mu).problem.A
-        assert isinstance(A, DenseDiag)
-        dense = A.toarray()
-        c = len(rows.nodes)
-        assert np.array_equal(dense[0, :3 * c], np.tile([1.0, 0.0, 0.0], c)) and not dense[0, 3 * c:].any()
-        assert np.array_equal(dense[A.k:, :3 * c], np.diag(np.tile([-mu, -1.0, -1.0], c)))
-        assert not dense[A.k:, 3 * c:].any()
-        z = rng.standard_normal(A.shape[0])
-        assert np.allclose(A.rmatvec(z), dense.T @ z, rtol=0, atol=1e-13)
-        for M, ref in ((A, dense), (dense, dense)):
-            h = _clarabel_csc(M)
-            assert h.has_canonical_format and h.nnz == len(h.data) and h.shape == ref.shape
-            back = sp.csc_matrix((h.data, h.indices, h.indptr), shape=h.shape)
-            assert back.has_canonical_format and np.array_equal(back.toarray(), ref)

@@ -1,0 +1,307 @@
+"""One Clarabel solve of a conic problem: its form (`ConicProblem`), the settings of each
+attempt of the ladder (`settings`, values), the matrix as Clarabel's binding reads it
+(`DenseDiag`, `_clarabel_csc`), and the solve itself (`solve`), on a kept solver of the
+problem's structure when there is one (`_KeptSolvers`). socp.py builds the pattern SOCPs
+and reads the answers.
+
+Every conic problem here has the form  min 1/2 w'Pw + q.w  s.t.  A w + s = b,  s in K,
+with K = [zero cone (n_zero) | nonnegative (n_lin) | second-order cones of size 3 (n_soc)].
+
+The ladder (socp.attempts): attempt k uses `settings(k, tight)`. 0: plain; 1: the least-norm
+feasible point (P = I; when the plain solve returned a point that does not verify: the
+iterates can run off along rigid lift-offs, measured up to ||x|| ~ 1e17; P = I is not the
+default because it weakens the infeasibility certificates: 732 of 2,126 failed the Farkas
+check on plug3d + 30 random free bodies, none with P = 0); 2: static regularisation 1e-7;
+3: Clarabel's defaults (equilibration on).
+
+A feasibility problem (no objective) starts with static regularisation 1e-7 and no iterative
+refinement: with Clarabel's 1e-8 the first attempt stopped at NumericalError after one
+zero-length step on 37 % of plug3d 3 x 6's SOCPs (62 % at 4 x 6), every one of which 1e-7
+decides; refinement adds nothing to a problem without an objective and cost a third of the
+solve time (scripts/bench_socp_count.py; issue 13's measurements in docs/benchmarks.md). Its
+tolerances are 1e-10: a point Clarabel calls solved must pass socp.VERIFY_TOL, which at the
+default 1e-8 the points of problems within ~1e-7 of their mu^c did not (the 3D global mu^c
+on plug3d 3 x 6 without symmetry: 161 of 738 tree SOCPs, each retried down the ladder; none
+at 1e-10, and the enumeration's 6,791 SOCPs cost the same).
+
+Long steps (`settings(long_steps=True)`, for the caller to choose): the first attempt of a
+feasibility problem steps 0.999 of the way to the cone's boundary instead of Clarabel's
+0.99. On 1,500 tree SOCPs of plug3d 3 x 6 (mu = 0.65) that takes 7.05 iterations on a
+feasible problem against 8.10, and 7.97 on an infeasible one against 9.61, every answer
+verified either way; the enumeration at a given mu uses them. Near a mu^c the feasible
+set thins out and long steps fail more: the global mu^c tree on plug3d 4 x 6 left 1 node
+undecided with them and 2 at 0.9999 (3 x 8: 0 and 2), none with 0.99, so the mu^c searches
+keep Clarabel's steps.
+"""
+from __future__ import annotations
+
+import functools
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+#: the attempts of the ladder (module doc), and the one that seeks the least-norm point
+ATTEMPTS = 4
+LEAST_NORM_ATTEMPT = 1
+#: max_step_fraction of a long-step first attempt (Clarabel's default: 0.99; module doc)
+LONG_STEP = 0.999
+
+
+@functools.lru_cache(maxsize=32)
+def settings(attempt: int, tight: bool = False, feasibility: bool = False, long_steps: bool = False):
+    """Clarabel settings of attempt 0..ATTEMPTS-1 (module doc). tight: feasibility and gap
+    tolerances 1e-10 (an optimisation: the branch and bound's steered solves; or every solve
+    when the caller's options ask for it). feasibility: the problem has no objective (its
+    first attempt is regularised, module doc). The rows are unit-scaled already, and Ruiz
+    equilibration on top of that measured worse: on plug3d (m = 10, all 1,024 partitions,
+    mu = 0.55 / 0.65 / 1.0) 7 % non-definitive statuses with it, none without. long_steps
+    (attempt 0 of a feasibility problem): each interior-point step goes LONG_STEP of the
+    way to the cone's boundary (module doc). Shared (cached): do not modify the object
+    returned."""
+    import clarabel
+    s = clarabel.DefaultSettings()
+    s.verbose = False
+    # no b here is infinite, so presolve would remove no row; off, a kept solver takes data
+    # updates (_KeptSolvers)
+    s.presolve_enable = False
+    if attempt < 3:
+        s.equilibrate_enable = False
+    if attempt == 0 and feasibility:
+        # P = 0, q = 0: the KKT (1,1) block is the static regularisation alone (module doc)
+        s.static_regularization_constant = 1e-7
+        s.iterative_refinement_enable = tight
+        if long_steps:
+            s.max_step_fraction = LONG_STEP
+        s.tol_feas = s.tol_gap_abs = s.tol_gap_rel = 1e-10
+    if attempt == 2:
+        s.static_regularization_constant = 1e-7
+        s.max_iter = 400
+    if tight:
+        # an optimum (the branch and bound's steered solves) lies on the boundary,
+        # where the default 1e-8 tolerances left cone rows 1e-8..4e-8 short of
+        # VERIFY_TOL relative to the reactions (66 of 945 solves on plug3d, mu = 1)
+        s.tol_feas = s.tol_gap_abs = s.tol_gap_rel = 1e-10
+    return s
+
+
+@dataclass(frozen=True)
+class ConicProblem:
+    """min 1/2 w'Pw + q.w s.t. A w + s = b, s in [zero (n_zero) | nonnegative (n_lin) |
+    n_soc second-order cones of size 3]. q None: a feasibility problem (q = 0; P = I on
+    the least-norm attempt, else P = 0)."""
+
+    A: np.ndarray
+    b: np.ndarray
+    n_zero: int
+    n_lin: int
+    n_soc: int
+    q: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Solution:
+    """What Clarabel returned: its status name ("Solved", "PrimalInfeasible", ...), the
+    primal point w and the dual z."""
+
+    status: str
+    x: np.ndarray
+    z: np.ndarray
+
+
+def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = False) -> Solution:
+    """One Clarabel solve of `problem` with the settings of `attempt` (long_steps: see
+    `settings`): on a kept solver of the same structure when there is one (`_KeptSolvers`),
+    else on a new one."""
+    import clarabel
+    n = problem.A.shape[1]
+    identity = problem.q is None and attempt == LEAST_NORM_ATTEMPT
+    q = np.zeros(n) if problem.q is None else problem.q
+    opts = settings(attempt, tight, feasibility=problem.q is None, long_steps=long_steps)
+    A = _clarabel_csc(problem.A)
+    key = _KEPT.key(problem, identity, opts)
+    solver = _KEPT.take(key)
+    if solver is not None:
+        solver.update(A=A.data, b=problem.b.tolist(), q=q.tolist())
+        sol = solver.solve()
+        if str(sol.status) not in _SETTLED:
+            # a solve that fails on its first step restores Clarabel's "previous iterate",
+            # which on a kept solver is the last problem's: again on a new solver
+            solver = None
+    if solver is None:
+        cones = [clarabel.ZeroConeT(problem.n_zero)]
+        if problem.n_lin:
+            cones.append(clarabel.NonnegativeConeT(problem.n_lin))
+        cones += [clarabel.SecondOrderConeT(3) for _ in range(problem.n_soc)]
+        solver = clarabel.DefaultSolver(_csc_square(n, identity), q, A, problem.b, cones, opts)
+        sol = solver.solve()
+    status = str(sol.status)
+    if status in _SETTLED:
+        _KEPT.keep(key, solver, len(A.data))
+    return Solution(status, np.asarray(sol.x), np.asarray(sol.z))
+
+
+#: the statuses a solve on a kept solver ends with as on a new one (_KeptSolvers)
+_SETTLED = ("Solved", "PrimalInfeasible")
+
+
+class _KeptSolvers(threading.local):
+    """Clarabel solvers kept after a solve, by the structure of their problem (cones, A's
+    sparsity pattern, P, settings), the least recently used dropped beyond `size` solvers or
+    `entries` stored entries of A in all. A problem of a kept structure is solved by a data
+    update of A, b and q instead of a new solver, without Clarabel's setup (the symbolic
+    factorisation of its KKT system: ~120 of the ~470 us of a tree SOCP at m = 18). The answer is a new solver's bit for bit: the same KKT ordering and start,
+    and Clarabel reads nothing from an earlier solve but the "previous iterate" it restores
+    when a step fails, before the first one of this solve has been saved; so only the
+    settled statuses (_SETTLED) are taken from a kept solver, any other is solved again on
+    a new one (tests/test_socp.py compares all of them; every SOCP of plug3d 3 x 6's tree
+    the same). Only problems whose pattern is a function of their shape are kept (DenseDiag,
+    dense arrays), and only under settings without equilibration (a data update keeps the
+    first problem's scaling) or presolve (which forbids updates). Process and thread state:
+    each MPI rank and each thread has its own solvers."""
+
+    def __init__(self, size: int, entries: int):
+        self.size, self.entries = size, entries
+        self._solvers: dict = {}
+        self._stored = 0
+
+    def key(self, problem: ConicProblem, identity: bool, opts) -> tuple | None:
+        """The structure of `problem` under `opts` (None: not to be kept)."""
+        A = problem.A
+        if opts.equilibrate_enable or opts.presolve_enable:
+            return None
+        if isinstance(A, DenseDiag):
+            shape = ("diag", A.k, A.nd, A.n)
+        elif isinstance(A, np.ndarray):
+            shape = ("dense",) + A.shape
+        else:
+            return None
+        # the settings object itself (hashed by identity; the key keeps it alive)
+        return (opts, identity, problem.n_zero, problem.n_lin, problem.n_soc) + shape
+
+    def take(self, key: tuple | None):
+        """The kept solver of `key`, no longer kept (None: none)."""
+        if key is None or key not in self._solvers:
+            return None
+        solver, entries = self._solvers.pop(key)
+        self._stored -= entries
+        return solver
+
+    def keep(self, key: tuple | None, solver, entries: int) -> None:
+        """Keep `solver` (of `key`, A with `entries` stored entries) as the most recent."""
+        if key is None or entries > self.entries:
+            return
+        self._solvers[key] = (solver, entries)          # insertion order: the most recent last
+        self._stored += entries
+        while len(self._solvers) > self.size or self._stored > self.entries:
+            self._stored -= self._solvers.pop(next(iter(self._solvers)))[1]
+
+
+#: the solvers kept for reuse (_KeptSolvers): the structures a tree meets (plug3d 3 x 6 at
+#: mu = 0.65: 163 among its 7,219 SOCPs), within ~2^22 entries of A (a few tens of MB)
+_KEPT = _KeptSolvers(256, 1 << 22)
+
+
+@dataclass(frozen=True)
+class DenseDiag:
+    """The matrix [1_r; D; diag(d) 0] of `reaction_socp` (shape (k + nd, n), k = 1 + rows
+    of D): a first row with 1 on every nd column that is an r_n (columns 0, 3, 6, ...),
+    D (k - 1, n) dense with every entry stored, d = (-mu, -1, -1, ...) on the first nd
+    columns. Kept as Clarabel reads a CSC matrix: `data` column by column (one column: its
+    k dense entries, then its diagonal entry if it has one)."""
+
+    data: np.ndarray
+    k: int
+    nd: int
+    n: int
+
+    @classmethod
+    def of(cls, D: np.ndarray, nd: int, mu: float) -> "DenseDiag":
+        k, n = D.shape[0] + 1, D.shape[1]
+        A = cls(np.empty(nd * (k + 1) + (n - nd) * k), k, nd, n)
+        head, tail = A._columns()
+        head[:, 0] = 0.0
+        head[0::3, 0] = 1.0
+        head[:, 1:k] = D[:, :nd].T
+        head[:, k] = -1.0
+        head[0::3, k] = -mu
+        tail[:, 0] = 0.0
+        tail[:, 1:] = D[:, nd:].T
+        return A
+
+    def _columns(self) -> tuple[np.ndarray, np.ndarray]:
+        """Views of `data`: the first nd columns (nd, k + 1: dense part, then the diagonal
+        entry) and the others (n - nd, k)."""
+        split = self.nd * (self.k + 1)
+        return (self.data[:split].reshape(self.nd, self.k + 1),
+                self.data[split:].reshape(self.n - self.nd, self.k))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.k + self.nd, self.n
+
+    def rmatvec(self, z: np.ndarray) -> np.ndarray:
+        """A^T z."""
+        head, tail = self._columns()
+        k = self.k
+        return np.concatenate([head[:, :k] @ z[:k] + head[:, k] * z[k:], tail @ z[:k]])
+
+    def toarray(self) -> np.ndarray:
+        head, tail = self._columns()
+        out = np.zeros(self.shape)
+        out[:self.k] = np.concatenate([head[:, :self.k], tail]).T
+        out[self.k + np.arange(self.nd), np.arange(self.nd)] = head[:, self.k]
+        return out
+
+
+def rmatvec(A, z: np.ndarray) -> np.ndarray:
+    """A^T z for a ConicProblem's A (dense, DenseDiag or scipy sparse)."""
+    return A.rmatvec(z) if isinstance(A, DenseDiag) else A.T @ z
+
+
+class _ClarabelCsc:
+    """A CSC matrix as Clarabel's binding reads one (the attributes of a scipy csc_matrix in
+    canonical format), its arrays as Python lists: the binding copies them element by
+    element, which costs less from a list than from a numpy array (plug3d 3 x 6's tree
+    SOCPs: setup 120 against 162 us)."""
+
+    __slots__ = ("data", "indices", "indptr", "shape", "nnz")
+    has_canonical_format = True
+
+    def __init__(self, data: list, indices: list, indptr: list, shape: tuple[int, int]):
+        self.data, self.indices, self.indptr, self.shape, self.nnz = data, indices, indptr, shape, len(data)
+
+
+def _clarabel_csc(A) -> _ClarabelCsc:
+    """A ConicProblem's A for Clarabel: a DenseDiag or a dense array with every entry
+    stored (scipy's from-dense conversion costs more than the solve here), or a scipy
+    sparse matrix as it is."""
+    if isinstance(A, DenseDiag):
+        return _ClarabelCsc(A.data.tolist(), *_dense_diag_pattern(A.k, A.nd, A.n), A.shape)
+    if isinstance(A, np.ndarray):
+        r, c = A.shape
+        return _ClarabelCsc(A.T.ravel().tolist(), *_dense_diag_pattern(r, 0, c), (r, c))
+    A = sp.csc_matrix(A)
+    A.sort_indices()
+    return _ClarabelCsc(A.data.tolist(), A.indices.tolist(), A.indptr.tolist(), A.shape)
+
+
+@functools.lru_cache(maxsize=1024)
+def _dense_diag_pattern(k: int, nd: int, n: int) -> tuple[list, list]:
+    """(indices, indptr) of a (k + nd, n) CSC matrix with every entry of its first k rows
+    stored and one entry below them in each of its first nd columns (shared: not to be
+    modified)."""
+    head = np.arange(k)
+    indices = np.concatenate([np.hstack([np.tile(head, (nd, 1)), (k + np.arange(nd))[:, None]]).ravel(),
+                              np.tile(head, n - nd)])
+    indptr = np.concatenate([np.arange(nd + 1) * (k + 1), nd * (k + 1) + np.arange(1, n - nd + 1) * k])
+    return indices.tolist(), indptr.tolist()
+
+
+@functools.lru_cache(maxsize=256)
+def _csc_square(n: int, identity: bool) -> _ClarabelCsc:
+    """The (n, n) identity or zero matrix for Clarabel (shared: not to be modified)."""
+    if identity:
+        return _ClarabelCsc([1.0] * n, list(range(n)), list(range(n + 1)), (n, n))
+    return _ClarabelCsc([], [], [0] * (n + 1), (n, n))
