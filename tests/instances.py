@@ -157,6 +157,24 @@ def plug3d_param(levels: int = 2, ring: int = 5, **model):
     return parametrize(prob), prob.m
 
 
+def partial_masks(rng, m: int):
+    """Masks (zero_u, zero_r) of a random partial pattern: each node free, in contact or in
+    gap with probability 1/3 each; None when every node is in gap (nothing to normalise)."""
+    state = rng.integers(0, 3, m)
+    zu, zr = state == 1, state == 2
+    return (zu, zr) if (~zr).any() else None
+
+
+def partial_rows(param, m: int, rng, mus, draws: int):
+    """(mu, pattern_rows) of `draws` random partial patterns (partial_masks, all-gap draws
+    skipped) at each mu in turn, drawn lazily from rng."""
+    for mu in mus:
+        for _ in range(draws):
+            masks = partial_masks(rng, m)
+            if masks is not None:
+                yield mu, pattern_rows(param, m, *masks)
+
+
 def random_partial_rows(rng, m: int = 3):
     """Rows of a random partial pattern (about 40 % of the nodes fixed in contact, 40 % of
     the rest fixed open) of a random free or supported 3D body with m contact nodes."""

@@ -5,7 +5,7 @@ import numpy as np
 from hpcwedge.conic import LONG_STEP, settings
 from hpcwedge.rows import pattern_rows
 from hpcwedge.socp import pattern_socp
-from instances import plug3d_param
+from instances import partial_masks, partial_rows, plug3d_param
 
 
 def test_settings_are_values():
@@ -30,12 +30,11 @@ def test_reaction_matrix_is_stored_as_clarabel_reads_it():
     p, m = plug3d_param(2, 4)
     rng = np.random.default_rng(3)
     for _ in range(20):
-        state = rng.integers(0, 3, m)
-        zu, zr = state == 1, state == 2
-        if not (~zr).any():
+        masks = partial_masks(rng, m)
+        if masks is None:
             continue
         mu = rng.uniform(0.2, 1.0)
-        rows = pattern_rows(p, m, zu, zr)
+        rows = pattern_rows(p, m, *masks)
         A = reaction_socp(rows, mu).problem.A
         assert isinstance(A, DenseDiag)
         dense = A.toarray()
@@ -66,17 +65,11 @@ def test_kept_solvers_answer_as_new_ones_bit_for_bit(monkeypatch):
     p, m = plug3d_param(2, 4)
     rng = np.random.default_rng(11)
     problems = []
-    for mu in (0.4, 0.9):
-        for _ in range(40):
-            state = rng.integers(0, 3, m)
-            zu, zr = state == 1, state == 2
-            if not (~zr).any():
-                continue
-            rows = pattern_rows(p, m, zu, zr)
-            problems.append((reaction_socp(rows, mu).problem, 0, False, True))
-            dense = pattern_socp(rows, mu)
-            problems.append((dense, 1 + int(rng.integers(2)), False, False))
-            problems.append((replace(dense, q=rng.standard_normal(dense.A.shape[1])), 0, True, False))
+    for mu, rows in partial_rows(p, m, rng, (0.4, 0.9), 40):
+        problems.append((reaction_socp(rows, mu).problem, 0, False, True))
+        dense = pattern_socp(rows, mu)
+        problems.append((dense, 1 + int(rng.integers(2)), False, False))
+        problems.append((replace(dense, q=rng.standard_normal(dense.A.shape[1])), 0, True, False))
 
     def answers(kept):
         monkeypatch.setattr(conic, "_KEPT", kept)
