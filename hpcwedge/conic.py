@@ -117,13 +117,16 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
     import clarabel
     n = problem.A.shape[1]
     identity = problem.q is None and attempt == LEAST_NORM_ATTEMPT
-    q = np.zeros(n) if problem.q is None else problem.q
     opts = settings(attempt, tight, feasibility=problem.q is None, long_steps=long_steps)
     A = _clarabel_csc(problem.A)
     key = _KEPT.key(problem, identity, opts)
     solver = _KEPT.take(key)
     if solver is not None:
-        solver.update(A=A.data, b=problem.b.tolist(), q=q.tolist())
+        if problem.q is None:
+            # the key's settings say "no objective", so the kept solver's q is 0 already
+            solver.update(A=A.data, b=problem.b.tolist())
+        else:
+            solver.update(A=A.data, b=problem.b.tolist(), q=problem.q.tolist())
         sol = solver.solve()
         if str(sol.status) not in _SETTLED:
             # a solve that fails on its first step restores Clarabel's "previous iterate",
@@ -134,6 +137,7 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
         if problem.n_lin:
             cones.append(clarabel.NonnegativeConeT(problem.n_lin))
         cones += [clarabel.SecondOrderConeT(3) for _ in range(problem.n_soc)]
+        q = np.zeros(n) if problem.q is None else problem.q
         solver = clarabel.DefaultSolver(_csc_square(n, identity), q, A, problem.b, cones, opts)
         sol = solver.solve()
     status = str(sol.status)
@@ -151,12 +155,12 @@ class _KeptSolvers(threading.local):
     sparsity pattern, P, settings), the least recently used dropped beyond `size` solvers or
     `entries` stored entries of A in all. A problem of a kept structure is solved by a data
     update of A, b and q instead of a new solver, without Clarabel's setup (the symbolic
-    factorisation of its KKT system: ~120 of the ~470 us of a tree SOCP at m = 18). The answer is a new solver's bit for bit: the same KKT ordering and start,
-    and Clarabel reads nothing from an earlier solve but the "previous iterate" it restores
-    when a step fails, before the first one of this solve has been saved; so only the
-    settled statuses (_SETTLED) are taken from a kept solver, any other is solved again on
-    a new one (tests/test_socp.py compares all of them; every SOCP of plug3d 3 x 6's tree
-    the same). Only problems whose pattern is a function of their shape are kept (DenseDiag,
+    factorisation of its KKT system: ~120 of the ~470 us of a tree SOCP at m = 18). The
+    answer is a new solver's bit for bit: the same KKT ordering and start, and Clarabel
+    reads nothing from an earlier solve but the "previous iterate" it restores when a step
+    fails, before the first one of this solve has been saved; so only the settled statuses
+    (_SETTLED) are taken from a kept solver, any other is solved again on a new one
+    (tests/test_conic.py compares all of them; every SOCP of plug3d 3 x 6's tree the same). Only problems whose pattern is a function of their shape are kept (DenseDiag,
     dense arrays), and only under settings without equilibration (a data update keeps the
     first problem's scaling) or presolve (which forbids updates). Process and thread state:
     each MPI rank and each thread has its own solvers."""
@@ -182,11 +186,11 @@ class _KeptSolvers(threading.local):
 
     def take(self, key: tuple | None):
         """The kept solver of `key`, no longer kept (None: none)."""
-        if key is None or key not in self._solvers:
+        kept = None if key is None else self._solvers.pop(key, None)
+        if kept is None:
             return None
-        solver, entries = self._solvers.pop(key)
-        self._stored -= entries
-        return solver
+        self._stored -= kept[1]
+        return kept[0]
 
     def keep(self, key: tuple | None, solver, entries: int) -> None:
         """Keep `solver` (of `key`, A with `entries` stored entries) as the most recent."""
