@@ -27,7 +27,6 @@ VERIFY_TOL = 1e-8
 #: an infeasibility certificate z holds when ||A^T z|| and the dual-cone violation are
 #: <= CERT_TOL * |b^T z| (b^T z < 0 strictly)
 CERT_TOL = 1e-7
-_THREE = np.arange(3)
 
 
 def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
@@ -109,37 +108,48 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     dense null-space form (plug3d 3 x 6: Clarabel 0.64 against 1.13 ms per SOCP, the same
     answers on all 6,791 of the enumeration's SOCPs), and no SVD. Dense rows unit-scaled,
     rows that vanish on the kept columns dropped (as rows.kept_rows does)."""
-    form = rows.reactions
-    n, m = form.B.shape[0], rows.zero_u.shape[0]
-    k = form.E.shape[0]
+    lay = _reaction_layout(rows.reactions, rows.zero_u.shape[0])
     nodes = rows.nodes
-    c, nb = len(nodes), form.U.shape[1] - n
-    cols = (nodes[:, None] + _THREE * m).ravel()
+    cols = lay.cols[nodes].ravel()
     # [equilibrium; u_n of every node] on the kept columns, each row's norm
-    rest = np.ascontiguousarray(_equilibrium_normal_rows(form, m)[:, np.concatenate([cols, np.arange(n, n + nb)])])
+    rest = np.ascontiguousarray(lay.rest[:, np.concatenate([cols, lay.beta])])
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
     kept = kept_sizes(size)
-    eq = np.flatnonzero(kept & np.concatenate([np.ones(k, bool), rows.zero_u]))
-    lin = np.flatnonzero(kept & np.concatenate([np.zeros(k, bool), ~rows.zero_u]))
-    lin_scale = size[lin]
-    body = rest[np.concatenate([eq, lin])] / np.concatenate([size[eq], -lin_scale])[:, None]
-    A = DenseDiag.of(body, 3 * c, mu)
+    is_eq = np.concatenate([lay.equilibrium, rows.zero_u])
+    eq = np.flatnonzero(kept & is_eq)
+    lin = np.flatnonzero(kept & ~is_eq)
+    order = np.concatenate([eq, lin])
+    scale = size[order]
+    scale[len(eq):] *= -1.0                     # a lin row is -u_n: s = -A w = u_n >= 0
+    A = DenseDiag.of(rest[order] / scale[:, None], 3 * len(nodes), mu)
     b = np.zeros(A.shape[0])
     b[0] = 1.0
-    problem = ConicProblem(A, b, 1 + len(eq), len(lin), c)
-    return ReactionSOCP(problem, rows, cols, lin - k, lin_scale)
+    problem = ConicProblem(A, b, 1 + len(eq), len(lin), len(nodes))
+    return ReactionSOCP(problem, rows, cols, lin - lay.equilibrium.size, size[lin])
 
 
-def _equilibrium_normal_rows(form: ReactionCoordinates, m: int) -> np.ndarray:
-    """[E 0; U_n] (E rows + m, n + n_beta): the rows `reaction_socp` cuts its dense block
-    from, computed once per parametrisation (kept on `form`)."""
-    def build() -> np.ndarray:
+@dataclass(frozen=True)
+class _ReactionLayout:
+    """What `reaction_socp` cuts every pattern's problem from (one per parametrisation and
+    m): rest [E 0; U_n] (E rows + m, n + n_beta); cols (m, 3) the columns of each node's
+    (r_n, r_t1, r_t2); beta the rigid amplitudes' columns; equilibrium: True per E row."""
+
+    rest: np.ndarray
+    cols: np.ndarray
+    beta: np.ndarray
+    equilibrium: np.ndarray
+
+
+def _reaction_layout(form: ReactionCoordinates, m: int) -> _ReactionLayout:
+    """_ReactionLayout of (form, m), computed once (kept on `form`)."""
+    def build() -> _ReactionLayout:
         k, n = form.E.shape
         rest = np.zeros((k + m, form.U.shape[1]))
         rest[:k, :n] = form.E
         rest[k:] = form.U[:m]
-        return rest
-    return kept_on(form, f"_equilibrium_normal_rows_{m}", build)
+        return _ReactionLayout(rest, np.arange(3 * m).reshape(3, m).T.copy(),
+                               np.arange(n, form.U.shape[1]), np.ones(k, bool))
+    return kept_on(form, f"_reaction_layout_{m}", build)
 
 
 def attempts(plain: ConicProblem, tight: bool, steered: ConicProblem | None = None,
