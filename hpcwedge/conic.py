@@ -118,21 +118,24 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
     n = problem.A.shape[1]
     identity = problem.q is None and attempt == LEAST_NORM_ATTEMPT
     opts = settings(attempt, tight, feasibility=problem.q is None, long_steps=long_steps)
-    A = _clarabel_csc(problem.A)
     key = _KEPT.key(problem, identity, opts)
     solver = _KEPT.take(key)
     if solver is not None:
+        data = _clarabel_data(problem.A)
+        entries = len(data)
         if problem.q is None:
             # the key's settings say "no objective", so the kept solver's q is 0 already
-            solver.update(A=A.data, b=problem.b.tolist())
+            solver.update(A=data, b=problem.b.tolist())
         else:
-            solver.update(A=A.data, b=problem.b.tolist(), q=problem.q.tolist())
+            solver.update(A=data, b=problem.b.tolist(), q=problem.q.tolist())
         sol = solver.solve()
         if str(sol.status) not in _SETTLED:
             # a solve that fails on its first step restores Clarabel's "previous iterate",
             # which on a kept solver is the last problem's: again on a new solver
             solver = None
     if solver is None:
+        A = _clarabel_csc(problem.A)
+        entries = A.nnz
         cones = [clarabel.ZeroConeT(problem.n_zero)]
         if problem.n_lin:
             cones.append(clarabel.NonnegativeConeT(problem.n_lin))
@@ -142,7 +145,7 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
         sol = solver.solve()
     status = str(sol.status)
     if status in _SETTLED:
-        _KEPT.keep(key, solver, len(A.data))
+        _KEPT.keep(key, solver, entries)
     return Solution(status, np.asarray(sol.x), np.asarray(sol.z))
 
 
@@ -221,18 +224,14 @@ class DenseDiag:
     n: int
 
     @classmethod
-    def of(cls, D: np.ndarray, nd: int, mu: float) -> "DenseDiag":
-        k, n = D.shape[0] + 1, D.shape[1]
-        A = cls(np.empty(nd * (k + 1) + (n - nd) * k), k, nd, n)
-        head, tail = A._columns()
-        head[:, 0] = 0.0
-        head[0::3, 0] = 1.0
-        head[:, 1:k] = D[:, :nd].T
-        head[:, k] = -1.0
-        head[0::3, k] = -mu
-        tail[:, 0] = 0.0
-        tail[:, 1:] = D[:, nd:].T
-        return A
+    def of(cls, Dt: np.ndarray, nd: int, mu: float) -> "DenseDiag":
+        """The matrix of D = Dt.T (Dt (n, k - 1): D's columns as rows)."""
+        n, k = Dt.shape[0], Dt.shape[1] + 1
+        template, dense, mus = _dense_diag_layout(k, nd, n)
+        data = template.copy()
+        data[dense] = Dt.ravel()
+        data[mus] = -mu
+        return cls(data, k, nd, n)
 
     def _columns(self) -> tuple[np.ndarray, np.ndarray]:
         """Views of `data`: the first nd columns (nd, k + 1: dense part, then the diagonal
@@ -277,18 +276,44 @@ class _ClarabelCsc:
         self.data, self.indices, self.indptr, self.shape, self.nnz = data, indices, indptr, shape, len(data)
 
 
+def _clarabel_data(A) -> list:
+    """The stored entries of a kept structure's A (a DenseDiag or a dense array), as
+    `_clarabel_csc` lays them out."""
+    return A.data.tolist() if isinstance(A, DenseDiag) else A.T.ravel().tolist()
+
+
 def _clarabel_csc(A) -> _ClarabelCsc:
     """A ConicProblem's A for Clarabel: a DenseDiag or a dense array with every entry
     stored (scipy's from-dense conversion costs more than the solve here), or a scipy
     sparse matrix as it is."""
     if isinstance(A, DenseDiag):
-        return _ClarabelCsc(A.data.tolist(), *_dense_diag_pattern(A.k, A.nd, A.n), A.shape)
+        return _ClarabelCsc(_clarabel_data(A), *_dense_diag_pattern(A.k, A.nd, A.n), A.shape)
     if isinstance(A, np.ndarray):
         r, c = A.shape
-        return _ClarabelCsc(A.T.ravel().tolist(), *_dense_diag_pattern(r, 0, c), (r, c))
+        return _ClarabelCsc(_clarabel_data(A), *_dense_diag_pattern(r, 0, c), (r, c))
     A = sp.csc_matrix(A)
     A.sort_indices()
     return _ClarabelCsc(A.data.tolist(), A.indices.tolist(), A.indptr.tolist(), A.shape)
+
+
+@functools.lru_cache(maxsize=1024)
+def _dense_diag_layout(k: int, nd: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where a DenseDiag (k, nd, n) keeps its entries in `data`: the entries it holds for any
+    D and mu (the first row's 1s and 0s, the diagonal's -1s), the positions of D's entries
+    (column by column) and of the diagonal's -mu (shared: read-only)."""
+    split = nd * (k + 1)
+    template = np.zeros(split + (n - nd) * k)
+    head = template[:split].reshape(nd, k + 1)
+    head[0::3, 0] = 1.0
+    head[:, k] = -1.0
+    dense = np.empty((n, k - 1), np.intp)
+    dense[:nd] = (np.arange(nd) * (k + 1))[:, None] + 1 + np.arange(k - 1)
+    dense[nd:] = (split + np.arange(n - nd) * k)[:, None] + 1 + np.arange(k - 1)
+    mus = np.arange(0, nd, 3) * (k + 1) + k
+    out = (template, dense.ravel(), mus)
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 @functools.lru_cache(maxsize=1024)

@@ -43,8 +43,9 @@ def bits_to_nodes(bits: int, m: int) -> tuple[int, ...]:
 
 
 def bits_to_mask(bits: int, m: int) -> np.ndarray:
-    """Bitset -> (m,) bool mask (any m: Python ints)."""
-    return np.array([bool(bits >> i & 1) for i in range(m)], dtype=bool)
+    """Bitset -> (m,) bool mask (any m: Python ints; bits beyond m ignored)."""
+    raw = np.frombuffer((bits & ((1 << m) - 1)).to_bytes((m + 7) // 8, "little"), np.uint8)
+    return np.unpackbits(raw, count=m, bitorder="little").view(bool)
 
 
 def to_mask(nodes, m: int) -> np.ndarray:

@@ -208,7 +208,8 @@ class PatternTree:
                 zu, zr = node.masks(m)
                 steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
                 rows = pattern_rows(param, m, zu, zr, self.friction)
-                dec = decide(rows, mu, self.options, stats.statuses, objective=steer)
+                dec = decide(rows, mu, self.options, stats.statuses, objective=steer,
+                             farkas=self._cores is not None)
                 if dec.status == Status.INFEASIBLE:
                     if dec.farkas is not None and self._cores is not None:
                         self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
@@ -272,9 +273,10 @@ class PatternTree:
         fixed = node.contact | node.gap
         free = [i for i in self.order if not fixed >> i & 1]
         u = pt.ux[:m]
-        r = np.linalg.norm(pt.rx[:3 * m].reshape(3, m), axis=0)
-        v = np.minimum(np.maximum(u, 0) / max(np.abs(u).max(), 1e-300), r / max(r.max(), 1e-300))
-        return max(free, key=lambda i: v[i])          # first maximum in `order`
+        r2 = pt.rx[:3 * m].reshape(3, m) ** 2
+        r = np.sqrt(r2[0] + r2[1] + r2[2])
+        v = np.minimum(np.maximum(u, 0) / max(np.abs(u).max(), 1e-300), r / max(r.max(), 1e-300)).tolist()
+        return max(free, key=v.__getitem__)          # first maximum in `order`
 
     def expand(self, found: list[Subtree]) -> list[Subtree]:
         """expand_orbits with this tree's symmetry."""

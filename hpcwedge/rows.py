@@ -76,25 +76,65 @@ class Rows:
 
 @dataclass(frozen=True)
 class ConeRows:
-    """The 3D pattern SOCP (module doc). eq (E, d), lin (L, d): unit rows;
-    rn (c, d), rt (c, 2, d): the cone nodes `nodes`, each node's three rows scaled
-    by one common factor (scale (c,), applied as rows / scale); norm (d,): sum r_n.
-    lin_nodes (L,): the node of each lin row, lin_scale (L,) the norm it was scaled by.
-    zero_u, zero_r (m,): the pattern; reactions: the parametrisation in x' = (r, beta)
-    (problem.ReactionCoordinates), for socp.reaction_socp."""
+    """The 3D pattern SOCP (module doc) of the pattern zero_u, zero_r (m,), its rows cut on
+    first use from `node_blocks`, the parametrisation's node rows (a solve in reaction
+    coordinates, socp.reaction_socp, needs none of them): eq (E, d), lin (L, d): unit rows;
+    rn (c, d), rt (c, 2, d): the cone nodes `nodes`, each node's three rows scaled by one
+    common factor (scale (c,), applied as rows / scale); norm (d,): sum r_n. lin_nodes
+    (L,): the node of each lin row, lin_scale (L,) the norm it was scaled by. reactions:
+    the parametrisation in x' = (r, beta) (problem.ReactionCoordinates)."""
 
-    eq: np.ndarray
-    lin: np.ndarray
-    rn: np.ndarray
-    rt: np.ndarray
-    norm: np.ndarray
-    nodes: np.ndarray
-    lin_nodes: np.ndarray
-    scale: np.ndarray
-    lin_scale: np.ndarray
     zero_u: np.ndarray
     zero_r: np.ndarray
+    nodes: np.ndarray
+    norm: np.ndarray
     reactions: ReactionCoordinates
+    node_blocks: _NodeBlocks
+
+    @functools.cached_property
+    def eq_index(self) -> np.ndarray:
+        """eq's rows among the node rows [u_n; r_n; r_t1; r_t2] (4m): u_n of contact nodes,
+        (r_n, r_t1, r_t2) of gap nodes, zero rows dropped."""
+        zr = self.zero_r
+        pick = np.concatenate([self.zero_u, zr, zr, zr]).nonzero()[0]
+        return pick[kept_sizes(self.node_blocks.size[pick])]
+
+    @functools.cached_property
+    def eq(self) -> np.ndarray:
+        return self.node_blocks.unit[self.eq_index]
+
+    @functools.cached_property
+    def lin_nodes(self) -> np.ndarray:
+        free_u = (~self.zero_u).nonzero()[0]
+        return free_u[kept_sizes(self.node_blocks.size[free_u])]
+
+    @functools.cached_property
+    def lin(self) -> np.ndarray:
+        return self.node_blocks.unit[self.lin_nodes]
+
+    @functools.cached_property
+    def lin_scale(self) -> np.ndarray:
+        return self.node_blocks.size[self.lin_nodes]
+
+    @functools.cached_property
+    def rn(self) -> np.ndarray:
+        return self.node_blocks.rn[self.nodes]
+
+    @functools.cached_property
+    def rt(self) -> np.ndarray:
+        return self.node_blocks.rt[self.nodes]
+
+    @functools.cached_property
+    def scale(self) -> np.ndarray:
+        return self.node_blocks.scale[self.nodes]
+
+    def at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The rows at x (d,): eq x, lin x, rn x (c,) and rt x (c, 2), from one product with
+        every node's rows (equal to the blocks' own products up to rounding)."""
+        m = self.zero_u.shape[0]
+        y = self.node_blocks.stacked @ x
+        cone = y[4 * m:].reshape(3, m)[:, self.nodes]
+        return y[self.eq_index], y[self.lin_nodes], cone[0], cone[1:].T
 
     @functools.cached_property
     def Z(self) -> np.ndarray:
@@ -123,7 +163,7 @@ def kept_rows(A: np.ndarray) -> np.ndarray:
 def kept_sizes(size: np.ndarray) -> np.ndarray:
     """Of rows with norms `size`, those not identically zero: above ZERO_ROW_RTOL times the
     largest (boolean mask)."""
-    return size > ZERO_ROW_RTOL * max(size.max(initial=0.0), 1e-300)
+    return size > ZERO_ROW_RTOL * max(np.maximum.reduce(size, initial=0.0), 1e-300)
 
 
 def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray,
@@ -158,24 +198,14 @@ def pattern_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.
 
 def _pattern_rows_3d(param, m, zu, zr, friction):
     nb = _node_blocks(param, m)
-    unit = nb.unit
-    # equalities: u_n of contact nodes, (r_n, r_t1, r_t2) of gap nodes, unit rows
-    pick = np.concatenate([zu, zr, zr, zr])
-    eq = unit[pick][kept_sizes(nb.size[pick])]
-    free_u = np.flatnonzero(~zu)
-    lin_nodes = free_u[kept_sizes(nb.size[free_u])]
-    lin_scale = nb.size[lin_nodes]
-    lin = unit[lin_nodes]
-    fr = ~zr
-    if not friction:
-        rn = unit_rows(nb.rows[m:2 * m][fr])
-        A0 = np.vstack([eq, lin, rn])
-        E = np.concatenate([np.ones(len(eq), bool), np.zeros(len(lin) + len(rn), bool)])
-        return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=nb.norm)
-    nodes = np.flatnonzero(fr)
-    return ConeRows(eq=eq, lin=lin, rn=nb.rn[fr], rt=nb.rt[fr], norm=nb.norm,
-                    nodes=nodes, lin_nodes=lin_nodes, scale=nb.scale[fr], lin_scale=lin_scale,
-                    zero_u=zu, zero_r=zr, reactions=param.reactions)
+    rows = ConeRows(zero_u=zu, zero_r=zr, nodes=(~zr).nonzero()[0], norm=nb.norm,
+                    reactions=param.reactions, node_blocks=nb)
+    if friction:
+        return rows
+    eq, lin, rn = rows.eq, rows.lin, unit_rows(nb.rows[m:2 * m][~zr])
+    A0 = np.vstack([eq, lin, rn])
+    E = np.concatenate([np.ones(len(eq), bool), np.zeros(len(lin) + len(rn), bool)])
+    return Rows(a0=A0, a1=np.zeros_like(A0), eq=E, norm=nb.norm)
 
 
 @dataclass(frozen=True)
@@ -183,7 +213,7 @@ class _NodeBlocks:
     """The rows of a 3D parametrisation that every pattern's rows are cut from: rows (4m, d)
     [u_n; r_n; r_t1; r_t2], each row's norm `size` and the rows over it `unit` (zero rows
     stay zero); rn (m, d), rt (m, 2, d) over each node's cone factor `scale` (m,); norm (d,)
-    sum r_n."""
+    sum r_n; stacked (7m, d): [unit; rn; rt1; rt2] (ConeRows.at)."""
 
     rows: np.ndarray
     size: np.ndarray
@@ -192,6 +222,7 @@ class _NodeBlocks:
     rt: np.ndarray
     scale: np.ndarray
     norm: np.ndarray
+    stacked: np.ndarray
 
 
 def _node_blocks(param: Parametrization, m: int) -> _NodeBlocks:
@@ -202,9 +233,9 @@ def _node_blocks(param: Parametrization, m: int) -> _NodeBlocks:
         size = np.linalg.norm(rows, axis=1)
         unit = rows / np.where(size > 0, size, 1.0)[:, None]
         sc = _cone_scale(Rn, Rt1, Rt2)
-        return _NodeBlocks(rows=rows, size=size, unit=unit, rn=Rn / sc[:, None],
-                           rt=np.stack([Rt1, Rt2], axis=1) / sc[:, None, None], scale=sc,
-                           norm=Rn.sum(axis=0))
+        rn, rt = Rn / sc[:, None], np.stack([Rt1, Rt2], axis=1) / sc[:, None, None]
+        return _NodeBlocks(rows=rows, size=size, unit=unit, rn=rn, rt=rt, scale=sc, norm=Rn.sum(axis=0),
+                           stacked=np.vstack([unit, rn, rt[:, 0], rt[:, 1]]))
     return kept_on(param, f"_node_blocks_{m}", build)
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -41,13 +41,14 @@ def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
         return math.inf
     x = x / nr
     size = max(np.linalg.norm(x), 1e-300)
+    eq, lin, rn, rt = rows.at(x)
     v = 0.0
-    if rows.eq.shape[0]:
-        v = max(v, np.abs(rows.eq @ x).max() / size)
-    if rows.lin.shape[0]:
-        v = max(v, -(rows.lin @ x).min() / size)
-    if rows.rn.shape[0]:
-        rn, rt = rows.rn @ x, np.linalg.norm(rows.rt @ x, axis=1)
+    if eq.size:
+        v = max(v, np.abs(eq).max() / size)
+    if lin.size:
+        v = max(v, -lin.min() / size)
+    if rn.size:
+        rt = np.sqrt(rt[:, 0] ** 2 + rt[:, 1] ** 2)
         rsize = max(np.sqrt((rn ** 2).sum() + (rt ** 2).sum()), 1e-300)
         v = max(v, (rt - mu * rn).max() / (max(mu, 1.0) * rsize))
     return float(v)
@@ -112,16 +113,16 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     nodes = rows.nodes
     cols = lay.cols[nodes].ravel()
     # [equilibrium; u_n of every node] on the kept columns, each row's norm
-    rest = np.ascontiguousarray(lay.rest[:, np.concatenate([cols, lay.beta])])
+    rest = lay.rest.take(np.concatenate([cols, lay.beta]), axis=1)
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
     kept = kept_sizes(size)
     is_eq = np.concatenate([lay.equilibrium, rows.zero_u])
-    eq = np.flatnonzero(kept & is_eq)
-    lin = np.flatnonzero(kept & ~is_eq)
+    eq = (kept & is_eq).nonzero()[0]
+    lin = (kept & ~is_eq).nonzero()[0]
     order = np.concatenate([eq, lin])
     scale = size[order]
     scale[len(eq):] *= -1.0                     # a lin row is -u_n: s = -A w = u_n >= 0
-    A = DenseDiag.of(rest[order] / scale[:, None], 3 * len(nodes), mu)
+    A = DenseDiag.of(rest.T[:, order] / scale, 3 * len(nodes), mu)
     b = np.zeros(A.shape[0])
     b[0] = 1.0
     problem = ConicProblem(A, b, 1 + len(eq), len(lin), len(nodes))
@@ -168,16 +169,22 @@ def attempts(plain: ConicProblem, tight: bool, steered: ConicProblem | None = No
 @dataclass(frozen=True)
 class Outcome:
     """One attempt at the pattern SOCP, read: status (Clarabel's name); x: the point
-    (x-space, Solved); farkas, certified: the certificate z (its rows laid out as in
-    `pattern_socp`) and whether it passed `certificate_ok` (PrimalInfeasible); positive:
-    Solved with an objective whose verified dual proves it > 0 on the feasible set."""
+    (x-space, Solved); certified: whether the certificate passed `certificate_ok`
+    (PrimalInfeasible), `farkas` that certificate with its rows laid out as in
+    `pattern_socp` (computed when asked: z and its `layout`); positive: Solved with an
+    objective whose verified dual proves it > 0 on the feasible set."""
 
     attempt: int
     status: str
     x: np.ndarray | None = None
-    farkas: np.ndarray | None = None
     certified: bool | None = None
     positive: bool = False
+    z: np.ndarray | None = None
+    layout: Callable[[np.ndarray], np.ndarray | None] | None = None
+
+    @property
+    def farkas(self) -> np.ndarray | None:
+        return self.layout(self.z) if self.certified else None
 
 
 def pattern_attempts(rows: ConeRows, mu: float, tight: bool,
@@ -210,8 +217,7 @@ def _outcome(attempt: int, sol: Solution, plain: ConicProblem, steered: ConicPro
         return Outcome(attempt, sol.status, x=to_x(sol.x), positive=positive)
     if sol.status == "PrimalInfeasible":
         certified = certificate_ok(plain.A, plain.b, sol.z, plain.n_zero, plain.n_lin)
-        return Outcome(attempt, sol.status, farkas=farkas(sol.z) if certified else None,
-                       certified=certified)
+        return Outcome(attempt, sol.status, certified=certified, z=sol.z, layout=farkas)
     return Outcome(attempt, sol.status)
 
 
@@ -236,6 +242,6 @@ def certificate_ok(A, b, z, n_zero, n_lin, q: np.ndarray | None = None) -> bool:
     if n_lin and zl.min() < -CERT_TOL:
         return False
     zc = z[n_zero + n_lin:].reshape(-1, 3)
-    if len(zc) and (np.linalg.norm(zc[:, 1:], axis=1) - zc[:, 0]).max() > CERT_TOL:
+    if len(zc) and (np.sqrt(zc[:, 1] ** 2 + zc[:, 2] ** 2) - zc[:, 0]).max() > CERT_TOL:
         return False
     return True
