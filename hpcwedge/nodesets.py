@@ -38,8 +38,14 @@ def to_bits(nodes) -> int:
 
 
 def bits_to_nodes(bits: int, m: int) -> tuple[int, ...]:
-    """Bitset -> sorted node tuple (nodes 0..m-1)."""
-    return tuple(i for i in range(m) if bits >> i & 1)
+    """Bitset -> sorted node tuple (nodes 0..m-1; bits beyond m ignored)."""
+    bits &= (1 << m) - 1
+    out = []
+    while bits:
+        low = bits & -bits                      # the lowest set bit
+        out.append(low.bit_length() - 1)
+        bits ^= low
+    return tuple(out)
 
 
 def bits_to_mask(bits: int, m: int) -> np.ndarray:

@@ -74,8 +74,10 @@ class Subtree:
     gap: int = 0
 
     def masks(self, m: int) -> tuple[np.ndarray, np.ndarray]:
-        """(zero_u, zero_r) boolean masks over the m nodes."""
-        return bits_to_mask(self.contact, m), bits_to_mask(self.gap, m)
+        """(zero_u, zero_r) boolean masks over the m nodes (views of one array)."""
+        w = -(-m // 8) * 8                      # both from one unpacking, gap from bit w on
+        both = bits_to_mask(self.contact & ((1 << m) - 1) | self.gap << w, 2 * w)
+        return both[:m], both[w:w + m]
 
 
 @dataclass

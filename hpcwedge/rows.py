@@ -97,7 +97,7 @@ class ConeRows:
         (r_n, r_t1, r_t2) of gap nodes, zero rows dropped."""
         zr = self.zero_r
         pick = np.concatenate([self.zero_u, zr, zr, zr]).nonzero()[0]
-        return pick[kept_sizes(self.node_blocks.size[pick])]
+        return pick if self.node_blocks.all_kept else pick[kept_sizes(self.node_blocks.size[pick])]
 
     @functools.cached_property
     def eq(self) -> np.ndarray:
@@ -106,7 +106,7 @@ class ConeRows:
     @functools.cached_property
     def lin_nodes(self) -> np.ndarray:
         free_u = (~self.zero_u).nonzero()[0]
-        return free_u[kept_sizes(self.node_blocks.size[free_u])]
+        return free_u if self.node_blocks.all_kept else free_u[kept_sizes(self.node_blocks.size[free_u])]
 
     @functools.cached_property
     def lin(self) -> np.ndarray:
@@ -128,13 +128,13 @@ class ConeRows:
     def scale(self) -> np.ndarray:
         return self.node_blocks.scale[self.nodes]
 
-    def at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The rows at x (d,): eq x, lin x, rn x (c,) and rt x (c, 2), from one product with
-        every node's rows (equal to the blocks' own products up to rounding)."""
+    def at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rows at x (d,): eq x, lin x and the cones' (rn x, rt1 x, rt2 x) (3, c), from
+        one product with every node's rows (equal to the blocks' own products up to
+        rounding)."""
         m = self.zero_u.shape[0]
         y = self.node_blocks.stacked @ x
-        cone = y[4 * m:].reshape(3, m)[:, self.nodes]
-        return y[self.eq_index], y[self.lin_nodes], cone[0], cone[1:].T
+        return y[self.eq_index], y[self.lin_nodes], y[4 * m:].reshape(3, m)[:, self.nodes]
 
     @functools.cached_property
     def Z(self) -> np.ndarray:
@@ -213,7 +213,8 @@ class _NodeBlocks:
     """The rows of a 3D parametrisation that every pattern's rows are cut from: rows (4m, d)
     [u_n; r_n; r_t1; r_t2], each row's norm `size` and the rows over it `unit` (zero rows
     stay zero); rn (m, d), rt (m, 2, d) over each node's cone factor `scale` (m,); norm (d,)
-    sum r_n; stacked (7m, d): [unit; rn; rt1; rt2] (ConeRows.at)."""
+    sum r_n; stacked (7m, d): [unit; rn; rt1; rt2] (ConeRows.at); all_kept: every row above ZERO_ROW_RTOL times the largest (so
+    kept_sizes keeps every row of any selection of them)."""
 
     rows: np.ndarray
     size: np.ndarray
@@ -223,6 +224,7 @@ class _NodeBlocks:
     scale: np.ndarray
     norm: np.ndarray
     stacked: np.ndarray
+    all_kept: bool
 
 
 def _node_blocks(param: Parametrization, m: int) -> _NodeBlocks:
@@ -235,7 +237,8 @@ def _node_blocks(param: Parametrization, m: int) -> _NodeBlocks:
         sc = _cone_scale(Rn, Rt1, Rt2)
         rn, rt = Rn / sc[:, None], np.stack([Rt1, Rt2], axis=1) / sc[:, None, None]
         return _NodeBlocks(rows=rows, size=size, unit=unit, rn=rn, rt=rt, scale=sc, norm=Rn.sum(axis=0),
-                           stacked=np.vstack([unit, rn, rt[:, 0], rt[:, 1]]))
+                           stacked=np.vstack([unit, rn, rt[:, 0], rt[:, 1]]),
+                           all_kept=bool(size.min() > ZERO_ROW_RTOL * size.max()))
     return kept_on(param, f"_node_blocks_{m}", build)
 
 

@@ -36,22 +36,23 @@ def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
     relative to the size of the reactions, ||(r_n, r_t)|| over the cone nodes —
     not to ||x||, which a rigid lift-off (r = 0, u_n > 0) can make arbitrarily
     large without changing any reaction."""
-    nr = rows.norm @ x
-    if not np.isfinite(nr) or nr <= 0:
+    nr = float(rows.norm @ x)
+    if not math.isfinite(nr) or nr <= 0:
         return math.inf
     x = x / nr
-    size = max(np.linalg.norm(x), 1e-300)
-    eq, lin, rn, rt = rows.at(x)
+    size = max(math.sqrt(x @ x), 1e-300)
+    eq, lin, cone = rows.at(x)
     v = 0.0
     if eq.size:
-        v = max(v, np.abs(eq).max() / size)
+        v = max(v, float(np.abs(eq).max()) / size)
     if lin.size:
-        v = max(v, -lin.min() / size)
-    if rn.size:
-        rt = np.sqrt(rt[:, 0] ** 2 + rt[:, 1] ** 2)
-        rsize = max(np.sqrt((rn ** 2).sum() + (rt ** 2).sum()), 1e-300)
-        v = max(v, (rt - mu * rn).max() / (max(mu, 1.0) * rsize))
-    return float(v)
+        v = max(v, -float(lin.min()) / size)
+    if cone.size:
+        c2 = cone * cone
+        rt = np.sqrt(c2[1] + c2[2])
+        rsize = max(math.sqrt(float(c2.sum())), 1e-300)
+        v = max(v, float((rt - mu * cone[0]).max()) / (max(mu, 1.0) * rsize))
+    return v
 
 
 def pattern_socp(rows: ConeRows, mu: float) -> ConicProblem:

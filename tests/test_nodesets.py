@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from hpcwedge.nodesets import (NODES_PER_WORD, RowBits, bit_images, bits_to_nodes, bits_to_words,
+from hpcwedge.nodesets import (NODES_PER_WORD, RowBits, bit_images, bits_to_mask, bits_to_nodes, bits_to_words,
                                canonical_face, canonical_order, masks_to_bits, pack_rows, pattern_key,
                                to_bits, to_mask, unpack_rows, words_to_bits)
 
@@ -20,6 +20,19 @@ def test_list_mask_bits_round_trip(m):
         mask = to_mask(nodes, m)
         assert mask.dtype == bool and tuple(np.flatnonzero(mask)) == nodes
         assert int(masks_to_bits(mask[None, :])[0]) == bits
+
+
+@pytest.mark.parametrize("m", [0, 1, 7, 8, 9, 18, 64, 65, 130])
+def test_bits_to_mask_and_nodes_read_bit_i_as_node_i(m):
+    """Against the definition (bit i set: node i in the set), on any m, not only whole bytes
+    or words, the bits at and beyond m ignored."""
+    rng = np.random.default_rng(m)
+    for _ in range(30):
+        bits = int.from_bytes(rng.bytes(m // 8 + 2), "little")
+        want = [bool(bits >> i & 1) for i in range(m)]
+        mask = bits_to_mask(bits, m)
+        assert mask.dtype == bool and mask.shape == (m,) and mask.tolist() == want
+        assert bits_to_nodes(bits, m) == tuple(i for i in range(m) if want[i])
 
 
 def test_words_round_trip_beyond_64_nodes():

@@ -38,6 +38,14 @@ def test_subtree_masks():
     zu, zr = Subtree(3, contact=0b101, gap=0b010).masks(4)
     assert zu.tolist() == [True, False, True, False]
     assert zr.tolist() == [False, True, False, False]
+    # both masks come from one unpacking: neither may read the other's bits, on any m
+    rng = np.random.default_rng(1)
+    for m in (1, 7, 8, 9, 18, 64, 65):
+        for _ in range(20):
+            contact, gap = (int.from_bytes(rng.bytes(m // 8 + 1), "little") & ((1 << m) - 1) for _ in "cg")
+            zu, zr = Subtree(0, contact, gap).masks(m)
+            assert zu.tolist() == [bool(contact >> i & 1) for i in range(m)]
+            assert zr.tolist() == [bool(gap >> i & 1) for i in range(m)]
 
 
 # ------------------------------------------------------------------ 2D vs rays

@@ -50,6 +50,29 @@ def test_3d_rows_are_the_unit_rows_of_u_and_r_of_their_own_body():
     assert np.array_equal(pattern_rows(q, m, np.zeros(m, bool), np.zeros(m, bool)).lin_nodes, [0, 2, 3, 4])
 
 
+def test_rows_at_a_point_are_the_products_of_the_rows():
+    """ConeRows.at reads every row at x from one product with all the node rows: it must give
+    the products of the pattern's own eq, lin and cone rows, also where a zero row was
+    dropped (then the selections are not the plain masks)."""
+    m = 5
+    rng = np.random.default_rng(11)
+    p = parametrize(random_problem_3d(np.random.default_rng(3), m, True))
+    U = p.U.copy()
+    U[1] = 0.0
+    for body in (p, Parametrization(U=U, R=p.R, n_alpha=p.n_alpha)):
+        for _ in range(30):
+            zu = rng.random(m) < 0.4
+            zr = ~zu & (rng.random(m) < 0.4)
+            rows = pattern_rows(body, m, zu, zr)
+            x = rng.standard_normal(body.d)
+            eq, lin, cone = rows.at(x)
+            assert np.allclose(eq, rows.eq @ x, rtol=0, atol=1e-13)
+            assert np.allclose(lin, rows.lin @ x, rtol=0, atol=1e-13)
+            assert np.allclose(cone[0], rows.rn @ x, rtol=0, atol=1e-13)
+            assert np.allclose(cone[1:].T, rows.rt @ x, rtol=0, atol=1e-13)
+            assert len(eq) == len(rows.eq) and len(lin) == len(rows.lin) and cone.shape[1] == len(rows.nodes)
+
+
 def test_node_rows_scale_as_the_pattern_rows():
     """cores.infeasible_core reads a certificate of the pattern SOCP with node_rows: each
     cone node's (r_n, r_t) rows and each kept u_n row must be the very rows pattern_rows built."""
