@@ -29,7 +29,7 @@ import numpy as np
 
 from .lp import LP_OPTIONS, lp_feasible
 from .rows import ZERO_ROW_RTOL, ConeRows, Rows, Status, count, pyramid_rows
-from .socp import VERIFY_TOL, pattern_attempts, violation
+from .socp import pattern_attempts, verified
 
 #: facets per node of the polyhedral pyramids, tried in turn
 PYRAMID_SIDES = (16, 64, 256)
@@ -119,8 +119,9 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
                 return Decision(Status.INFEASIBLE, farkas=o.farkas if farkas else None)
             count(counts, tag + "certificate_failed")
         elif o.x is not None:
-            if violation(rows, mu, o.x) <= VERIFY_TOL:
-                return Decision(Status.FEASIBLE, o.x / (rows.norm @ o.x), o.positive)
+            x = verified(rows, mu, o.x)
+            if x is not None:
+                return Decision(Status.FEASIBLE, x, o.positive)
             count(counts, tag + "verify_failed")
         if o.attempt == 0 and (rows.Z.shape[1] == 0 or np.abs(rows.norm @ rows.Z).max()
                                <= ZERO_ROW_RTOL * np.linalg.norm(rows.norm)):
@@ -130,9 +131,10 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
     for sides in pyramid_sides:
         status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_calls")
-        if status == Status.FEASIBLE and violation(rows, mu, x) <= VERIFY_TOL:
+        x = verified(rows, mu, x) if status == Status.FEASIBLE else None
+        if x is not None:
             count(counts, "pyramid_inner_feasible")
-            return Decision(Status.FEASIBLE, x / (rows.norm @ x))
+            return Decision(Status.FEASIBLE, x)
         status, _ = lp_feasible(pyramid_rows(rows, sides, inner=False), mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_calls")
         if status == Status.INFEASIBLE:

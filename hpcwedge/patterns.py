@@ -25,7 +25,7 @@ from .parallel.tasks import task_stopping
 from .problem import Parametrization, blocks
 from .results import TreeStats
 from .rows import ConeRows, Status, count, node_rows, pattern_rows, problem_dim
-from .socp import VERIFY_TOL, violation
+from .socp import verified
 from .symmetry import Symmetry
 
 MEETS_TOL = 1e-12
@@ -306,10 +306,7 @@ class PatternTree:
         rows = pattern_rows(param, m, zu, zr, self.friction)
         if not isinstance(rows, ConeRows):             # friction=False: an LP, no projection at hand
             return None
-        y = rows.Z @ (rows.Z.T @ x)
-        if violation(rows, mu, y) > VERIFY_TOL:
-            return None
-        return y / (rows.norm @ y)
+        return verified(rows, mu, rows.Z @ (rows.Z.T @ x))
 
 
 def expand_orbits(found: list[Subtree], symmetry: Symmetry | None, m: int) -> list[Subtree]:

@@ -36,10 +36,24 @@ def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
     relative to the size of the reactions, ||(r_n, r_t)|| over the cone nodes —
     not to ||x||, which a rigid lift-off (r = 0, u_n > 0) can make arbitrarily
     large without changing any reaction."""
+    x = _normalised(rows, x)
+    return math.inf if x is None else _violation(rows, mu, x)
+
+
+def verified(rows: ConeRows, mu: float, x: np.ndarray, tol: float = VERIFY_TOL) -> np.ndarray | None:
+    """x scaled to sum r_n = 1 when its `violation` is <= tol, else None."""
+    x = _normalised(rows, x)
+    return x if x is not None and _violation(rows, mu, x) <= tol else None
+
+
+def _normalised(rows: ConeRows, x: np.ndarray) -> np.ndarray | None:
+    """x / sum r_n (None: sum r_n <= 0 or not finite)."""
     nr = float(rows.norm @ x)
-    if not math.isfinite(nr) or nr <= 0:
-        return math.inf
-    x = x / nr
+    return x / nr if math.isfinite(nr) and nr > 0 else None
+
+
+def _violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
+    """`violation` at an x with sum r_n = 1."""
     size = max(math.sqrt(x @ x), 1e-300)
     eq, lin, cone = rows.at(x)
     v = 0.0
@@ -230,8 +244,8 @@ def certificate_ok(A, b, z, n_zero, n_lin, q: np.ndarray | None = None) -> bool:
     1 / CERT_TOL is feasible. q: the check of {q . w = 0, A w + s = b} instead, the
     multiplier of the extra row 1 (an optimal dual z of min q . w over the set, for
     which A^T z + q = 0)."""
-    bz = b @ z
-    if not np.isfinite(bz) or bz >= 0:
+    bz = float(b @ z)
+    if not math.isfinite(bz) or bz >= 0:
         return False
     z = z / -bz
     ATz = rmatvec(A, z)
@@ -239,10 +253,11 @@ def certificate_ok(A, b, z, n_zero, n_lin, q: np.ndarray | None = None) -> bool:
         ATz += q / -bz
     if np.abs(ATz).max() > CERT_TOL:
         return False
-    zl = z[n_zero:n_zero + n_lin]
-    if n_lin and zl.min() < -CERT_TOL:
+    if n_lin and z[n_zero:n_zero + n_lin].min() < -CERT_TOL:
         return False
     zc = z[n_zero + n_lin:].reshape(-1, 3)
-    if len(zc) and (np.sqrt(zc[:, 1] ** 2 + zc[:, 2] ** 2) - zc[:, 0]).max() > CERT_TOL:
-        return False
+    if len(zc):
+        c2 = zc * zc
+        if (np.sqrt(c2[:, 1] + c2[:, 2]) - zc[:, 0]).max() > CERT_TOL:
+            return False
     return True
