@@ -10,6 +10,7 @@ multipliers (kkt.py) are others. The ladder (`attempts`): attempt k is one `solv
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 from typing import Callable, Iterator
@@ -126,11 +127,7 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     rows that vanish on the kept columns dropped (as rows.kept_rows does)."""
     lay = _reaction_layout(rows.reactions, rows.zero_u.shape[0])
     nodes = rows.nodes
-    cols = lay.cols[nodes].ravel()
-    # [equilibrium; u_n of every node] on the kept columns, each row's norm
-    rest = lay.rest.take(np.concatenate([cols, lay.beta]), axis=1)
-    size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
-    kept = kept_sizes(size)
+    cols, rest, size, kept = _gap_columns(lay, rows.zero_r.tobytes())
     is_eq = np.concatenate([lay.equilibrium, rows.zero_u])
     eq = (kept & is_eq).nonzero()[0]
     lin = (kept & ~is_eq).nonzero()[0]
@@ -144,7 +141,23 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     return ReactionSOCP(problem, rows, cols, lin - lay.equilibrium.size, size[lin])
 
 
-@dataclass(frozen=True)
+@functools.lru_cache(maxsize=64)
+def _gap_columns(lay: _ReactionLayout, zero_r: bytes) -> tuple[np.ndarray, ...]:
+    """What `reaction_socp` cuts from `lay` for the gap set zero_r (the bytes of its mask;
+    shared by a node and its contact children, kept for the next few nodes): the columns
+    of the cone nodes' reactions, the rows [equilibrium; u_n of every node] on those and the
+    rigid amplitudes' columns (`rest`), each row's norm and whether it is kept (read-only)."""
+    nodes = (~np.frombuffer(zero_r, bool)).nonzero()[0]
+    cols = lay.cols[nodes].ravel()
+    rest = lay.rest.take(np.concatenate([cols, lay.beta]), axis=1)
+    size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
+    out = (cols, rest, size, kept_sizes(size))
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
+@dataclass(frozen=True, eq=False)
 class _ReactionLayout:
     """What `reaction_socp` cuts every pattern's problem from (one per parametrisation and
     m): rest [E 0; U_n] (E rows + m, n + n_beta); cols (m, 3) the columns of each node's
