@@ -528,6 +528,29 @@ def bench_search_3d() -> str:
                   "CPU s", "SCIP, same run"], rows)
 
 
+def bench_search_3d_kinds() -> str:
+    """Ours in results/bench_search_3d.json (an AMD EPYC with AVX-512) beside
+    results/bench_search_3d_no_avx512.json (one without it, later code): the counts of each
+    tree on both kinds, and the CPU seconds."""
+    kinds = [_load("bench_search_3d.json"), _load("bench_search_3d_no_avx512.json")]
+    arch = [k["environment"]["blas"][0]["architecture"] for k in kinds]
+    recs = [{(r["task"], r["m"]): r for r in k["records"] if r.get("engine", "ours") == "ours"} for k in kinds]
+    rows = []
+    for key, a in recs[0].items():
+        b = recs[1].get(key)
+        if b is None or "ok" not in (a["status"], b["status"]):
+            continue
+        enum = key[0] == "enumerate"
+        same = (a["nodes"], a["socps"]) == (b["nodes"], b["socps"])
+        answer = "the same" if (a.get("patterns_hash") == b.get("patterns_hash") if enum
+                                else abs(a["mu_c"] - b["mu_c"]) <= 1e-14 * a["mu_c"]) else "another"
+        rows.append([key[0], f"{a['levels']} × {a['ring']}", str(key[1]),
+                     f"{a['nodes']:,} / {a['socps']:,}", "the same" if same else f"{b['nodes']:,} / {b['socps']:,}",
+                     answer, _s(a["seconds"], 3), _s(b["seconds"], 3)])
+    return table(["search", "plug3d", "m", f"nodes / SOCPs ({arch[0]})", f"nodes / SOCPs ({arch[1]})",
+                  "patterns (hash) or mu^c (to 1e-14)", f"CPU s ({arch[0]})", f"CPU s ({arch[1]})"], rows)
+
+
 def _scip_cell(p: dict | None, ours: dict, limit: float | None) -> str:
     """The SCIP peer's answer and CPU seconds beside ours: the same pattern set (hash) or its
     mu^c's distance from ours; a run cut at the time limit as "> limit s"."""
@@ -600,6 +623,9 @@ BENCHMARKS: dict = {
                           " scip_bisect --out results/bench_global_mu_c_block2d]"),
     "bench_search_3d": (bench_search_3d, "results/bench_search_3d.json, results/bench_search_3d_before.json",
                         "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full"),
+    "bench_search_3d_kinds": (bench_search_3d_kinds, "results/bench_search_3d.json, results/bench_search_3d_no_avx512.json",
+                              "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full [--no-peers --out"
+                              " results/bench_search_3d_no_avx512]"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
 }
 
