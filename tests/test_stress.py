@@ -50,14 +50,22 @@ def answer(res):
 
 @pytest.mark.parametrize("taper,delta", [(1.0, 1e-7), (1.0, -1e-7), (1.0, 1e-9), (0.1, 1e-9)])
 def test_float_dd_near_mu_c_on_small_taper(taper, delta):
-    """mu = tan(taper) (1 + delta): the float DD alone (no fallback) finds the exact rays
-    (before the balanced coordinates: 1 ray instead of 8, or 1 instead of 0)."""
+    """mu = tan(taper) (1 + delta): 1e-7 off mu^c the float DD alone (no fallback) finds the
+    exact rays and flags nothing (before the balanced coordinates: 1 ray instead of 8, or 1
+    instead of 0); 1e-9 off it flags its run as suspect, and the default (the exact
+    fallback) gives the exact rays. What a flagged float run finds depends on the BLAS
+    kernels (0.1 deg, 1e-9: 8 rays under OpenBLAS's Haswell kernels, 10 under Sandybridge)."""
     spec = grid.builtin("plug2d", rows=4, taper_deg=taper)
     mu = tan(taper) * (1 + delta)
     raw = run(spec, mu, exact_fallback_max_m=0, mu_c="none")
     exact = run(spec, mu, exact=True, mu_c="none")
-    assert answer(raw) == answer(exact)
-    assert raw.runs[0].n_wedged_rays == (8 if delta > 0 else 0)
+    flagged = raw.stats["numerics"]["flagged"]
+    assert flagged == (abs(delta) < 1e-8)
+    if not flagged:
+        assert answer(raw) == answer(exact)
+    res = run(spec, mu, mu_c="none")
+    assert answer(res) == answer(exact)
+    assert res.runs[0].n_wedged_rays == (8 if delta > 0 else 0)
 
 
 @pytest.mark.parametrize("label,spec,mu", [
@@ -227,9 +235,11 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
     order left a row 1e-10 from the span of the others: the initial rays had cond 1e11,
     their combinations zero flags off by up to 0.75, so nearly every ray looked
     degenerate (at m = 16 the face ran > 16 min instead of 0.2 s). Now the basis is
-    well conditioned and every ray's zero flags agree with its values."""
+    well conditioned and every ray's zero flags agree with its values up to the close-call
+    band (this is the close-call scene: under OpenBLAS's Sandybridge kernels one ray flagged
+    nonzero has a.x = -1.6e-11 when recomputed, inside the band)."""
     from hpcwedge.build import build_model, contact_problem
-    from hpcwedge.dd import face_rows, initial_basis
+    from hpcwedge.dd import CLOSE_CALL_FACTOR, FLOAT_ZERO_TOL, face_rows, initial_basis
     from hpcwedge.faces import split_faces
     from hpcwedge.numerics import NumericsReport
 
@@ -244,4 +254,6 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
         assert np.linalg.cond(A[basis]) < 1e3, face
         dd = complementary_rays(A, m, face=face)
         S = dd.X @ A.T
-        assert np.abs(S[dd.zero]).max(initial=0.0) < 1e-8 and S[~dd.zero].min(initial=1.0) > 0, face
+        band = CLOSE_CALL_FACTOR * FLOAT_ZERO_TOL
+        assert np.abs(S[dd.zero]).max(initial=0.0) < 1e-8, face
+        assert S[~dd.zero].min(initial=1.0) > -band, face
