@@ -74,6 +74,13 @@ class Rows:
         return eq_null_space(unit_rows(self.a0[self.eq]), self.a0.shape[1])
 
 
+def _gathered(block: str, index: str) -> functools.cached_property:
+    """A ConeRows field cut from its node blocks on first use: node_blocks.<block>[<index>]."""
+    def cut(self):
+        return getattr(self.node_blocks, block)[getattr(self, index)]
+    return functools.cached_property(cut)
+
+
 @dataclass(frozen=True)
 class ConeRows:
     """The 3D pattern SOCP (module doc) of the pattern zero_u, zero_r (m,), its rows cut on
@@ -96,37 +103,18 @@ class ConeRows:
         """eq's rows among the node rows [u_n; r_n; r_t1; r_t2] (4m): u_n of contact nodes,
         (r_n, r_t1, r_t2) of gap nodes, zero rows dropped."""
         zr = self.zero_r
-        pick = np.concatenate([self.zero_u, zr, zr, zr]).nonzero()[0]
-        return pick if self.node_blocks.all_kept else pick[kept_sizes(self.node_blocks.size[pick])]
-
-    @functools.cached_property
-    def eq(self) -> np.ndarray:
-        return self.node_blocks.unit[self.eq_index]
+        return self.node_blocks.nonzero(np.concatenate([self.zero_u, zr, zr, zr]).nonzero()[0])
 
     @functools.cached_property
     def lin_nodes(self) -> np.ndarray:
-        free_u = (~self.zero_u).nonzero()[0]
-        return free_u if self.node_blocks.all_kept else free_u[kept_sizes(self.node_blocks.size[free_u])]
+        return self.node_blocks.nonzero((~self.zero_u).nonzero()[0])
 
-    @functools.cached_property
-    def lin(self) -> np.ndarray:
-        return self.node_blocks.unit[self.lin_nodes]
-
-    @functools.cached_property
-    def lin_scale(self) -> np.ndarray:
-        return self.node_blocks.size[self.lin_nodes]
-
-    @functools.cached_property
-    def rn(self) -> np.ndarray:
-        return self.node_blocks.rn[self.nodes]
-
-    @functools.cached_property
-    def rt(self) -> np.ndarray:
-        return self.node_blocks.rt[self.nodes]
-
-    @functools.cached_property
-    def scale(self) -> np.ndarray:
-        return self.node_blocks.scale[self.nodes]
+    eq = _gathered("unit", "eq_index")
+    lin = _gathered("unit", "lin_nodes")
+    lin_scale = _gathered("size", "lin_nodes")
+    rn = _gathered("rn", "nodes")
+    rt = _gathered("rt", "nodes")
+    scale = _gathered("scale", "nodes")
 
     def at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The rows at x (d,): eq x, lin x and the cones' (rn x, rt1 x, rt2 x) (3, c), from
@@ -225,6 +213,10 @@ class _NodeBlocks:
     norm: np.ndarray
     stacked: np.ndarray
     all_kept: bool
+
+    def nonzero(self, pick: np.ndarray) -> np.ndarray:
+        """Of the rows `pick` (indices into rows), those kept_sizes keeps."""
+        return pick if self.all_kept else pick[kept_sizes(self.size[pick])]
 
 
 def _node_blocks(param: Parametrization, m: int) -> _NodeBlocks:
