@@ -342,15 +342,16 @@ def _result_file(result: Result | str | os.PathLike) -> Iterator[str]:
 
 def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1,
          ray: int | None = None, pattern: int | None = None) -> None:
-    """Draw a wedged configuration and the cones' mu^c as a PNG (``hpcwedge plot``:
-    plot.plot_result).
+    """Draw a wedged configuration and the cones' mu^c as a PNG, PDF or SVG (``hpcwedge
+    plot``: plot.plot_result).
 
     Parameters
     ----------
     result : Result or path
         A solved Result or a result file.
     output : path
-        The PNG to write (atomically).
+        The figure to write (atomically), in the format of its suffix: .png (or none),
+        .pdf, .svg.
     run : int
         Which run (Python-style index, -1: the last).
     ray, pattern : int, optional

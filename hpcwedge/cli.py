@@ -30,22 +30,27 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     stderr = sys.stderr
     sys.stderr = _Stderr(stderr)
+    from . import __version__
     p = _Parser(prog="hpcwedge", description="Wedged configurations and critical friction "
-                "coefficients of elastic bodies in frictional contact.")
-    sub = p.add_subparsers(dest="cmd", required=True)
+                "coefficients of elastic bodies in frictional contact.",
+                epilog="Exit status: 0 done; 2 a failure you can fix (one line naming the key or "
+                "file); 75 stopped by a signal, a checkpoint written (rerun with --resume); 1 an "
+                "internal error (HPCWEDGE_DEBUG=1 prints the traceback).")
+    p.add_argument("--version", action="version", version=f"hpcwedge {__version__}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="command")
     r = sub.add_parser("run", help="solve a scene and write RESULT.h5")
-    r.add_argument("scene")
-    r.add_argument("-o", "--output", required=True)
+    r.add_argument("scene", help="the scene (TOML)")
+    r.add_argument("-o", "--output", required=True, metavar="RESULT.h5", help="the result file to write (HDF5)")
     r.add_argument("--resume", action="store_true",
                    help="continue from the checkpoint RESULT.h5.ckpt if it exists (else start afresh)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     s = sub.add_parser("show", help="print a result")
-    s.add_argument("result")
+    s.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
     s.add_argument("--json", action="store_true", help="one JSON object (SPEC §4)")
     s.add_argument("--no-rays", action="store_true", help="leave the ray vectors out of the JSON")
     pl = sub.add_parser("plot", help="draw a wedged configuration and the cones' / patterns' mu^c")
-    pl.add_argument("result")
-    pl.add_argument("-o", "--output", required=True)
+    pl.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
+    pl.add_argument("-o", "--output", required=True, help="the figure to write (its format from the suffix: .png, .pdf, .svg)")
     pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     pl.add_argument("--ray", type=int, help="2D: wedged ray to draw (default 0)")
     pl.add_argument("--pattern", type=int, help="3D: sign pattern to draw (default 0)")
@@ -53,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
                         description="Recover every node's displacement, the contact reactions and the "
                         "element stresses (von Mises / bar axial force) of one item of a result, on the "
                         "body rebuilt from the stored scene, and write them as a VTK XML unstructured grid.")
-    ex.add_argument("result")
+    ex.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
     ex.add_argument("-o", "--output", required=True, help="the .vtu file to write")
     ex.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     item = ex.add_mutually_exclusive_group(required=True)
@@ -119,7 +124,9 @@ class _Parser(argparse.ArgumentParser):
     """argparse, with its usage errors as one line and exit status 2 (the usage is in --help)."""
 
     def error(self, message: str):
-        raise _UserError(f"{self.prog}: {message} (see {self.prog} --help)")
+        # the command's name when a command's own arguments are wrong ("hpcwedge run: ...")
+        where = "" if self.prog == "hpcwedge" else f"{self.prog}: "
+        raise _UserError(f"{where}{message} (see {self.prog} --help)")
 
 
 def _error(message: str, code: int) -> int:
@@ -366,7 +373,11 @@ def _show(args) -> int:
 
 
 def _plot(args) -> int:
-    from .plot import plot_result
+    from .plot import figure_format, plot_result
+    try:
+        figure_format(args.output)
+    except ValueError as e:
+        raise _UserError(str(e)) from None
     _read(args.result, with_rays=False)
     check_output(args.output, (args.result,))
     try:

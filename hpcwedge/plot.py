@@ -1,5 +1,5 @@
 """`hpcwedge plot` (SPEC §4): one wedged configuration and the mu^c of a run's cones or
-sign patterns, as a PNG.
+sign patterns, as a PNG, PDF or SVG (by the output's suffix: `figure_format`).
 
 2D (`--ray J`). Left panel: with a /model group, the undeformed body (light grey) and the
 whole body deformed by the chosen wedged ray (recovery.load_configuration: interior
@@ -32,18 +32,22 @@ ARROW_FRACTION = 0.15    # largest drawn reaction arrow / body size (3D: twice t
 WALL_FRACTION = 0.12     # length of a wall segment / body size
 MAX_TICKS = 40           # per-item tick labels only up to this many bars
 AXIAL_LABEL = "bar axial force (tension > 0)"
+#: the figure formats by file suffix (no suffix: PNG)
+FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg", "": "png"}
 
 
 def plot_result(path: str, output: str, run: int = -1, ray: int | None = None,
                 pattern: int | None = None) -> None:
     """Draw run `run` (Python-style index, -1 = last) of the result file `path` and save the
-    figure as PNG to `output` (atomically): for a 2D result its wedged ray `ray` (default 0),
-    for a 3D result its sign pattern `pattern` (default 0).
+    figure to `output` (atomically; PNG, PDF or SVG by its suffix, `figure_format`): for a
+    2D result its wedged ray `ray` (default 0), for a 3D result its sign pattern `pattern`
+    (default 0).
 
-    ValueError (one line) for a bad run, ray or pattern index, `pattern` given for a 2D or
-    `ray` for a 3D result (PlotError), or a file that is missing, damaged or not a hpcwedge
-    result (files.FileError).
+    ValueError (one line) for an output suffix of no known format, a bad run, ray or
+    pattern index, `pattern` given for a 2D or `ray` for a 3D result (PlotError), or a file
+    that is missing, damaged or not a hpcwedge result (files.FileError).
     """
+    fmt = figure_format(output)
     data = _load(path, run, ray, pattern)
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -64,7 +68,19 @@ def plot_result(path: str, output: str, run: int = -1, ray: int | None = None,
                  fontsize=12)
     if data["dim"] == 2:
         fig.tight_layout()
-    _save_atomic(fig, output)
+    replace_atomic(output, lambda tmp: fig.savefig(tmp, format=fmt), "." + fmt)
+
+
+def figure_format(output: str) -> str:
+    """The format of a figure written to `output`, from its suffix (FORMATS, any case; no
+    suffix: "png"); PlotError for any other suffix."""
+    suffix = os.path.splitext(os.fspath(output))[1]
+    fmt = FORMATS.get(suffix.lower())
+    if fmt is None:
+        known = ", ".join(k for k in FORMATS if k)
+        raise PlotError(f"plot: {os.fspath(output)}: no figure format for the suffix {suffix!r} "
+                        f"(use {known})")
+    return fmt
 
 
 # --------------------------------------------------------------------------- reading
@@ -381,6 +397,3 @@ def message(ax, note: str, title: str) -> None:
     ax.set_yticks([])
     ax.set_title(title, fontsize=10)
 
-
-def _save_atomic(fig, output: str) -> None:
-    replace_atomic(output, lambda tmp: fig.savefig(tmp, format="png"), ".png")

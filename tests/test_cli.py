@@ -250,6 +250,16 @@ def test_usage_errors_one_line_exit_2(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and err.startswith("hpcwedge: error: hpcwedge run:") and "-o" in err
 
 
+def test_version_and_no_command(capsys):
+    from hpcwedge import __version__
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out == f"hpcwedge {__version__}\n"
+    assert main([]) == 2
+    err = capsys.readouterr().err
+    assert err == "hpcwedge: error: the following arguments are required: command (see hpcwedge --help)\n"
+
+
 def _result(tmp_path) -> str:
     return _run_quiet(tmp_path, _t(PLUG), "res")
 

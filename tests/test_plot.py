@@ -67,6 +67,29 @@ def test_stiffness_scene_png(stiffness_h5, tmp_path):
     check_png(png)
 
 
+@pytest.mark.parametrize("name,head", [("fig.svg", b"<?xml"), ("FIG.PDF", b"%PDF-"), ("fig", b"\x89PNG")])
+def test_format_from_the_suffix(stiffness_h5, tmp_path, name, head):
+    out = tmp_path / name
+    plot_result(stiffness_h5, str(out))
+    with open(out, "rb") as f:
+        data = f.read()
+    assert data.startswith(head) and len(data) > 5_000, data[:40]
+    if head == b"<?xml":
+        assert b"<svg" in data[:2000]
+
+
+@pytest.mark.parametrize("name", ["fig.jpeg", "fig.h5", "fig.png.bak"])
+def test_unknown_suffix_refused_before_anything(stiffness_h5, tmp_path, capsys, name):
+    with pytest.raises(ValueError, match="no figure format"):
+        plot_result(stiffness_h5, str(tmp_path / name))
+    assert main(["plot", stiffness_h5, "-o", str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("hpcwedge: error: plot:") and ".png, .pdf, .svg" in err
+    assert not (tmp_path / name).exists()
+    assert main(["plot", str(tmp_path / "missing.h5"), "-o", str(tmp_path / name)]) == 2
+    assert "no figure format" in capsys.readouterr().err    # the output is checked first
+
+
 def test_run_and_ray_indices(stiffness_h5, tmp_path):
     png = tmp_path / "fig.png"
     plot_result(stiffness_h5, str(png), run=0, ray=-1)
