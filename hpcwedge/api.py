@@ -379,7 +379,7 @@ def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *,
     result : Result or path
         A solved Result or a result file.
     output : path
-        The .vtu file to write (ParaView).
+        The .vtu file to write (ParaView; another suffix: ValueError).
     run : int
         Which run (Python-style index, -1: the last).
     ray, cone, pattern : int
@@ -396,6 +396,8 @@ def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *,
     ------
     recovery.ConfigurationError
         One line: a bad index, a result without a body (a stiffness scene), a bad file.
+    ValueError
+        An output name that does not end in .vtu.
 
     Examples
     --------
@@ -408,8 +410,9 @@ def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *,
     >>> c.displacement.shape
     (6, 2)
     """
-    from .export import write_vtu
+    from .export import check_vtu_name, write_vtu
     from .recovery import load_configuration
+    check_vtu_name(output)
     with _result_file(result) as path:
         config = load_configuration(path, run=run, ray=ray, cone=cone, pattern=pattern)
     write_vtu(config, os.fspath(output))

@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
                         "element stresses (von Mises / bar axial force) of one item of a result, on the "
                         "body rebuilt from the stored scene, and write them as a VTK XML unstructured grid.")
     ex.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
-    ex.add_argument("-o", "--output", required=True, help="the .vtu file to write")
+    ex.add_argument("-o", "--output", required=True, help="the file to write (its name ends in .vtu)")
     ex.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     item = ex.add_mutually_exclusive_group(required=True)
     item.add_argument("--ray", type=int, help="2D: wedged ray J")
@@ -388,9 +388,13 @@ def _plot(args) -> int:
 
 
 def _export(args) -> int:
-    from .export import write_vtu
+    from .export import check_vtu_name, write_vtu
     from .recovery import ConfigurationError, load_configuration
     check_output(args.output, (args.result,))
+    try:
+        check_vtu_name(args.output)
+    except ValueError as e:
+        raise _UserError(str(e)) from None
     try:
         config = load_configuration(args.result, run=args.run, ray=args.ray, cone=args.cone,
                                     pattern=args.pattern)

@@ -3,6 +3,7 @@ VTK XML unstructured grid for ParaView, written atomically (files.replace_atomic
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -10,8 +11,18 @@ from .files import replace_atomic
 from .recovery import Configuration
 
 
+def check_vtu_name(path: str) -> None:
+    """ValueError (one line) unless `path` ends in .vtu (any case): ParaView picks its reader
+    by the suffix, and the file is a VTK XML unstructured grid whatever it is called."""
+    suffix = os.path.splitext(os.fspath(path))[1]
+    if suffix.lower() != ".vtu":
+        raise ValueError(f"export: {os.fspath(path)}: the file is a VTK XML unstructured grid; "
+                         f"name it *.vtu (not {suffix!r}), the suffix ParaView reads it by")
+
+
 def write_vtu(config: Configuration, path: str) -> None:
-    """Write the configuration as a VTK XML unstructured grid (meshio), atomically.
+    """Write the configuration as a VTK XML unstructured grid (meshio), atomically, to a
+    path ending in .vtu (else ValueError, `check_vtu_name`).
 
     points: model.coords padded to 3 components. Point data: "displacement" (n, 3) and
     "reaction" (n, 3) (global axes, padded with 0 in 2D; reaction nonzero at contact nodes
@@ -19,6 +30,7 @@ def write_vtu(config: Configuration, path: str) -> None:
     block of model.cells: "von_mises" (continuum) and/or "axial_force" (bars), NaN on blocks
     of the other family.
     """
+    check_vtu_name(path)
     import meshio
     mdl = config.model
     n, dim = mdl.coords.shape

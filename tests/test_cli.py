@@ -147,6 +147,21 @@ def test_export_errors_exit_2(tmp_path, capsys, args, phrase):
     assert not vtu.exists() and not [p for p in os.listdir(tmp_path) if p.startswith(".tmp")]
 
 
+@pytest.mark.parametrize("name", ["x.vtk", "x", "x.vtu.tmp"])
+def test_export_needs_a_vtu_name(tmp_path, capsys, name):
+    from hpcwedge.api import export_vtu
+    res = _run_quiet(tmp_path, 'name = "p"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 2\n'
+                     '[friction]\nmu = [0.65]\n', "p2")
+    assert main(["export", res, "--ray", "0", "-o", str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("hpcwedge: error: export:") and "*.vtu" in err, err
+    with pytest.raises(ValueError, match=r"name it \*\.vtu"):
+        export_vtu(res, tmp_path / name, ray=0)
+    assert not (tmp_path / name).exists()
+    assert main(["export", res, "--ray", "0", "-o", str(tmp_path / "X.VTU")]) == 0
+    assert open(tmp_path / "X.VTU", "rb").read(5) == b"<?xml"
+
+
 def test_export_stiffness_scene_and_missing_file(tmp_path, capsys):
     res = _run_quiet(tmp_path, 'name = "k"\ndim = 2\n[model]\nkind = "stiffness"\n'
                      'K = [[2.0, 0.5], [0.5, 1.0]]\n[friction]\nmu = [2.5]\n', "k")
