@@ -214,6 +214,10 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
             raise SceneError(f"friction.mu: every value must be a finite number > 0, got {v!r}")
         if not MU_RANGE[0] <= v <= MU_RANGE[1]:
             raise SceneError(f"friction.mu: every value must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {v!r}")
+    twice = sorted({float(v) for v in mus if sum(float(w) == float(v) for w in mus) > 1})
+    if twice:
+        # each value is one run: a repeated one would be computed again for the same answer
+        raise SceneError(f"friction.mu: {twice[0]!r} is listed twice (each value is one run)")
     compute = dict(COMPUTE_DEFAULTS)
     given = data.get("compute", {})
     _unknown(given, set(COMPUTE_DEFAULTS), "compute.")

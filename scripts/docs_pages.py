@@ -42,7 +42,7 @@ MEANINGS: dict[str, dict[str, tuple[str, str, str]]] = {
         "kind": ("string", "", "The kind of body: {kinds}. The other keys of [model] depend on it (below)."),
     },
     "friction": {
-        "mu": ("number or list of numbers", "1", "Coulomb friction coefficients to enumerate at, each in [1e-6, 1e6]."),
+        "mu": ("number or list of numbers", "1", "Coulomb friction coefficients to enumerate at, each in [1e-6, 1e6] and listed once (a run per value, in increasing order)."),
     },
     "compute": {
         "enumerate": ('true, false, "rays" or "patterns"', "",

@@ -213,6 +213,8 @@ BAD_SCENES = [
     (_t(PLUG, top="frction = 1"), "frction"),
     (_t(PLUG).replace("mu = [0.65]", 'mu = "0.5"'), "friction.mu"),
     (_t(PLUG).replace("mu = [0.65]", "mu = [nan]"), "friction.mu"),
+    (_t(PLUG).replace("mu = [0.65]", "mu = [0.65, 0.3, 0.65]"), "friction.mu"),
+    (_t(PLUG).replace("mu = [0.65]", "mu = [1, 0.5, 1.0]"), "friction.mu"),
     (_t(PLUG).replace("mu = [0.65]", "mu = [0.65]\nmuu = 1"), "friction.muu"),
     (_t(PLUG, tail="[compute]\nenumerate = 1"), "compute.enumerate"),
     (_t(PLUG, tail="[compute]\nmu_max = inf"), "compute.mu_max"),
