@@ -476,6 +476,7 @@ def scene_cases() -> list[Case]:
     add("friction.mu nan", with_(P, "friction.mu", [float("nan")]), "mu")
     add("friction.mu inf", with_(P, "friction.mu", [float("inf")]), "mu")
     add("friction.mu true", with_(P, "friction.mu", [True]), "mu")
+    add("friction.mu listed twice", with_(P, "friction.mu", [0.65, 0.3, 0.65]), "mu")
     add("friction unknown key", with_(P, "friction.mu_s", 0.5), "mu_s")
     add("compute.enumerate 'x'", with_(P, "compute.enumerate", "x"), "enumerate")
     add("compute.enumerate 1 (not a bool)", with_(P, "compute.enumerate", 1), "enumerate")
@@ -667,6 +668,10 @@ def output_cases() -> list[Case]:
     plot_like(lambda c, r: ["plot", r, "-o", r], "r.h5", "plot -o the result itself")
     plot_like(lambda c, r: ["export", r, "--ray", "0", "-o", r], "r.h5", "export -o the result itself")
     plot_like(lambda c, r: ["plot", r, "-o", c.folder], "directory", "plot -o a directory")
+    plot_like(lambda c, r: ["plot", r, "-o", os.path.join(c.folder, "f.jpg")], "f.jpg",
+              "plot -o a suffix of no figure format")
+    plot_like(lambda c, r: ["export", r, "--ray", "0", "-o", os.path.join(c.folder, "c.vtk")], "c.vtk",
+              "export -o a name not ending in .vtu")
     plot_like(lambda c, r: ["plot", r, "-o", os.path.join(c.folder, "no", "f.png")], "no/f.png",
               "plot -o missing parent")
     plot_like(lambda c, r: ["export", r, "--ray", "0", "-o", device(c, r)], "null", "export -o a device node")
