@@ -44,6 +44,15 @@ def test_reaction_matrix_is_stored_as_clarabel_reads_it():
         assert not dense[A.k:, 3 * c:].any()
         z = rng.standard_normal(A.shape[0])
         assert np.allclose(A.rmatvec(z), dense.T @ z, rtol=0, atol=1e-13)
+        # the dense rows: unit rows; a lin row's slack s = -A w is u_n / |row| of its node,
+        # u_n = U x at the point x of w (the parametrisation's own rows, another route)
+        socp = reaction_socp(rows, mu)
+        assert np.allclose(np.linalg.norm(dense[1:A.k], axis=1), 1.0, rtol=0, atol=1e-14)
+        w = rng.standard_normal(A.shape[1])
+        lin = slice(socp.problem.n_zero, socp.problem.n_zero + socp.problem.n_lin)
+        u_n = p.U[:m] @ socp.to_x(w)
+        assert np.allclose(-(dense @ w)[lin] * socp.lin_scale, u_n[socp.lin_nodes], rtol=0,
+                           atol=1e-13 * np.abs(u_n).max())
         for M, ref in ((A, dense), (dense, dense)):
             h = _clarabel_csc(M)
             assert h.has_canonical_format and h.nnz == len(h.data) and h.shape == ref.shape
