@@ -234,13 +234,11 @@ class DenseDiag:
     def of(cls, Dt: np.ndarray, nd: int, mu: float) -> "DenseDiag":
         """The matrix of D = Dt.T (Dt (n, k - 1): D's columns as rows)."""
         n, k = Dt.shape[0], Dt.shape[1] + 1
-        template, mus = _dense_diag_layout(k, nd, n)
-        out = cls(template.copy(), k, nd, n)
-        head, tail = out._columns()
-        head[:, 1:k] = Dt[:nd]
-        tail[:, 1:] = Dt[nd:]
-        out.data[mus] = -mu
-        return out
+        template, dense, mus = _dense_diag_layout(k, nd, n)
+        data = template.copy()
+        data[dense] = Dt.ravel()
+        data[mus] = -mu
+        return cls(data, k, nd, n)
 
     def _columns(self) -> tuple[np.ndarray, np.ndarray]:
         """Views of `data`: the first nd columns (nd, k + 1: dense part, then the diagonal
@@ -313,17 +311,20 @@ def _clarabel_csc(A) -> _ClarabelCsc:
 
 
 @functools.lru_cache(maxsize=1024)
-def _dense_diag_layout(k: int, nd: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """What a DenseDiag (k, nd, n) holds in `data` for any D and mu (the first row's 1s and
-    0s, the diagonal's -1s; D's entries go to rows 1..k-1 of each column) and the positions
-    of the diagonal's -mu (shared: read-only)."""
+def _dense_diag_layout(k: int, nd: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where a DenseDiag (k, nd, n) keeps its entries in `data`: the entries it holds for any
+    D and mu (the first row's 1s and 0s, the diagonal's -1s), the positions of D's entries
+    (column by column) and of the diagonal's -mu (shared: read-only)."""
     split = nd * (k + 1)
     template = np.zeros(split + (n - nd) * k)
     head = template[:split].reshape(nd, k + 1)
     head[0::3, 0] = 1.0
     head[:, k] = -1.0
+    dense = np.empty((n, k - 1), np.intp)
+    dense[:nd] = (np.arange(nd) * (k + 1))[:, None] + 1 + np.arange(k - 1)
+    dense[nd:] = (split + np.arange(n - nd) * k)[:, None] + 1 + np.arange(k - 1)
     mus = np.arange(0, nd, 3) * (k + 1) + k
-    out = (template, mus)
+    out = (template, dense.ravel(), mus)
     for a in out:
         a.flags.writeable = False
     return out

@@ -127,11 +127,14 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     rows that vanish on the kept columns dropped (as rows.kept_rows does)."""
     lay = _reaction_layout(rows.reactions, rows.zero_u.shape[0])
     nodes = rows.nodes
-    cols, signed, size, kept = _gap_columns(lay, rows.zero_r.tobytes())
+    cols, rest, size, kept = _gap_columns(lay, rows.zero_r.tobytes())
     is_eq = np.concatenate([lay.equilibrium, rows.zero_u])
     eq = (kept & is_eq).nonzero()[0]
     lin = (kept & ~is_eq).nonzero()[0]
-    A = DenseDiag.of(signed.take(np.concatenate([eq, lin + len(size)]), axis=1), 3 * len(nodes), mu)
+    order = np.concatenate([eq, lin])
+    scale = size[order]
+    scale[len(eq):] *= -1.0                     # a lin row is -u_n: s = -A w = u_n >= 0
+    A = DenseDiag.of(rest.T[:, order] / scale, 3 * len(nodes), mu)
     b = np.zeros(A.shape[0])
     b[0] = 1.0
     problem = ConicProblem(A, b, 1 + len(eq), len(lin), len(nodes))
@@ -142,18 +145,13 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
 def _gap_columns(lay: _ReactionLayout, zero_r: bytes) -> tuple[np.ndarray, ...]:
     """What `reaction_socp` cuts from `lay` for the gap set zero_r (the bytes of its mask;
     shared by a node and its contact children, kept for the next few nodes): the columns
-    of the cone nodes' reactions; `signed`, the rows [equilibrium; u_n of every node] on
-    those and the rigid amplitudes' columns, transposed, each divided by its norm and then
-    by minus its norm (k rows: (columns, 2k), the second half a lin row's -u_n / |u_n|: s =
-    -A w = u_n >= 0); each row's norm and whether it is kept (read-only)."""
+    of the cone nodes' reactions, the rows [equilibrium; u_n of every node] on those and the
+    rigid amplitudes' columns (`rest`), each row's norm and whether it is kept (read-only)."""
     nodes = (~np.frombuffer(zero_r, bool)).nonzero()[0]
     cols = lay.cols[nodes].ravel()
     rest = lay.rest.take(np.concatenate([cols, lay.beta]), axis=1)
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
-    kept = kept_sizes(size)
-    by = np.where(kept, size, 1.0)              # a dropped row is never taken
-    signed = np.concatenate([rest.T / by, rest.T / -by], axis=1)
-    out = (cols, signed, size, kept)
+    out = (cols, rest, size, kept_sizes(size))
     for a in out:
         a.flags.writeable = False
     return out
