@@ -245,11 +245,12 @@ def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
 
 
-def check_output(path: str, inputs=()) -> None:
+def check_output(path: str, inputs=(), name_check=None) -> None:
     """Refuse an output path before any work (_UserError naming it): empty, a directory or
     any other existing non-regular file (a device, a pipe), in a missing or read-only
-    folder, not writable, or the same file as one of `inputs` (hard and symbolic links
-    included). Used by run, plot and export."""
+    folder, not writable, the same file as one of `inputs` (hard and symbolic links
+    included), or a name that name_check(path) refuses (ValueError: a suffix of the wrong
+    format). Used by run, plot and export."""
     if not path:
         raise _UserError("-o: empty file name")
     folder = os.path.dirname(os.path.abspath(path))
@@ -280,6 +281,11 @@ def check_output(path: str, inputs=()) -> None:
         raise _UserError(f"{path}: folder {folder} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise _UserError(f"{path}: cannot write in {folder} (read-only file system or no permission)")
+    if name_check is not None:
+        try:
+            name_check(path)
+        except ValueError as e:
+            raise _UserError(str(e)) from None
 
 
 class OutputLock:
@@ -374,12 +380,8 @@ def _show(args) -> int:
 
 def _plot(args) -> int:
     from .plot import figure_format, plot_result
-    try:
-        figure_format(args.output)
-    except ValueError as e:
-        raise _UserError(str(e)) from None
+    check_output(args.output, (args.result,), figure_format)
     _read(args.result, with_rays=False)
-    check_output(args.output, (args.result,))
     try:
         plot_result(args.result, args.output, run=args.run, ray=args.ray, pattern=args.pattern)
     except ValueError as e:
@@ -390,11 +392,7 @@ def _plot(args) -> int:
 def _export(args) -> int:
     from .export import check_vtu_name, write_vtu
     from .recovery import ConfigurationError, load_configuration
-    check_output(args.output, (args.result,))
-    try:
-        check_vtu_name(args.output)
-    except ValueError as e:
-        raise _UserError(str(e)) from None
+    check_output(args.output, (args.result,), check_vtu_name)
     try:
         config = load_configuration(args.result, run=args.run, ray=args.ray, cone=args.cone,
                                     pattern=args.pattern)

@@ -214,10 +214,11 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
             raise SceneError(f"friction.mu: every value must be a finite number > 0, got {v!r}")
         if not MU_RANGE[0] <= v <= MU_RANGE[1]:
             raise SceneError(f"friction.mu: every value must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {v!r}")
-    twice = sorted({float(v) for v in mus if sum(float(w) == float(v) for w in mus) > 1})
-    if twice:
+    values = sorted(map(float, mus))
+    twice = next((a for a, b in zip(values, values[1:]) if a == b), None)
+    if twice is not None:
         # each value is one run: a repeated one would be computed again for the same answer
-        raise SceneError(f"friction.mu: {twice[0]!r} is listed twice (each value is one run)")
+        raise SceneError(f"friction.mu: {twice!r} is listed twice (each value is one run)")
     compute = dict(COMPUTE_DEFAULTS)
     given = data.get("compute", {})
     _unknown(given, set(COMPUTE_DEFAULTS), "compute.")
@@ -299,7 +300,7 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     if kind == "mesh":
         _check_mesh(params, contact, dim, obstacles is not None)
     return Scene(name=name, dim=dim, kind=kind, model=params, contact=contact,
-                 mu=tuple(sorted(float(v) for v in mus)), enumerate=compute["enumerate"],
+                 mu=tuple(values), enumerate=compute["enumerate"],
                  mu_c=compute["mu_c"], mu_c_method=compute["mu_c_method"],
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
