@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
+import stat
 import tempfile
 
 import h5py
@@ -84,13 +85,41 @@ def verify_checksum(path: str) -> bool:
     return True
 
 
+def _umask() -> int:
+    """The process's file mode creation mask (Linux: read from /proc, which leaves it
+    untouched; elsewhere set and restored)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def output_mode(path: str) -> int:
+    """The permission bits a file written to `path` gets: those of the regular file it
+    replaces, else 0666 less the umask - what open(path, "w") would give."""
+    try:
+        st = os.stat(path)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    except OSError:
+        pass
+    return 0o666 & ~_umask()
+
+
 def replace_atomic(path: str, write, suffix: str, tmp_path: str | None = None) -> None:
     """Make the file `path` through `write(tmp)`, which fills the temp file `tmp` (same
-    folder; a fresh ".tmp-*<suffix>" name, mode 0600, or the fixed `tmp_path`: a stale one
-    from a killed writer is simply overwritten) and may raise to refuse it. Then tmp is
-    fsynced and renamed onto `path` and the folder fsynced, so a crash never leaves a
-    half-written file and a refused or failed write (OSError: full disk, read-only
-    folder...) raises, removes tmp and leaves `path` as it was."""
+    folder; a fresh ".tmp-*<suffix>" name, mode 0600 while written, or the fixed
+    `tmp_path`: a stale one from a killed writer is simply overwritten) and may raise to
+    refuse it. Then tmp is given `output_mode(path)`, fsynced and renamed onto `path` and
+    the folder fsynced, so a crash never leaves a half-written file and a refused or failed
+    write (OSError: full disk, read-only folder...) raises, removes tmp and leaves `path`
+    as it was."""
     folder = os.path.dirname(os.path.abspath(path)) or "."
     os.makedirs(folder, exist_ok=True)
     if tmp_path is None:
@@ -100,6 +129,7 @@ def replace_atomic(path: str, write, suffix: str, tmp_path: str | None = None) -
         tmp = tmp_path
     try:
         write(tmp)
+        os.chmod(tmp, output_mode(path))
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp, path)

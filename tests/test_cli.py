@@ -131,6 +131,22 @@ def test_export_vtu(tmp_path, capsys):
         assert got.cell_data[field][0].shape == (cells[1],) and np.isfinite(got.cell_data[field][0]).all()
 
 
+def test_outputs_follow_the_umask(tmp_path, capsys):
+    """The result, the figure and the VTU a user writes get 0666 less the umask, like any
+    file a shell command makes (before: 0600 whatever the umask)."""
+    import stat
+    old = os.umask(0o027)
+    try:
+        res = _run_quiet(tmp_path, 'name = "b"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 2\n'
+                         '[friction]\nmu = [0.65]\n', "b")
+        assert main(["plot", res, "-o", str(tmp_path / "f.svg")]) == 0
+        assert main(["export", res, "--ray", "0", "-o", str(tmp_path / "c.vtu")]) == 0
+    finally:
+        os.umask(old)
+    for name in ("b.h5", "f.svg", "c.vtu"):
+        assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o640, name
+
+
 @pytest.mark.parametrize("args,phrase", [
     (["--run", "4", "--ray", "0"], "run 4 out of range"),
     (["--ray", "500"], "ray 500 out of range"),

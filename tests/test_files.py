@@ -32,7 +32,42 @@ def test_replace_atomic_writes_through_a_temp_file_in_the_folder(tmp_path):
         open(tmp, "wb").write(b"picture")
     replace_atomic(str(path), write, ".png")
     assert path.read_bytes() == b"picture" and os.listdir(path.parent) == ["f.png"]
-    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and not os.path.exists(seen[0])
+    assert not os.path.exists(seen[0])
+
+
+@pytest.fixture
+def umask():
+    """Set the process's umask for the test (umask(m)), restored after it."""
+    old = os.umask(0o022)
+    os.umask(old)
+    yield os.umask
+    os.umask(old)
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o002, 0o077, 0o027])
+def test_new_file_mode_follows_the_umask(tmp_path, umask, mask):
+    """A new output gets what open(path, "w") would give, 0666 less the umask (before: the
+    temp file's 0600 whatever the umask, so a group's shared project folder got results
+    nobody else could read), on both temp-name routes."""
+    umask(mask)
+    path, ckpt = tmp_path / "f.png", tmp_path / "c.ckpt"
+    replace_atomic(str(path), lambda t: open(t, "wb").write(b"x"), ".png")
+    replace_atomic(str(ckpt), lambda t: open(t, "wb").write(b"x"), ".h5", tmp_path=str(ckpt) + ".tmp")
+    plain = tmp_path / "plain"
+    plain.write_bytes(b"x")
+    for p in (path, ckpt):
+        assert stat.S_IMODE(p.stat().st_mode) == stat.S_IMODE(plain.stat().st_mode) == 0o666 & ~mask
+
+
+def test_replaced_file_keeps_its_mode(tmp_path, umask):
+    """Writing over an existing file keeps its permission bits, as open(path, "w") does."""
+    umask(0o022)
+    path = tmp_path / "r.h5"
+    write_atomic(str(path), lambda f: f.create_dataset("a", data=[1]))
+    for mode in (0o640, 0o604, 0o600):
+        os.chmod(path, mode)
+        write_atomic(str(path), lambda f: f.create_dataset("a", data=[2]))
+        assert stat.S_IMODE(path.stat().st_mode) == mode and verify_checksum(str(path))
 
 
 @pytest.mark.parametrize("error", [OSError(28, "No space left on device"), KeyboardInterrupt()])
