@@ -44,8 +44,9 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--resume", action="store_true",
                    help="continue from the checkpoint RESULT.h5.ckpt if it exists (else start afresh)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
-    s = sub.add_parser("show", help="print a result")
-    s.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
+    s = sub.add_parser("show", help="print a result, or how far a checkpoint's run got")
+    s.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote, or its checkpoint "
+                   "(RESULT.h5.ckpt)")
     s.add_argument("--json", action="store_true", help="one JSON object (SPEC §4)")
     s.add_argument("--no-rays", action="store_true", help="leave the ray vectors out of the JSON")
     pl = sub.add_parser("plot", help="draw a wedged configuration and the cones' / patterns' mu^c")
@@ -347,6 +348,9 @@ def _read(path: str, with_rays: bool = True) -> dict:
 
 
 def _show(args) -> int:
+    from .parallel.checkpoint import is_checkpoint
+    if is_checkpoint(args.result):
+        return _show_checkpoint(args)
     if args.json:
         from .files import FileError
         from .resultfile import dump_result_json
@@ -375,6 +379,40 @@ def _show(args) -> int:
             print(f"         pattern {j}: contact {pat['contact']}, mu_c {mc}{flag}")
     t = res["timings"]
     print("timings: " + ", ".join(f"{k} {v:.3f} s" for k, v in t.items()))
+    return 0
+
+
+def _show_checkpoint(args) -> int:
+    """`show` of a checkpoint: how far its run got (parallel.checkpoint.checkpoint_summary)."""
+    import json
+    import time
+    from .files import resume_hint
+    from .parallel.checkpoint import CheckpointError, checkpoint_summary
+    try:
+        ck = checkpoint_summary(args.result)
+    except CheckpointError as e:
+        raise _UserError(str(e)) from None
+    if args.json:
+        print(json.dumps(ck))
+        return 0
+    when = (time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(ck["written_unix"]))
+            if ck["written_unix"] == ck["written_unix"] else "?")
+    sessions = ck["resumes"] + 1
+    print(f"{args.result}: checkpoint of an unfinished run of {ck['name'] or '(unnamed scene)'}, "
+          f"written {when} ({ck['reason'] or '?'})")
+    print(f"work so far: {ck['elapsed_s']:.1f} s in {sessions} session{'s' * (sessions > 1)}, "
+          f"last on {ck['ranks']} rank{'s' * (ck['ranks'] > 1)} (hpcwedge {ck['version']})")
+    for job in ck["jobs"]:
+        state = "done" if job["finished"] else "in progress"
+        if "found" in job:
+            nodes = job["counters"].get("nodes", 0)
+            mus = ", ".join(f"{v:g}" for v in job["mu"])
+            what = (f"{job['found']} pattern(s) found, {job['open']} open subtree(s), "
+                    f"{nodes:,} tree nodes (mu {mus})")
+        else:
+            what = f"{job['done']} of {job['tasks']} {job['kind']} task(s) done"
+        print(f"  {job['name']}: {what}; {state}")
+    print(f"to finish it: {resume_hint(args.result)}")
     return 0
 
 

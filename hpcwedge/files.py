@@ -36,6 +36,21 @@ def error_reason(e: BaseException) -> str:
     return " ".join(str(text).split()) or type(e).__name__
 
 
+#: the root attribute "format" of a checkpoint (parallel/checkpoint.py)
+CHECKPOINT_FORMAT = "hpcwedge-checkpoint"
+
+
+def checkpoint_path(output: str) -> str:
+    """Where the checkpoint of the run writing `output` lives."""
+    return output + ".ckpt"
+
+
+def resume_hint(ckpt: str) -> str:
+    """The command that finishes the run of the checkpoint file `ckpt`."""
+    result = ckpt.removesuffix(".ckpt") if ckpt.endswith(".ckpt") else "RESULT.h5"
+    return f"hpcwedge run SCENE -o {result} --resume"
+
+
 #: the user block at the start of every file write_atomic writes (see the module doc)
 USERBLOCK_SIZE = 512
 CHECKSUM_MAGIC = b"hpcwedge-sha256 "

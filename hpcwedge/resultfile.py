@@ -33,7 +33,8 @@ import h5py
 import numpy as np
 
 from . import __version__
-from .files import FileError, error_reason, verify_checksum, write_atomic
+from .files import (CHECKPOINT_FORMAT, FileError, checkpoint_path, error_reason, resume_hint, verify_checksum,
+                    write_atomic)
 
 
 def compression(arr: np.ndarray) -> str | None:
@@ -97,6 +98,10 @@ def open_result(path: str, passthrough: tuple = ()):
     wrong type or shape, bad JSON), is a FileError naming the file; exceptions of the
     classes in `passthrough` (the caller's own one-line errors) pass as they are."""
     if not os.path.exists(path):
+        ckpt = checkpoint_path(path)
+        if os.path.exists(ckpt):
+            raise FileError(f"{path}: no such file; its run stopped with a checkpoint: `hpcwedge show {ckpt}` "
+                            f"tells how far it got, `{resume_hint(ckpt)}` finishes it")
         raise FileError(f"{path}: no such file")
     try:
         st = os.stat(path)
@@ -108,6 +113,9 @@ def open_result(path: str, passthrough: tuple = ()):
         _VERIFIED.add(ident)
     try:
         with h5py.File(path, "r") as f:
+            if f.attrs.get("format") == CHECKPOINT_FORMAT:
+                raise FileError(f"{path}: a checkpoint of an unfinished run, not a result: `hpcwedge show "
+                                f"{path}` tells how far it got, `{resume_hint(path)}` finishes it")
             yield f
     except (FileError, *passthrough):
         raise

@@ -4,6 +4,7 @@ killed worker, and both in the middle of a 2D double description split over
 faces — then --resume gives exactly the uninterrupted answers; a checkpoint of
 another scene or a damaged one is refused (exit 2) and left as is."""
 import errno
+import json
 import os
 import random
 import shutil
@@ -99,7 +100,44 @@ def test_killed_worker_then_resume(tmp_path, reference):
 def test_sigterm_writes_checkpoint_and_exits_75(tmp_path, reference):
     scene, out, n, codes = interrupt_cycles(tmp_path, None, 4, _signal(None, signal.SIGTERM), random.Random(5))
     assert codes == [EXIT_INTERRUPTED] * 4
-    assert answers(_finish(scene, out)) == reference
+    job = _show_of_checkpoint(out)
+    final = _finish(scene, out)
+    assert answers(final) == reference
+    if "found" in job:
+        assert job["found"] <= sum(r["n_patterns"] for r in final["runs"])
+
+
+def _show_of_checkpoint(out: str) -> dict:
+    """`show RESULT.h5.ckpt` tells how far the stopped run got, from the checkpoint's own
+    data (text and JSON); show, plot and export of the missing result or of the checkpoint
+    as a result are one line, exit 2, naming --resume. Returns the last job's summary."""
+    ckpt = checkpoint_path(out)
+    ck = read_checkpoint(ckpt)
+    text = run(None, "show", ckpt).stdout
+    lines = text.splitlines()
+    assert lines[0].startswith(f"{ckpt}: checkpoint of an unfinished run of ") and lines[0].endswith("(SIGTERM)")
+    assert lines[-1] == f"to finish it: hpcwedge run SCENE -o {out} --resume"
+    js = show_json(ckpt)
+    assert js["checkpoint"] is True and js["reason"] == "SIGTERM" and js["resumes"] == ck["attrs"]["resumes"]
+    assert [j["name"] for j in js["jobs"]] == ck["order"]
+    job = js["jobs"][-1]                    # the job in progress, or the last finished one
+    attrs, data = ck["jobs"][job["name"]]["attrs"], ck["jobs"][job["name"]]["data"]
+    assert job["finished"] is bool(attrs["finished"]) and job["counters"] == json.loads(attrs["counters"])
+    assert lines[-2].endswith("; done" if job["finished"] else "; in progress")
+    if "found" in job:
+        assert (job["found"], job["open"]) == (len(data["found_mu"]), len(data["open_mu"]))
+        assert f"{job['found']} pattern(s) found, {job['open']} open subtree(s)" in text
+    else:
+        assert job["done"] == len(data["done"]) and f"{job['done']} of {job['tasks']}" in text
+    alone = os.path.join(os.path.dirname(out), "alone", "r.h5")     # a result not written yet
+    os.makedirs(os.path.dirname(alone))
+    shutil.copy(ckpt, checkpoint_path(alone))
+    for cmd in (["show", alone], ["plot", checkpoint_path(alone), "-o", alone + ".png"],
+                ["export", checkpoint_path(alone), "--pattern", "0", "-o", alone + ".vtu"]):
+        p = run(None, *cmd, check=False)
+        assert p.returncode == 2 and p.stderr.count("\n") == 1 and f"-o {alone} --resume" in p.stderr, p.stderr
+    assert sorted(os.listdir(os.path.dirname(alone))) == ["r.h5.ckpt"]
+    return job
 
 
 @pytest.mark.mpi
@@ -305,6 +343,7 @@ def test_sigterm_mid_dd_then_resume_serially(tmp_path, dd_reference):
     assert ck["attrs"]["reason"] == "SIGTERM"
     done = len(ck["jobs"]["rays"]["data"]["done"])
     assert 0 < done < int(ck["jobs"]["rays"]["attrs"]["n_tasks"])
+    assert _show_of_checkpoint(out)["kind"] == "face"
     got = _finish(scene, out, rays=False)
     assert got["stats"]["parallel"]["ranks"] == 1 and got["stats"]["parallel"]["resumes"] == 1
     assert _tasks(got) == _tasks(ref) - done                  # finished faces are not run again
@@ -400,6 +439,9 @@ def test_random_damage_of_a_real_checkpoint_refused_and_kept(tmp_path, reference
     for i in range(20):
         open(ckpt, "wb").write(damaged(good, rng, i))
         _refused(scene, out, "unreadable checkpoint")
+        if i < 4:                   # show's summary trusts no more than --resume does
+            p = run(None, "show", ckpt, check=False)
+            assert p.returncode == 2 and p.stderr.count("\n") == 1 and not p.stdout, p
     open(ckpt, "wb").write(good)
     assert answers(_finish(scene, out)) == reference
 

@@ -32,26 +32,22 @@ import math
 import os
 import sys
 import time
+import tomllib
 
 import h5py
 import numpy as np
 
 from .. import __version__
-from ..files import FileError, error_reason, verify_checksum, write_atomic
+from ..files import CHECKPOINT_FORMAT as FORMAT
+from ..files import FileError, checkpoint_path, error_reason, verify_checksum, write_atomic
 from ..resultfile import compression
 
-FORMAT = "hpcwedge-checkpoint"
 #: 2: checksummed (files.write_atomic), with the scene's input digests
 FORMAT_VERSION = 2
 
 
 class CheckpointError(FileError):
     """A checkpoint that cannot be used: one line naming the file and the reason."""
-
-
-def checkpoint_path(output: str) -> str:
-    """Where the checkpoint of the run writing `output` lives."""
-    return output + ".ckpt"
 
 
 def write_checkpoint(path: str, header: dict, scene_text: str, jobs: list[tuple[str, dict]]) -> None:
@@ -111,6 +107,51 @@ def read_checkpoint(path: str) -> dict:
         reason = " ".join(str(e).split()) or type(e).__name__
         raise CheckpointError(f"{path}: unreadable checkpoint (truncated or corrupt: {reason})") from None
     return {"attrs": attrs, "scene_text": text, "jobs": jobs, "order": order}
+
+
+def is_checkpoint(path: str) -> bool:
+    """Whether `path` is an HDF5 file whose root says it is a checkpoint (format attribute
+    only, nothing verified: read_checkpoint checks the rest). False for anything else."""
+    try:
+        with h5py.File(path, "r") as f:
+            return _plain(f.attrs.get("format")) == FORMAT
+    except Exception:  # not HDF5, unreadable, damaged: not recognisably a checkpoint
+        return False
+
+
+def checkpoint_summary(path: str) -> dict:
+    """How far the run of a checkpoint got (`hpcwedge show RESULT.h5.ckpt`), after
+    read_checkpoint's checks (CheckpointError as there): {"checkpoint": true, "name" (the
+    scene's, None if its text does not parse), "version", "scene_hash", "written_unix",
+    "reason", "elapsed_s" (all sessions), "resumes", "ranks", "jobs": [{"name", "kind",
+    "finished", "counters"} + subtree jobs: "mu" (list), "found" (patterns, orbit
+    representatives where a tree uses a symmetry), "open" (subtrees left);
+    task jobs: "tasks", "done"], in the order they ran}."""
+    from .jobs import SubtreeJob      # jobs imports this module
+    ck = read_checkpoint(path)
+    a = ck["attrs"]
+    try:
+        name = tomllib.loads(ck["scene_text"]).get("name")
+    except tomllib.TOMLDecodeError:
+        name = None
+    jobs = []
+    try:
+        for job_name in ck["order"]:
+            ja, data = ck["jobs"][job_name]["attrs"], ck["jobs"][job_name]["data"]
+            job = {"name": job_name, "kind": ja["kind"], "finished": bool(ja["finished"]),
+                   "counters": json.loads(ja["counters"])}
+            if ja["kind"] == SubtreeJob.kind:
+                job.update(mu=[float(v) for v in data["mus"]], found=len(data["found_mu"]),
+                           open=len(data["open_mu"]))
+            else:
+                job.update(tasks=int(ja["n_tasks"]), done=len(data["done"]))
+            jobs.append(job)
+    except (KeyError, TypeError, ValueError) as e:
+        raise CheckpointError(f"{path}: unreadable checkpoint (a job lacks {e})") from None
+    return {"checkpoint": True, "name": name, "version": a["version"], "scene_hash": a["scene_hash"],
+            "written_unix": float(a.get("written_unix", math.nan)), "reason": a.get("reason"),
+            "elapsed_s": float(a["elapsed_s"]), "resumes": int(a["resumes"]),
+            "ranks": int(a.get("ranks", 1)), "jobs": jobs}
 
 
 class Checkpointer:
