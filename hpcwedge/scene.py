@@ -183,9 +183,14 @@ def load_scene(path: str) -> Scene:
     except OSError as e:
         raise SceneError(f"{path}: cannot read ({e.strerror})") from None
     try:
-        text = raw.decode()
+        text = raw.decode("utf-8-sig")        # a byte-order mark (Windows editors) is dropped
+    except UnicodeDecodeError as e:
+        line = raw[:e.start].count(b"\n") + 1
+        raise SceneError(f"{path}: not UTF-8 text (byte 0x{raw[e.start]:02x} on line {line}): save it "
+                         f"as UTF-8") from None
+    try:
         data = tomllib.loads(text)
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+    except tomllib.TOMLDecodeError as e:
         raise SceneError(f"{path}: not valid TOML ({e})") from None
     return parse_scene(data, text=text, base_dir=os.path.dirname(os.path.abspath(path)))
 

@@ -163,3 +163,20 @@ def test_plan_patterns_2d():
                      "compute": {"enumerate": "patterns"}})
     p = s.plan()
     assert p.patterns and not p.rays and not p.cones and s.task_budget == 64
+
+
+def test_file_encoding(tmp_path):
+    """load_scene reads UTF-8: a byte-order mark (as Windows editors write it) is dropped, the
+    scene and its hash are those of the same file without it; text in another encoding is one
+    line naming the byte and its line (before: tomllib's 'Invalid statement (at line 1,
+    column 1)' for the mark, the codec's message for the rest)."""
+    from hpcwedge.scene import load_scene
+    text = 'name = "café"\ndim = 2\n[model]\nkind = "plug2d"\n[friction]\nmu = [0.65]\n'
+    plain, bom, latin = tmp_path / "a.toml", tmp_path / "b.toml", tmp_path / "c.toml"
+    plain.write_bytes(text.encode())
+    bom.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    latin.write_bytes(("# ok\n" + text).encode("latin-1"))
+    a, b = load_scene(str(plain)), load_scene(str(bom))
+    assert (b.name, b.text, b.hash) == (a.name, a.text, a.hash) == ("café", text, a.hash)
+    with pytest.raises(SceneError, match=r"c\.toml: not UTF-8 text \(byte 0xe9 on line 2\)"):
+        load_scene(str(latin))
