@@ -284,6 +284,7 @@ def _obstacles_3d(ax, obstacles: list | None, P: np.ndarray, n: np.ndarray, size
 def _counts_panel(ax, d: dict) -> None:
     """3D: the number of feasible sign patterns of every run against its mu (steps between
     runs), the drawn run highlighted and the global mu^c marked."""
+    from matplotlib.ticker import MaxNLocator
     pts = sorted((mu, n) for mu, n in d["counts"] if n is not None)
     title = "feasible sign patterns against mu"
     if not pts:
@@ -298,11 +299,12 @@ def _counts_panel(ax, d: dict) -> None:
         ax.plot([d["mu"]], here[:1], "o", color="tab:orange", ms=8, label=f"this run (mu = {d['mu']:.6g})")
     if d["mu_c"] is not None:
         ax.axvline(d["mu_c"], color="tab:green", lw=1.5, label=f"global mu^c = {d['mu_c']:.6g}")
-    lo = min(mus.min(), d["mu_c"] if d["mu_c"] is not None else mus.min())
-    hi = mus.max()
+    span = [mus.min(), mus.max()] + ([d["mu_c"]] if d["mu_c"] is not None else [])
+    lo, hi = min(span), max(span)          # the global mu^c in view also above every run's mu
     pad = 0.08 * (hi - lo) if hi > lo else 0.1 * max(hi, 1e-12)
     ax.set_xlim(lo - pad, hi + pad)
     ax.set_ylim(0, 1.15 * max(int(ns.max()), 1))
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel("mu")
     ax.set_ylabel("feasible patterns")
     ax.legend(loc="upper left", fontsize=8, frameon=False)

@@ -168,3 +168,22 @@ mu = [4.0, 5.0]
 enumerate = true
 mu_c = "cones"
 """
+
+
+@pytest.mark.parametrize("counts,mu,mu_c", [([(0.1, 0)], 0.1, 0.1763),              # every run below mu^c
+                                            ([(0.3, 2), (1.0, 131)], 1.0, 0.1763),  # mu^c below every run
+                                            ([(0.3, 2), (1.0, 7)], 0.3, None)])
+def test_counts_panel_shows_the_global_mu_c_and_whole_counts(counts, mu, mu_c):
+    """The count-against-mu panel keeps every run and the global mu^c line in view (before:
+    a mu^c above every run's mu was drawn off the axes, listed only in the legend) and
+    ticks its counts at whole numbers."""
+    from matplotlib.figure import Figure
+
+    from hpcwedge.plot3d import _counts_panel
+    ax = Figure().add_subplot()
+    _counts_panel(ax, {"counts": counts, "mu": mu, "mu_c": mu_c})
+    lo, hi = ax.get_xlim()
+    for v in [c[0] for c in counts] + ([mu_c] if mu_c is not None else []):
+        assert lo < v < hi
+    ticks = [t for t in ax.get_yticks() if ax.get_ylim()[0] <= t <= ax.get_ylim()[1]]
+    assert len(ticks) >= 2 and all(float(t).is_integer() for t in ticks)
