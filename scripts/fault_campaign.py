@@ -584,10 +584,24 @@ def file_cases() -> list[Case]:
         add("scene missing", None, "s.toml"),
         add("scene a directory", None, "s.toml", is_dir=True),
         add("scene not UTF-8", b"name = \"\xff\xfe\"\n", "s.toml"),
+        add("scene in Latin-1", "# plug\nname = \"caf\xe9\"\n".encode("latin-1"), "line 2"),
         add("scene not TOML", b"name = [unclosed\n", "s.toml"),
         add("scene empty", b"", "name"),
         add("scene random bytes", bytes(random.Random(1).randrange(256) for _ in range(300)), "s.toml"),
+        Case("scene with a byte-order mark", "scene file", "exit 0, mu^c of the scene without it", _bom_scene),
     ]
+
+
+def _bom_scene(ctx: Context):
+    """A scene saved with a UTF-8 byte-order mark (Windows editors) solves like the same text
+    without it."""
+    path = ctx.write("s.toml", b"\xef\xbb\xbf" + toml_text(plug(3)).encode())
+    out = os.path.join(ctx.folder, "r.h5")
+    o = cli(["run", path, "-o", out, "-q"], ctx.timeout)
+    if o.code != 0 or "Traceback" in o.stderr:
+        return False, describe(o)
+    got, want = show_json(out)["mu_c"], math.tan(math.radians(10.0))
+    return got is not None and math.isclose(got, want, rel_tol=1e-9), f"exit 0, mu_c {got!r} (tan 10 deg {want!r})"
 
 
 def output_cases() -> list[Case]:
@@ -738,8 +752,18 @@ def result_cases() -> list[Case]:
             f["x"] = [1, 2, 3]
         return p
     show_of(other_h5, "o.h5", "show an HDF5 file that is not a result")
-    show_of(lambda c: (shutil.copy(stopped_checkpoint(c), os.path.join(c.folder, "c.h5")),
-                       os.path.join(c.folder, "c.h5"))[1], "c.h5", "show a checkpoint")
+    def ckpt_as(c):
+        p = os.path.join(c.folder, "c.h5")
+        shutil.copy(stopped_checkpoint(c), p)
+        return p
+    show_of(ckpt_as, "c.h5", "plot a checkpoint", argv=("plot", "{}", "-o", "{}.png"))
+
+    def show_ckpt(ctx: Context):
+        o = cli(["show", ckpt_as(ctx)], ctx.timeout)
+        good = (o.code == 0 and not stderr_lines(o)
+                and o.stdout.startswith(os.path.join(ctx.folder, "c.h5") + ": checkpoint of an unfinished run"))
+        return good, describe(o) + f" [{o.stdout.splitlines()[0] if o.stdout else 'no output'}]"
+    cases.append(Case("show a checkpoint", "result file", "exit 0, how far its run got", show_ckpt))
 
     rng = random.Random(11)
     for k in range(12):
