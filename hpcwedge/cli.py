@@ -191,7 +191,9 @@ def _run(args) -> int:
             lock = OutputLock(args.output)
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
                                      inputs=scene.input_digests):
-                progress.note(f"resuming from {ckpt}")
+                done = engine.checkpoints
+                progress.note(f"resuming from {ckpt} (session {done.resumes + 1}; "
+                              f"{done.elapsed_before:.1f} s of work before it)")
             elif os.path.exists(ckpt):
                 print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
                       f"({'it is missing' if args.resume else 'use --resume to continue from it'})",

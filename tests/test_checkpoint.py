@@ -101,7 +101,12 @@ def test_sigterm_writes_checkpoint_and_exits_75(tmp_path, reference):
     scene, out, n, codes = interrupt_cycles(tmp_path, None, 4, _signal(None, signal.SIGTERM), random.Random(5))
     assert codes == [EXIT_INTERRUPTED] * 4
     job = _show_of_checkpoint(out)
-    final = _finish(scene, out)
+    a = read_checkpoint(checkpoint_path(out))["attrs"]
+    p = run(None, "run", scene, "-o", out, "--resume")          # with its progress lines
+    assert (f"resuming from {checkpoint_path(out)} (session {a['resumes'] + 2}; "
+            f"{a['elapsed_s']:.1f} s of work before it)") in p.stderr, p.stderr
+    assert not os.path.exists(checkpoint_path(out))
+    final = show_json(out)
     assert answers(final) == reference
     if "found" in job:
         assert job["found"] <= sum(r["n_patterns"] for r in final["runs"])
