@@ -372,16 +372,22 @@ def _show(args) -> int:
         print(f"{run['mu']:8.4g} " + " ".join(f"{'-' if v is None else v:>{w}}"
                                                for v, w in zip(cells, (8, 8, 6, 9))))
         for j, cone in enumerate(run["cones"] or []):
-            mc = "-" if cone["mu_c"] is None else f"{cone['mu_c']:.12g}"
             print(f"         cone {j}: {len(cone['rays'])} rays, zero_u {cone['zero_u']}, "
-                  f"zero_r {cone['zero_r']}, mu_c {mc}")
+                  f"zero_r {cone['zero_r']}, mu_c {_mu_c_text(cone)}")
         for j, pat in enumerate(run["patterns"] or []):
-            mc = "-" if pat["mu_c"] is None else f"{pat['mu_c']:.12g}"
             flag = " (undecided)" if pat.get("undecided") else ""
-            print(f"         pattern {j}: contact {pat['contact']}, mu_c {mc}{flag}")
+            print(f"         pattern {j}: contact {pat['contact']}, mu_c {_mu_c_text(pat)}{flag}")
     t = res["timings"]
     print("timings: " + ", ".join(f"{k} {v:.3f} s" for k, v in t.items()))
     return 0
+
+
+def _mu_c_text(item: dict) -> str:
+    """A cone's or pattern's mu^c for `show`: "-" when not computed; a value left at a
+    bisection bracket's end (not certified to 1e-9) says so."""
+    if item["mu_c"] is None:
+        return "-"
+    return f"{item['mu_c']:.12g}" + (" (not polished: a bracket's end)" if item.get("mu_c_polished") is False else "")
 
 
 def _show_checkpoint(args) -> int:

@@ -211,7 +211,9 @@ def _run_plan(scene: Scene, progress: Progress, engine: Engine, condensed: Conde
                           unpolished=int(not r.polished))
             if plan.mu_c_cones:
                 for key, item in (pair for pairs in values.keyed for pair in pairs):
-                    item["mu_c"] = values.by_key[key].mu_c
+                    value = values.by_key[key]
+                    item["mu_c"] = value.mu_c
+                    item["mu_c_polished"] = None if value.mu_c is None else bool(value.polished)
         elif step == "global_mu_c":
             g = global_mu_c(ctx, values)
             result.mu_c, result.mu_c_status = g.mu_c, g.status

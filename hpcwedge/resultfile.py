@@ -18,7 +18,9 @@ Layout of RESULT.h5
     /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
                      (an attribute absent = null); datasets rays, trivial_rays,
                      ray_zero, cones_json (JSON list), patterns_json (3D: JSON list of
-                     {"contact", "mu_c", "undecided"}, canonical order: contact bits)
+                     {"contact", "mu_c", "mu_c_polished", "undecided"}, canonical order: contact
+                     bits; mu_c_polished: the value certified (pencil / KKT polish) or left at a
+                     bisection bracket's end, null without a value, absent when no mu^c stage ran)
 """
 from __future__ import annotations
 
@@ -225,19 +227,24 @@ def _result_object(f, rays) -> dict:
 def check_items(cones, patterns, n_rays: int, m: int) -> None:
     """ValueError unless a run's cones and patterns (parsed cones_json, patterns_json; None
     passes) have the layout of the module doc: cones {"rays": wedged-ray indices < n_rays,
-    "zero_u", "zero_r": node indices < m, "mu_c": number or null}, patterns {"contact": node
-    indices < m, "mu_c"}. Readers check before using them, so a malformed file is one line."""
+    "zero_u", "zero_r": node indices < m, "mu_c": number or null, "mu_c_polished": bool or null
+    or absent}, patterns {"contact": node indices < m, "mu_c", "mu_c_polished"}. Readers check before using them, so a malformed file is one line."""
     def indices(v, n):
         return isinstance(v, list) and all(type(i) is int and 0 <= i < n for i in v)
 
     def number(v):
         return v is None or type(v) in (int, float)
+
+    def flag(v):
+        return v is None or type(v) is bool
     if cones is not None and not (isinstance(cones, list) and all(
             isinstance(c, dict) and indices(c.get("rays"), n_rays) and indices(c.get("zero_u"), m)
-            and indices(c.get("zero_r"), m) and number(c.get("mu_c")) for c in cones)):
+            and indices(c.get("zero_r"), m) and number(c.get("mu_c")) and flag(c.get("mu_c_polished"))
+            for c in cones)):
         raise ValueError("cones_json: not the cones of this run")
     if patterns is not None and not (isinstance(patterns, list) and all(
-            isinstance(p, dict) and indices(p.get("contact"), m) and number(p.get("mu_c")) for p in patterns)):
+            isinstance(p, dict) and indices(p.get("contact"), m) and number(p.get("mu_c"))
+            and flag(p.get("mu_c_polished")) for p in patterns)):
         raise ValueError("patterns_json: not the sign patterns of this run")
 
 

@@ -45,6 +45,21 @@ def test_run_show_json(tmp_path, capsys):
     assert main(["show", out]) == 0
 
 
+@pytest.mark.parametrize("method", ["accurate", "bisection"])
+def test_show_marks_the_mu_c_left_at_a_bracket(tmp_path, capsys, method):
+    """`show` prints every pattern's mu^c, with "(not polished: a bracket's end)" exactly where
+    the JSON says mu_c_polished is false."""
+    out, got = run_show_json(tmp_path, capsys, 'name = "p"\ndim = 3\n[model]\nkind = "plug3d"\nring = 4\n'
+                             f'[friction]\nmu = [0.65]\n[compute]\nmu_c_method = "{method}"\n')
+    assert main(["show", out]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if "pattern " in ln]
+    pats = got["runs"][0]["patterns"]
+    assert len(lines) == len(pats) > 0
+    for line, pat in zip(lines, pats):
+        assert pat["mu_c_polished"] is (method == "accurate")
+        assert line.endswith("(not polished: a bracket's end)") is (not pat["mu_c_polished"])
+
+
 @pytest.mark.parametrize("text,key", [
     ('name = "x"\ndim = 2\n[model]\nkind = "stiffness"\nK = [[1.0, 2.0], [2.0, 1.0]]\n[friction]\nmu = [1.0]\n', "model.K"),
     ('name = "x"\ndim = 2\n[model]\nkind = "plug2d"\n[friction]\nmu = [-1.0]\n', "friction.mu"),

@@ -333,3 +333,19 @@ def test_orbit_keys_give_one_mu_c_task_per_orbit():
     assert [item for *_, item in keys] == run.cones + run.patterns
     sym = [k for k, *_ in mu_c_keys(run, 3, Swap())]
     assert sym[0] == sym[1] == (1, 6) and sym[2] == (5, 2)
+
+
+@pytest.mark.parametrize("method", ["accurate", "bisection"])
+def test_each_mu_c_says_whether_it_is_polished(method):
+    """Every cone's and pattern's mu^c carries mu_c_polished: True where the pencil / KKT polish
+    certified it, False where it was left at a bisection bracket's end (every value of the
+    "bisection" route); as many False as stats.mu_c_unpolished (no symmetry: one task per
+    item); None where there is no value."""
+    r2 = run_scene(scene({"kind": "plug2d", "rows": 3}, mu=(0.1, 0.65), mu_c_method=method))
+    r3 = run_scene(scene({"kind": "plug3d", "ring": 4}, dim=3, run={"symmetry": False}, mu_c_method=method))
+    for res, items in ((r2, [c for run in r2.runs for c in run.cones]), (r3, r3.runs[0].patterns)):
+        assert items and all(i["mu_c"] is not None for i in items)
+        assert {i["mu_c_polished"] for i in items} == {method == "accurate"}
+    assert sum(not p["mu_c_polished"] for p in r3.runs[0].patterns) == r3.stats["mu_c_unpolished"]
+    none = run_scene(scene({"kind": "plug2d", "rows": 2}, mu_c="none"))
+    assert all("mu_c_polished" not in c for c in none.runs[0].cones)
