@@ -17,6 +17,7 @@ and taken as feasible) to mu_c_tol.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -54,8 +55,40 @@ def mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: n
         return None, False, None
     if method != "accurate":
         return bisect(lambda mu, _: probe.feasible(rows, mu), 0.0, hi, tol)[1], False, None
-    return _accurate_3d(param, m, np.asarray(zero_u, bool), np.asarray(zero_r, bool), rows,
-                        hi, first, probe, depth=0)
+    zu, zr = np.asarray(zero_u, bool), np.asarray(zero_r, bool)
+    out = _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0)
+    if out[1] or probe.options.tight:
+        return out
+    return _tight_retry(param, m, zu, zr, rows, hi, probe) or out
+
+
+def _tight_retry(param, m, zu, zr, rows, hi, probe: Probe):
+    """The accurate route again with Clarabel's tight tolerances, after it ended unpolished
+    under the default ones: (mu^c, True, x*) when that polish verifies, else None. Near a
+    mu^c where many cones are active at once the default solves leave Dinkelbach ~1e-6
+    above mu^c, too far for Newton to find the active set, and the fallback bisection then
+    takes undecided solves as feasible: plug3d 3 x 10 at mu = 0.65, two orbits of patterns
+    left at 0.5960095 and 0.5336348 (30 of 601 patterns), whose certified values are
+    0.5960110 and 0.5336361 (points verified at mu^c (1 + 1e-7), infeasibility
+    certificates below). Counted into `probe`: solves added, the retry's statuses as tight_*,
+    mu_c_tight_retry and mu_c_tight_polished; undecided: the retry's alone when it polishes."""
+    count(probe.statuses, "mu_c_tight_retry")
+    tight = Probe(replace(probe.options, tolerances="tight"))
+    first = tight.decide(rows, hi)
+    out = None
+    if first.status == Status.FEASIBLE:
+        out = _accurate_3d(param, m, zu, zr, rows, hi, first, tight, depth=0)
+    probe.solves += tight.solves
+    for k, v in tight.statuses.items():
+        count(probe.statuses, "tight_" + k, v)
+    if out is None or not out[1]:
+        probe.undecided += tight.undecided
+        return None
+    # the certified value owes nothing to the first attempt's undecided solves (its bracket
+    # is dropped): only the retry's are the value's
+    probe.undecided = tight.undecided
+    count(probe.statuses, "mu_c_tight_polished")
+    return out
 
 
 def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth):

@@ -87,3 +87,27 @@ def test_3d_mu_c_inside_an_independent_bracket(seed):
     upper = _bisect_ur(prob, zu, 0.0, 4.0 / math.cos(math.pi / 512), 512, inner=True)
     assert lower * (1 - 1e-7) <= r.mu_c <= upper * (1 + 1e-7)
     assert upper <= lower / math.cos(math.pi / 512) ** 2 * (1 + 1e-6)
+
+
+@pytest.mark.parametrize("contact,want", [
+    ([0, 1, 2, *range(4, 26)], 0.5960110078957),
+    ([0, 1, 2, *range(6, 29)], 0.5336360516686)])
+def test_many_active_cones_polished_by_the_tight_retry(contact, want):
+    """plug3d 3 x 10 (mu = 0.65): two patterns where 22 cones are active at mu^c. Under the
+    default tolerances Dinkelbach stops ~2e-6 above mu^c, the polish fails and the bisection
+    took undecided solves as feasible (0.5960095, 0.5336348: below mu^c); the tight retry
+    certifies them. Independent check: its point verifies at mu^c and Clarabel proves the
+    pattern infeasible 5e-6 below it (the old values lay 2.5e-6 below it)."""
+    from hpcwedge.feasibility import SolverOptions, decide
+    from hpcwedge.rows import Status, pattern_rows
+    from hpcwedge.socp import violation
+    from instances import plug3d_param
+    param, m = plug3d_param(levels=3, ring=10)
+    zu = np.zeros(m, bool)
+    zu[contact] = True
+    r = mu_critical(param, m, zu, ~zu, mu_hi=0.65)
+    assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
+    assert r.statuses["mu_c_tight_polished"] == 1 and r.undecided == 0
+    rows = pattern_rows(param, m, zu, ~zu)
+    assert violation(rows, r.mu_c, r.x) <= 1e-12
+    assert decide(rows, r.mu_c * (1 - 5e-6), SolverOptions("tight")).status == Status.INFEASIBLE
