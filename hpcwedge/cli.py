@@ -350,19 +350,20 @@ def _read(path: str, with_rays: bool = True) -> dict:
 
 
 def _show(args) -> int:
-    from .parallel.checkpoint import is_checkpoint
-    if is_checkpoint(args.result):
+    from .files import CheckpointGiven, FileError
+    from .resultfile import dump_result_json, read_result
+    try:
+        res = read_result(args.result, with_rays=False)
+    except CheckpointGiven:
         return _show_checkpoint(args)
+    except FileError as e:
+        raise _UserError(str(e)) from None
     if args.json:
-        from .files import FileError
-        from .resultfile import dump_result_json
-        _read(args.result, with_rays=False)
         try:
             dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)
         except FileError as e:
             raise _UserError(str(e)) from None
         return 0
-    res = _read(args.result, with_rays=False)
     mu_c = "null" if res["mu_c"] is None else f"{res['mu_c']:.12g}"
     print(f"{res['name']}: dim {res['dim']}, m {res['m']}, mu_c = {mu_c}"
           + (f" ({res['mu_c_status']})" if res["mu_c_status"] else ""))

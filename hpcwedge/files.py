@@ -36,6 +36,11 @@ def error_reason(e: BaseException) -> str:
     return " ".join(str(text).split()) or type(e).__name__
 
 
+class CheckpointGiven(FileError):
+    """A checkpoint where a result was expected (resultfile.open_result): `show` summarises
+    it instead, plot and export refuse it with this one line."""
+
+
 #: the root attribute "format" of a checkpoint (parallel/checkpoint.py)
 CHECKPOINT_FORMAT = "hpcwedge-checkpoint"
 

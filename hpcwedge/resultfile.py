@@ -35,8 +35,8 @@ import h5py
 import numpy as np
 
 from . import __version__
-from .files import (CHECKPOINT_FORMAT, FileError, checkpoint_path, error_reason, resume_hint, verify_checksum,
-                    write_atomic)
+from .files import (CHECKPOINT_FORMAT, CheckpointGiven, FileError, checkpoint_path, error_reason, resume_hint,
+                    verify_checksum, write_atomic)
 
 
 def compression(arr: np.ndarray) -> str | None:
@@ -116,7 +116,7 @@ def open_result(path: str, passthrough: tuple = ()):
     try:
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") == CHECKPOINT_FORMAT:
-                raise FileError(f"{path}: a checkpoint of an unfinished run, not a result: `hpcwedge show "
+                raise CheckpointGiven(f"{path}: a checkpoint of an unfinished run, not a result: `hpcwedge show "
                                 f"{path}` tells how far it got, `{resume_hint(path)}` finishes it")
             yield f
     except (FileError, *passthrough):

@@ -109,16 +109,6 @@ def read_checkpoint(path: str) -> dict:
     return {"attrs": attrs, "scene_text": text, "jobs": jobs, "order": order}
 
 
-def is_checkpoint(path: str) -> bool:
-    """Whether `path` is an HDF5 file whose root says it is a checkpoint (format attribute
-    only, nothing verified: read_checkpoint checks the rest). False for anything else."""
-    try:
-        with h5py.File(path, "r") as f:
-            return _plain(f.attrs.get("format")) == FORMAT
-    except Exception:  # not HDF5, unreadable, damaged: not recognisably a checkpoint
-        return False
-
-
 def checkpoint_summary(path: str) -> dict:
     """How far the run of a checkpoint got (`hpcwedge show RESULT.h5.ckpt`), after
     read_checkpoint's checks (CheckpointError as there): {"checkpoint": true, "name" (the
