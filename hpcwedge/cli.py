@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote, or its checkpoint "
                    "(RESULT.h5.ckpt)")
     s.add_argument("--json", action="store_true", help="one JSON object (SPEC §4)")
-    s.add_argument("--no-rays", action="store_true", help="leave the ray vectors out of the JSON")
+    s.add_argument("--no-rays", action="store_true", help="with --json: leave the ray vectors out")
     pl = sub.add_parser("plot", help="draw a wedged configuration and the cones' / patterns' mu^c")
     pl.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
     pl.add_argument("-o", "--output", required=True, help="the figure to write (its format from the suffix: .png, .pdf, .svg)")
@@ -352,6 +352,8 @@ def _read(path: str, with_rays: bool = True) -> dict:
 def _show(args) -> int:
     from .files import CheckpointGiven, FileError
     from .resultfile import dump_result_json, read_result
+    if args.no_rays and not args.json:
+        raise _UserError("show: --no-rays only applies with --json (the text summary has no rays)")
     try:
         res = read_result(args.result, with_rays=False)
     except CheckpointGiven:

@@ -216,6 +216,10 @@ def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monk
     assert got == want and len(got["runs"][0]["rays"]) == got["runs"][0]["n_wedged_rays"] > 7
     assert main(["show", out, "--json", "--no-rays"]) == 0
     assert json.loads(capsys.readouterr().out) == results.read_result(out, with_rays=False)
+    # the text summary has no rays: --no-rays without --json is a usage error, not ignored
+    assert main(["show", out, "--no-rays"]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err.count("\n") == 1 and "--no-rays only applies with --json" in cap.err
 
 
 # ----------------------------------------------------------------------------- user faults (issue 11)
