@@ -8,9 +8,13 @@ Route "accurate":
          min s  s.t.  ||r_t,i|| <= mu_k r_n,i + s r_n,i(x_{k-1}),  pattern rows,
      (s_k <= 0 since x_{k-1} is feasible with s = 0), until mu_k stalls
      (DINKELBACH_RTOL) — each mu_k is the max ratio of a verified point, an
-     upper bound of mu^c;
-  3. polish: the KKT Newton certificate (kkt.py). Otherwise the Dinkelbach bound is
-     returned, flagged (polished = False).
+     upper bound of mu^c to the verification tolerance (cones at rounding level are
+     out of the ratio: plug3d 2 x 8, a stall 1.9e-7 below mu^c);
+  3. polish: the KKT Newton certificate (kkt.py);
+  4. if it fails, or rests on an apex point settled by its sub-pattern (_accurate_3d:
+     not a certificate), steps 1-3 under Clarabel's tight tolerances, then the default
+     ones again from a start sought by bisection; a value no polish verifies is the
+     upper end of a bisection bracket, flagged (polished = False).
 Route "bisection": bisection on SOCP feasibility (mu_bracket.Probe: undecided counted
 and taken as feasible) to mu_c_tol.
 """
@@ -34,6 +38,10 @@ from .socp import attempts, pattern_socp
 DINKELBACH_RTOL = 1e-7
 DINKELBACH_MAX = 60
 DINKELBACH_WEIGHT_FLOOR = 1e-2
+#: where the polish from Dinkelbach's point fails, cones this small there (relative to
+#: the largest) are taken as unloaded at mu^c, and the polish starts again from the
+#: certified point of the sub-pattern without them (_polish_from_apex)
+NEAR_APEX_RTOL = 1e-6
 
 
 def mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarray, rows: ConeRows,
@@ -56,22 +64,36 @@ def mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: n
     if method != "accurate":
         return bisect(lambda mu, _: probe.feasible(rows, mu), 0.0, hi, tol)[1], False, None
     zu, zr = np.asarray(zero_u, bool), np.asarray(zero_r, bool)
-    out = _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0)
-    if out[1] or probe.options.tight:
+    if probe.options.tight:
+        return _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0)
+    apex = probe.statuses.get("polish_apex_by_subpattern", 0)
+    out = _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0, seek=False)
+    if out is not None and out[1] and probe.statuses.get("polish_apex_by_subpattern", 0) == apex:
         return out
-    return _tight_retry(param, m, zu, zr, rows, hi, probe) or out
+    retry, doubt = _tight_retry(param, m, zu, zr, rows, hi, probe)
+    if retry is not None:
+        return retry
+    out = out or _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0)
+    if not out[1]:
+        probe.undecided += doubt
+    return out
 
 
 def _tight_retry(param, m, zu, zr, rows, hi, probe: Probe):
-    """The accurate route again with Clarabel's tight tolerances, after it ended unpolished
-    under the default ones: (mu^c, True, x*) when that polish verifies, else None. Near a
-    mu^c where many cones are active at once the default solves leave Dinkelbach ~1e-6
-    above mu^c, too far for Newton to find the active set, and the fallback bisection then
-    takes undecided solves as feasible: plug3d 3 x 10 at mu = 0.65, two orbits of patterns
-    left at 0.5960095 and 0.5336348 (30 of 601 patterns), whose certified values are
-    0.5960110 and 0.5336361 (points verified at mu^c (1 + 1e-7), infeasibility
-    certificates below). Counted into `probe`: solves added, the retry's statuses as tight_*,
-    mu_c_tight_retry and mu_c_tight_polished; undecided: the retry's alone when it polishes."""
+    """The accurate route under Clarabel's tight tolerances, tried when the default
+    polish fails or settles an apex point by its sub-pattern (plug3d 2 x 8 at mu = 2:
+    5 of 9,161 patterns, one of them 2.4e-9 above the mu^c that this route certifies),
+    before the default route seeks another start by bisection:
+    ((mu^c, True, x*), 0) when its polish verifies, else (None, its undecided solves).
+    Near a mu^c where many cones are active at once the default solves leave Dinkelbach
+    ~1e-6 above mu^c, too far for Newton to find the active set, and the bisection took
+    undecided solves as feasible: plug3d 3 x 10 at mu = 0.65, two orbits of patterns
+    were left at 0.5960095 and 0.5336348 (30 of 601 patterns), whose certified values
+    are 0.5960110 and 0.5336361 (points verified at mu^c (1 + 1e-7), infeasibility
+    certificates below); on a third orbit the bisection's start polished, but took
+    2.3 s where this route takes 0.05 s. Counted into `probe`: solves added, the
+    retry's statuses as tight_*, mu_c_tight_retry and mu_c_tight_polished; a certified
+    value's undecided solves are the retry's alone."""
     count(probe.statuses, "mu_c_tight_retry")
     tight = Probe(replace(probe.options, tolerances="tight"))
     first = tight.decide(rows, hi)
@@ -82,19 +104,18 @@ def _tight_retry(param, m, zu, zr, rows, hi, probe: Probe):
     for k, v in tight.statuses.items():
         count(probe.statuses, "tight_" + k, v)
     if out is None or not out[1]:
-        probe.undecided += tight.undecided
-        return None
+        return None, tight.undecided
     # the certified value owes nothing to the first attempt's undecided solves (its bracket
     # is dropped): only the retry's are the value's
     probe.undecided = tight.undecided
     count(probe.statuses, "mu_c_tight_polished")
-    return out
+    return out, 0
 
 
-def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth):
-    """(mu^c, polished) of the pattern given a decision `first` that is not
-    infeasible at hi: Dinkelbach + KKT polish; if the polish does not verify,
-    bisection to BRACKET_RTOL and again from the bracket's upper point (that
+def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth, seek=True):
+    """(mu^c, polished, x*) of the pattern given a decision `first` that is not
+    infeasible at hi: Dinkelbach + KKT polish; if the polish does not verify, None
+    unless `seek`, else bisection to BRACKET_RTOL and again from the bracket's upper point (that
     bisection only seeks a start for Dinkelbach, whose result is then checked: its
     undecided points skip the pyramid levels too coarse to decide a point so near
     mu^c, feasibility.pyramid_sides_for; on plug3d 3 x 6 the full ladder there cost
@@ -108,7 +129,10 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth):
         mu, x = dinkelbach(rows, x, hi, probe)
         if mu == 0.0:
             return 0.0, True, x
-        pol = kkt_polish(rows, x, mu, options=probe.options)
+        pol = kkt_polish(rows, x, mu, options=probe.options) or _polish_from_apex(
+            param, m, zu, zr, rows, x, hi, probe, depth)
+    if pol is None and not seek:
+        return None
     if pol is None:
         state = {"x": x}
 
@@ -119,14 +143,21 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth):
                 return True
             return False
 
+        before = probe.undecided
         lo, hi = bisect(ok, 0.0, hi, BRACKET_RTOL)
         x = state["x"]
         if x is None:
             return hi, False, None
         mu, x = dinkelbach(rows, x, hi, probe)
-        pol = kkt_polish(rows, x, mu, options=probe.options)
+        pol = kkt_polish(rows, x, mu, options=probe.options) or _polish_from_apex(
+            param, m, zu, zr, rows, x, hi, probe, depth)
         if pol is None:
             return hi, False, None
+        # the polish certifies mu* whatever the start: the bisection's undecided solves,
+        # taken as feasible to seek that start, decide nothing the value rests on
+        if probe.undecided > before:
+            count(probe.statuses, "mu_c_start_undecided", probe.undecided - before)
+            probe.undecided = before
     mu_s, support, x_s, signed = pol
     if depth >= m:
         return mu_s, signed, x_s
@@ -144,13 +175,53 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth):
     if signed:
         return (mu_sub, polished_sub, x_sub) if mu_sub < mu_s else (mu_s, True, x_s)
     # unsigned apex point: accepted when the sub-pattern (apex cones unloaded) has
-    # the same value, polished
+    # the same value, polished. Not a proof (a point loading an apex cone may lie
+    # lower): mu_critical_3d tries the tight route on such a value first
     count(probe.statuses, "polish_apex_by_subpattern")
     if polished_sub and abs(mu_sub - mu_s) <= 1e-10 * mu_s:
         return min(mu_s, mu_sub), True, x_s
     if mu_sub < mu_s:
         return mu_sub, False, x_sub
     return _fallback_3d(rows, hi, probe)
+
+
+def _polish_from_apex(param, m, zu, zr, rows, x, hi, probe: Probe, depth):
+    """kkt_polish of the pattern from its sub-pattern's polished point, where the polish
+    from Dinkelbach's point x failed and x leaves some cones nearly unloaded (below
+    NEAR_APEX_RTOL, not all): the mu^c of such a pattern is often reached only with those
+    cones at their apex, where Dinkelbach's iterates stall (a cone whose r_n falls to
+    rounding level is out of its ratio) and Newton from them finds no root. The sub-
+    pattern (those nodes also gap) is solved without a start search; its point is only a
+    start, so its undecided solves are counted as statuses, not against the value; the
+    certificate is this pattern's own. plug3d 2 x 8 at mu = 2: 8 of 9,161 patterns were
+    left at bisection brackets 1.82121-1.82123 (undecided solves taken as feasible),
+    their certified mu^c is 1.8212335219. None when there is nothing to try or it fails."""
+    if depth >= m:
+        return None
+    size = np.hypot(rows.rn @ x, np.linalg.norm(rows.rt @ x, axis=1))
+    near = size <= NEAR_APEX_RTOL * size.max()
+    if not near.any() or near.all():
+        return None
+    count(probe.statuses, "polish_from_apex")
+    zr_sub = zr.copy()
+    zr_sub[rows.nodes[near]] = True
+    sub = pattern_rows(param, m, zu, zr_sub)
+    child = Probe(probe.options)
+    d = child.decide(sub, hi)
+    out = None
+    if d.status == Status.FEASIBLE:
+        out = _accurate_3d(param, m, zu, zr_sub, sub, hi, d, child, depth + 1, seek=False)
+    probe.solves += child.solves
+    for k, v in child.statuses.items():
+        count(probe.statuses, k, v)
+    if child.undecided:
+        count(probe.statuses, "polish_from_apex_undecided", child.undecided)
+    if out is None or not out[1] or out[2] is None:
+        return None
+    pol = kkt_polish(rows, out[2], out[0], options=probe.options)
+    if pol is not None:
+        count(probe.statuses, "polish_from_apex_verified")
+    return pol
 
 
 def _fallback_3d(rows, hi, probe: Probe):

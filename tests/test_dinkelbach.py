@@ -89,14 +89,20 @@ def test_3d_mu_c_inside_an_independent_bracket(seed):
     assert upper <= lower / math.cos(math.pi / 512) ** 2 * (1 + 1e-6)
 
 
-@pytest.mark.parametrize("contact,want", [
-    ([0, 1, 2, *range(4, 26)], 0.5960110078957),
-    ([0, 1, 2, *range(6, 29)], 0.5336360516686)])
+#: plug3d 3 x 10 (mu = 0.65): patterns whose default polish fails (many cones active at mu^c)
+MANY_ACTIVE = [([0, 1, 2, *range(4, 26)], 0.5960110078957),
+               ([0, 1, 2, *range(6, 29)], 0.5336360516686),
+               ([0, 1, 2, *range(5, 27), 28], 0.6166778635596)]
+
+
+@pytest.mark.parametrize("contact,want", MANY_ACTIVE)
 def test_many_active_cones_polished_by_the_tight_retry(contact, want):
-    """plug3d 3 x 10 (mu = 0.65): two patterns where 22 cones are active at mu^c. Under the
-    default tolerances Dinkelbach stops ~2e-6 above mu^c, the polish fails and the bisection
-    took undecided solves as feasible (0.5960095, 0.5336348: below mu^c); the tight retry
-    certifies them. Independent check: its point verifies at mu^c and Clarabel proves the
+    """Under the default tolerances Dinkelbach stops ~2e-6 above mu^c and the polish fails.
+    The bisection that followed took undecided solves as feasible on the first two
+    (0.5960095, 0.5336348: below mu^c) and found a start that polished on the third, in
+    2.3 s and 5 undecided solves. The tight retry, now tried first, certifies them, or
+    the first is polished from its sub-pattern with one cone unloaded (_polish_from_apex).
+    Independent check: its point verifies at mu^c and Clarabel proves the
     pattern infeasible 2e-5 below it (5e-6 below, the tight solve is undecided under
     OpenBLAS's Sandybridge kernels; the old values, 2.5e-6 below, no SOCP decides)."""
     from hpcwedge.feasibility import SolverOptions, decide
@@ -108,7 +114,89 @@ def test_many_active_cones_polished_by_the_tight_retry(contact, want):
     zu[contact] = True
     r = mu_critical(param, m, zu, ~zu, mu_hi=0.65)
     assert r.polished and abs(r.mu_c - want) <= 1e-9 * want
-    assert r.statuses["mu_c_tight_polished"] == 1 and r.undecided == 0
+    assert r.undecided == 0
+    assert r.statuses.get("mu_c_tight_polished", 0) + r.statuses.get("polish_from_apex_verified", 0) == 1
     rows = pattern_rows(param, m, zu, ~zu)
     assert violation(rows, r.mu_c, r.x) <= 1e-12
     assert decide(rows, r.mu_c * (1 - 2e-5), SolverOptions()).status == Status.INFEASIBLE
+
+
+def test_undecided_solves_of_the_start_bisection_are_not_the_values():
+    """The default route's bisection only seeks a start for Dinkelbach: when the polish from
+    that start verifies, its undecided solves (taken as feasible) are moved to the
+    statuses, not counted against the certified value (plug3d 3 x 10, the third pattern
+    above, without the tight retry)."""
+    from hpcwedge.dinkelbach import _accurate_3d
+    from hpcwedge.mu_bracket import Probe
+    from hpcwedge.rows import Status, pattern_rows
+    from instances import plug3d_param
+    param, m = plug3d_param(levels=3, ring=10)
+    contact, want = MANY_ACTIVE[2]
+    zu = np.zeros(m, bool)
+    zu[contact] = True
+    rows = pattern_rows(param, m, zu, ~zu)
+    probe = Probe()
+    first = probe.decide(rows, 0.65)
+    assert first.status == Status.FEASIBLE
+    assert _accurate_3d(param, m, zu, ~zu, rows, 0.65, first, probe, depth=0, seek=False) is None
+    mu, polished, _ = _accurate_3d(param, m, zu, ~zu, rows, 0.65, first, probe, depth=0)
+    assert polished and abs(mu - want) <= 1e-9 * want
+    assert probe.statuses["mu_c_start_undecided"] >= 1 and probe.undecided == 0
+
+
+@pytest.mark.parametrize("levels,ring,mu,contact,old,want", [
+    (2, 8, 2.0, [0, 2, 3, 4, 5, 6, 7, 9, 10, 12, 13, 14, 15], 1.6555317469186, 1.655531743026512),
+    (4, 6, 1.0, [0, 1, 2, 6, 8, 10, 11, 12, 15, 16, 17, 18, 21, 22, 23], 0.9904587065900, 0.9904583171237),
+    (4, 6, 1.0, [0, 1, 2, 6, 7, 8, 9, 10, 11, 12, 14, 15, 16, 17, 18, 21, 22], 0.9608613386311, 0.9608612444729)])
+def test_an_apex_point_settled_by_its_sub_pattern_is_not_taken_as_certified(levels, ring, mu, contact, old, want):
+    """The default polish of these patterns ends at a point with a cone at its apex, whose
+    multipliers cannot be signed, and its sub-pattern (that cone unloaded) has the same
+    value: accepted so far as polished (plug3d 2 x 8: `old`, 2.4e-9 above mu^c; 4 x 6:
+    3.9e-7 and 9.8e-8 above), but a point loading that cone lies lower. The tight route's
+    signed certificate is taken. Independent check: the point verifies at mu^c, the old
+    value is above it by more than the stated 1e-9, and Clarabel proves the pattern
+    infeasible 1e-5 below."""
+    from hpcwedge.feasibility import SolverOptions, decide
+    from hpcwedge.rows import Status, pattern_rows
+    from hpcwedge.socp import violation
+    from instances import plug3d_param
+    param, m = plug3d_param(levels=levels, ring=ring)
+    zu = np.zeros(m, bool)
+    zu[contact] = True
+    r = mu_critical(param, m, zu, ~zu, mu_hi=mu)
+    assert r.polished and r.statuses["mu_c_tight_polished"] == 1
+    rows = pattern_rows(param, m, zu, ~zu)
+    assert violation(rows, r.mu_c, r.x) <= 1e-12
+    assert old - r.mu_c > 2e-9 * r.mu_c
+    assert abs(r.mu_c - want) <= 1e-9 * want
+    assert decide(rows, r.mu_c * (1 - 1e-5), SolverOptions()).status == Status.INFEASIBLE
+
+
+def test_a_mu_c_reached_with_a_cone_at_its_apex_is_polished_from_the_sub_pattern():
+    """plug3d 2 x 8 at mu = 2: as mu falls to this pattern's mu^c one cone (node 7) unloads
+    completely. Dinkelbach's iterates stall with that cone at rounding level, the polish
+    from them fails under both tolerances, and the value was left at bisection brackets
+    1.82121-1.82123 across the pattern's orbit (undecided solves taken as feasible, up to
+    1.2e-5 below mu^c). Polished from the point of the sub-pattern with node 7 unloaded,
+    the pattern's own certificate holds. Independent checks: the sub-pattern's point
+    satisfies the pattern's rows at the sub-pattern's mu^c (an upper bound), and Clarabel
+    proves the pattern infeasible 3e-5 below."""
+    from hpcwedge.feasibility import SolverOptions, decide
+    from hpcwedge.rows import Status, pattern_rows
+    from hpcwedge.socp import violation
+    from instances import plug3d_param
+    param, m = plug3d_param(levels=2, ring=8)
+    zu = np.zeros(m, bool)
+    zu[[1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14]] = True
+    r = mu_critical(param, m, zu, ~zu, mu_hi=2.0)
+    assert r.polished and r.statuses.get("polish_from_apex_verified", 0) + \
+        r.statuses.get("tight_polish_from_apex_verified", 0) == 1
+    rows = pattern_rows(param, m, zu, ~zu)
+    assert violation(rows, r.mu_c, r.x) <= 1e-12
+    zr = ~zu
+    zr[7] = True
+    sub = mu_critical(param, m, zu, zr, mu_hi=2.0)
+    assert sub.polished and violation(rows, sub.mu_c, sub.x) <= 1e-12
+    assert abs(r.mu_c - sub.mu_c) <= 1e-9 * sub.mu_c
+    assert abs(r.mu_c - 1.8212335219) <= 1e-9
+    assert decide(rows, r.mu_c * (1 - 3e-5), SolverOptions()).status == Status.INFEASIBLE
