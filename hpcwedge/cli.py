@@ -386,11 +386,11 @@ def _show(args) -> int:
 
 
 def _mu_c_text(item: dict) -> str:
-    """A cone's or pattern's mu^c for `show`: "-" when not computed; a value left at a
-    bisection bracket's end (not certified to 1e-9) says so."""
+    """A cone's or pattern's mu^c for `show`: "-" when not computed; a value not certified
+    to 1e-9 (an upper bound: a bisection bracket's end, or a 3D point not polished) says so."""
     if item["mu_c"] is None:
         return "-"
-    return f"{item['mu_c']:.12g}" + (" (not polished: a bracket's end)" if item.get("mu_c_polished") is False else "")
+    return f"{item['mu_c']:.12g}" + (" (not polished: an upper bound)" if item.get("mu_c_polished") is False else "")
 
 
 def _show_checkpoint(args) -> int:

@@ -11,10 +11,15 @@ Route "accurate":
      upper bound of mu^c to the verification tolerance (cones at rounding level are
      out of the ratio: plug3d 2 x 8, a stall 1.9e-7 below mu^c);
   3. polish: the KKT Newton certificate (kkt.py);
-  4. if it fails, or rests on an apex point settled by its sub-pattern (_accurate_3d:
-     not a certificate), steps 1-3 under Clarabel's tight tolerances, then the default
-     ones again from a start sought by bisection; a value no polish verifies is the
-     upper end of a bisection bracket, flagged (polished = False).
+  4. if it fails: the polish from a sub-pattern's point (_polish_from_apex), steps 1-3
+     under Clarabel's tight tolerances, then the default ones again from a start sought
+     by bisection. A value no polish verifies is flagged (polished = False): the upper
+     end of a bisection bracket, or the value of a verified point at which a cone sits
+     at its apex with multipliers that cannot be signed, when the sub-pattern without
+     that cone has the same certified value. That was once taken as certified; on
+     plug3d 4 x 6 (mu = 1) all 36 such patterns, and one orbit of plug3d 2 x 8 (mu =
+     2; 4 of its 5 agreed), have points lower (3.9e-7 .. 2.4e-9), which the tight
+     route certifies.
 Route "bisection": bisection on SOCP feasibility (mu_bracket.Probe: undecided counted
 and taken as feasible) to mu_c_tol.
 """
@@ -66,9 +71,8 @@ def mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: n
     zu, zr = np.asarray(zero_u, bool), np.asarray(zero_r, bool)
     if probe.options.tight:
         return _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0)
-    apex = probe.statuses.get("polish_apex_by_subpattern", 0)
     out = _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0, seek=False)
-    if out is not None and out[1] and probe.statuses.get("polish_apex_by_subpattern", 0) == apex:
+    if out is not None and out[1]:
         return out
     retry, doubt = _tight_retry(param, m, zu, zr, rows, hi, probe)
     if retry is not None:
@@ -81,8 +85,7 @@ def mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: n
 
 def _tight_retry(param, m, zu, zr, rows, hi, probe: Probe):
     """The accurate route under Clarabel's tight tolerances, tried when the default
-    polish fails or settles an apex point by its sub-pattern (plug3d 2 x 8 at mu = 2:
-    5 of 9,161 patterns, one of them 2.4e-9 above the mu^c that this route certifies),
+    polish fails (an apex point settled by its sub-pattern included: module doc),
     before the default route seeks another start by bisection:
     ((mu^c, True, x*), 0) when its polish verifies, else (None, its undecided solves).
     Near a mu^c where many cones are active at once the default solves leave Dinkelbach
@@ -174,12 +177,13 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth, seek=Tr
     count(probe.statuses, "polish_support_recursions")
     if signed:
         return (mu_sub, polished_sub, x_sub) if mu_sub < mu_s else (mu_s, True, x_s)
-    # unsigned apex point: accepted when the sub-pattern (apex cones unloaded) has
-    # the same value, polished. Not a proof (a point loading an apex cone may lie
-    # lower): mu_critical_3d tries the tight route on such a value first
+    # unsigned apex point whose sub-pattern (apex cones unloaded) has the same value,
+    # polished: a verified point, but no proof that none lies lower (one that loads an
+    # apex cone did on every such pattern the tight route could settle: module doc), so
+    # an upper bound, not polished
     count(probe.statuses, "polish_apex_by_subpattern")
     if polished_sub and abs(mu_sub - mu_s) <= 1e-10 * mu_s:
-        return min(mu_s, mu_sub), True, x_s
+        return min(mu_s, mu_sub), False, x_s
     if mu_sub < mu_s:
         return mu_sub, False, x_sub
     return _fallback_3d(rows, hi, probe)

@@ -140,9 +140,9 @@ def settle_rays_2d(dd: DDResult, p_mu: Parametrization, cond_T: float, m: int, m
 def note_mu_c(numerics: NumericsReport, unpolished: int, undecided: int) -> None:
     """Record mu^c values left unpolished and LP solves no solver decided."""
     if unpolished:
-        numerics.notes.append(f"{unpolished} mu^c value(s) not polished: the upper end of a bisection "
-                              f"bracket (1e-7 relative{', less where LP solves were undecided' if undecided else ''}"
-                              f"; mu_c_polished = false in the result, marked by show)")
+        numerics.notes.append(f"{unpolished} mu^c value(s) not polished: upper bounds, a bisection "
+                              f"bracket's end (1e-7 relative{', less where LP solves were undecided' if undecided else ''})"
+                              " or a 3D point not certified (mu_c_polished = false in the result, marked by show)")
     if undecided:
         numerics.notes.append(f"{undecided} LP solve(s) of the mu^c stage undecided by every solver "
                               "(taken as feasible)")

@@ -19,8 +19,8 @@ Layout of RESULT.h5
                      (an attribute absent = null); datasets rays, trivial_rays,
                      ray_zero, cones_json (JSON list), patterns_json (3D: JSON list of
                      {"contact", "mu_c", "mu_c_polished", "undecided"}, canonical order: contact
-                     bits; mu_c_polished: the value certified (pencil / KKT polish) or left at a
-                     bisection bracket's end, null without a value, absent when no mu^c stage ran)
+                     bits; mu_c_polished: the value certified (pencil / KKT polish) or an upper
+                     bound (a bisection bracket's end, a 3D point), null without a value, absent when no mu^c stage ran)
 """
 from __future__ import annotations
 

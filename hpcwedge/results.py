@@ -116,7 +116,7 @@ class SolveStats:
     dd: list = field(default_factory=list)   # 2D rays: per mu {"mu", **dd.DDResult.stats}
     lp_solves: int = 0                       # mu^c stage: LP/SOCP solves
     mu_c_polished: int = 0                   # mu^c values polished (pencil / KKT)
-    mu_c_unpolished: int = 0                 # ... left at a bisection bracket's end
+    mu_c_unpolished: int = 0                 # ... upper bounds not certified
     lp_undecided: int = 0                    # mu^c stage solves no solver decided
     symmetry: SymmetryStats | None = None
     patterns_undecided: int | None = None    # patterns kept undecided (flagged)

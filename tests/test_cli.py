@@ -47,7 +47,7 @@ def test_run_show_json(tmp_path, capsys):
 
 @pytest.mark.parametrize("method", ["accurate", "bisection"])
 def test_show_marks_the_mu_c_left_at_a_bracket(tmp_path, capsys, method):
-    """`show` prints every pattern's mu^c, with "(not polished: a bracket's end)" exactly where
+    """`show` prints every pattern's mu^c, with "(not polished: an upper bound)" exactly where
     the JSON says mu_c_polished is false."""
     out, got = run_show_json(tmp_path, capsys, 'name = "p"\ndim = 3\n[model]\nkind = "plug3d"\nring = 4\n'
                              f'[friction]\nmu = [0.65]\n[compute]\nmu_c_method = "{method}"\n')
@@ -57,7 +57,7 @@ def test_show_marks_the_mu_c_left_at_a_bracket(tmp_path, capsys, method):
     assert len(lines) == len(pats) > 0
     for line, pat in zip(lines, pats):
         assert pat["mu_c_polished"] is (method == "accurate")
-        assert line.endswith("(not polished: a bracket's end)") is (not pat["mu_c_polished"])
+        assert line.endswith("(not polished: an upper bound)") is (not pat["mu_c_polished"])
 
 
 @pytest.mark.parametrize("text,key", [
