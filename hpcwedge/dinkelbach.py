@@ -16,7 +16,8 @@ Route "accurate":
      by bisection. A value no polish verifies is flagged (polished = False): the upper
      end of a bisection bracket, or the value of a verified point at which a cone sits
      at its apex with multipliers that cannot be signed, when the sub-pattern without
-     that cone has the same certified value. That was once taken as certified; on
+     that cone has the same certified value and Newton from the sub-pattern's point
+     does not sign them either. That was once taken as certified; on
      plug3d 4 x 6 (mu = 1) all 36 such patterns, and one orbit of plug3d 2 x 8 (mu =
      2; 4 of its 5 agreed), have points lower (3.9e-7 .. 2.4e-9), which the tight
      route certifies.
@@ -161,6 +162,13 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth, seek=Tr
         if probe.undecided > before:
             count(probe.statuses, "mu_c_start_undecided", probe.undecided - before)
             probe.undecided = before
+    return _settle(param, m, zu, zr, rows, hi, pol, probe, depth)
+
+
+def _settle(param, m, zu, zr, rows, hi, pol, probe: Probe, depth):
+    """(mu^c, polished, x*) from a polish `pol` (kkt_polish's answer) of the pattern: the
+    sub-pattern with the multipliers' support unloaded is checked at mu* (below mu* no
+    point loads those cones) and, if feasible there, solved recursively (_accurate_3d)."""
     mu_s, support, x_s, signed = pol
     if depth >= m:
         return mu_s, signed, x_s
@@ -180,9 +188,14 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth, seek=Tr
     # unsigned apex point whose sub-pattern (apex cones unloaded) has the same value,
     # polished: a verified point, but no proof that none lies lower (one that loads an
     # apex cone did on every such pattern the tight route could settle: module doc), so
-    # an upper bound, not polished
+    # an upper bound, not polished, unless the polish from the sub-pattern's point signs
     count(probe.statuses, "polish_apex_by_subpattern")
     if polished_sub and abs(mu_sub - mu_s) <= 1e-10 * mu_s:
+        # Newton from the sub-pattern's own point may still sign the multipliers
+        again = kkt_polish(rows, x_sub, mu_sub, options=probe.options) if x_sub is not None else None
+        if again is not None and again[3]:
+            count(probe.statuses, "polish_apex_from_subpattern_point")
+            return _settle(param, m, zu, zr, rows, hi, again, probe, depth + 1)
         return min(mu_s, mu_sub), False, x_s
     if mu_sub < mu_s:
         return mu_sub, False, x_sub

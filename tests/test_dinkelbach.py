@@ -224,3 +224,26 @@ def test_an_apex_point_settled_by_its_sub_pattern_is_an_upper_bound_only():
     assert probe.statuses["polish_apex_by_subpattern"] == 1
     assert not polished and violation(rows, mu, x) <= 1e-12
     assert mu - 0.9904583171237 > 1e-7
+
+
+@pytest.mark.parametrize("levels,ring,mu,contact", [
+    (2, 8, 2.0, [0, 1, 10, 11]), (2, 5, 1.0, [2, 3, 5, 6])])
+def test_an_apex_point_certified_from_its_sub_pattern_point(levels, ring, mu, contact):
+    """Patterns whose polish ends at an apex point with unsigned multipliers where the
+    value is right: Newton from the sub-pattern's own point signs them (plug3d 2 x 8; on
+    plug3d 2 x 5 under OpenBLAS's Sandybridge kernels, the value was otherwise left
+    unpolished). Independent check: the same value under Clarabel's tight tolerances,
+    the point verifies, and Clarabel proves the pattern infeasible 1e-5 below."""
+    from hpcwedge.feasibility import SolverOptions, decide
+    from hpcwedge.rows import Status, pattern_rows
+    from hpcwedge.socp import violation
+    from instances import plug3d_param
+    param, m = plug3d_param(levels=levels, ring=ring)
+    zu = np.zeros(m, bool)
+    zu[contact] = True
+    r = mu_critical(param, m, zu, ~zu, mu_hi=mu)
+    tight = mu_critical(param, m, zu, ~zu, mu_hi=mu, options=SolverOptions(tolerances="tight"))
+    assert r.polished and tight.polished and abs(r.mu_c - tight.mu_c) <= 1e-9 * tight.mu_c
+    rows = pattern_rows(param, m, zu, ~zu)
+    assert violation(rows, r.mu_c, r.x) <= 1e-12
+    assert decide(rows, r.mu_c * (1 - 1e-5), SolverOptions()).status == Status.INFEASIBLE
