@@ -64,3 +64,27 @@ def test_newton_trial_steps_plain_then_levenberg_marquardt():
     plain = next(_trial_steps(Js, Fs, float(np.linalg.norm(Fs))))[0]
     np.testing.assert_allclose(plain, np.linalg.lstsq(Js, -Fs, rcond=None)[0], atol=1e-12)
     assert plain[5] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_degenerate_optimum_certified_by_two_halves():
+    """plug3d 3 x 5 at mu = 1, contact nodes 2, 10, 14: at mu^c two cones are active with
+    gradients dependent to rounding; Newton on both gives a verified point whose
+    multipliers are unsigned (-8e-5 relative), on one alone signed multipliers whose point
+    misses the other cone by 5e-11. Together they certify mu^c (kkt._bounds_meet); before,
+    the value was left at a bisection bracket, 0.9169281721, below mu^c (undecided
+    solves taken as feasible; Clarabel proves the pattern infeasible at 0.9169282 on the
+    kernels tried, not on every one). Independent check: the point verifies, and
+    Clarabel proves the pattern infeasible 1e-6 below."""
+    from hpcwedge.feasibility import SolverOptions, decide
+    from hpcwedge.mu_critical import mu_critical
+    from hpcwedge.rows import Status, pattern_rows
+    from hpcwedge.socp import violation
+    from instances import plug3d_param
+    param, m = plug3d_param(levels=3, ring=5)
+    zu = np.zeros(m, bool)
+    zu[[2, 10, 14]] = True
+    r = mu_critical(param, m, zu, ~zu, mu_hi=1.0)
+    assert r.polished and abs(r.mu_c - 0.9169282418842) <= 1e-9 * r.mu_c
+    rows = pattern_rows(param, m, zu, ~zu)
+    assert violation(rows, r.mu_c, r.x) <= 1e-12
+    assert decide(rows, r.mu_c * (1 - 1e-6), SolverOptions()).status == Status.INFEASIBLE
