@@ -7,7 +7,9 @@ when the point satisfies every row of the pattern to POLISH3_TOL and the multipl
 have the right signs (λ >= 0 on the cones, >= 0 on the u_n rows, apex multipliers in
 the dual cone): then it is a certificate that no point exists below mu* (convexity at
 fixed mu), and mu* is exact to rounding. Where the active rows are dependent, signed
-multipliers are sought by a small conic problem (conic.py).
+multipliers are sought by a small conic problem (conic.py); where no active set gives
+both, signed multipliers of one and a verified point of another within BOUNDS_RTOL close
+the bracket (_bounds_meet).
 """
 from __future__ import annotations
 

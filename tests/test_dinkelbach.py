@@ -229,10 +229,10 @@ def test_an_apex_point_settled_by_its_sub_pattern_is_an_upper_bound_only():
 @pytest.mark.parametrize("levels,ring,mu,contact", [
     (2, 8, 2.0, [0, 1, 10, 11]), (2, 5, 1.0, [2, 3, 5, 6])])
 def test_an_apex_point_certified_from_its_sub_pattern_point(levels, ring, mu, contact):
-    """Patterns whose polish ends at an apex point with unsigned multipliers where the
-    value is right: Newton from the sub-pattern's own point signs them (plug3d 2 x 8; on
-    plug3d 2 x 5 under OpenBLAS's Sandybridge kernels, the value was otherwise left
-    unpolished). Independent check: the same value under Clarabel's tight tolerances,
+    """Patterns whose polish ended at an apex point with unsigned multipliers where the
+    value is right: certified by Newton from the sub-pattern's own point (plug3d 2 x 5
+    under OpenBLAS's Sandybridge kernels, left unpolished otherwise) or by
+    kkt._bounds_meet (plug3d 2 x 8). Independent check: the same value under Clarabel's tight tolerances,
     the point verifies, and Clarabel proves the pattern infeasible 1e-5 below."""
     from hpcwedge.feasibility import SolverOptions, decide
     from hpcwedge.rows import Status, pattern_rows
