@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     sub = p.add_subparsers(dest="cmd", required=True, metavar="command")
     r = sub.add_parser("run", help="solve a scene and write RESULT.h5")
     r.add_argument("scene", help="the scene (TOML)")
-    r.add_argument("-o", "--output", required=True, metavar="RESULT.h5", help="the result file to write (HDF5)")
+    r.add_argument("-o", "--output", required=True, metavar="RESULT.h5", help="the result file to write (HDF5; an existing file is replaced only if it is empty or HDF5)")
     r.add_argument("--resume", action="store_true",
                    help="continue from the checkpoint RESULT.h5.ckpt if it exists (else start afresh)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
@@ -187,7 +187,7 @@ def _run(args) -> int:
         try:
             # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
             scene = load_scene(args.scene)
-            check_output(args.output, (args.scene, *scene.input_files))
+            check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
             lock = OutputLock(args.output)
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
                                      inputs=scene.input_digests):
@@ -248,12 +248,14 @@ def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
 
 
-def check_output(path: str, inputs=(), name_check=None) -> None:
+def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool = False) -> None:
     """Refuse an output path before any work (_UserError naming it): empty, a directory or
     any other existing non-regular file (a device, a pipe), in a missing or read-only
     folder, not writable, the same file as one of `inputs` (hard and symbolic links
-    included), or a name that name_check(path) refuses (ValueError: a suffix of the wrong
-    format). Used by run, plot and export."""
+    included), a name that name_check(path) refuses (ValueError: a suffix of the wrong
+    format), or, with replaces_hdf5_only (run: -o takes any name), an existing non-empty
+    file that is not HDF5 (a scene, a mesh or a table given to -o by mistake). Used by
+    run, plot and export."""
     if not path:
         raise _UserError("-o: empty file name")
     folder = os.path.dirname(os.path.abspath(path))
@@ -278,6 +280,9 @@ def check_output(path: str, inputs=(), name_check=None) -> None:
                 raise _UserError(f"{path}: is the input {inp}; writing the output would destroy it")
         if not os.access(path, os.W_OK):
             raise _UserError(f"{path}: not writable")
+        if replaces_hdf5_only and st.st_size and not _is_hdf5(path):
+            raise _UserError(f"{path}: exists and is not an HDF5 file (not a result); refusing to "
+                             "replace it (remove it first, or give another -o)")
     elif os.path.islink(path):
         raise _UserError(f"{path}: a dangling symbolic link; refusing to write through it")
     if not os.path.isdir(folder):
@@ -289,6 +294,16 @@ def check_output(path: str, inputs=(), name_check=None) -> None:
             name_check(path)
         except ValueError as e:
             raise _UserError(str(e)) from None
+
+
+def _is_hdf5(path: str) -> bool:
+    """Does the file at `path` carry HDF5's signature (after a user block, as a result's
+    checksum)? False when it cannot be read."""
+    import h5py
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError:
+        return False
 
 
 class OutputLock:

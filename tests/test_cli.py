@@ -354,6 +354,25 @@ def test_output_that_would_destroy_an_input_or_fail_is_refused_first(tmp_path, c
     assert after == before and (case != "fifo" or os.path.exists(out) and not os.path.isfile(out))
 
 
+@pytest.mark.parametrize("victim", ["other.toml", "table.csv", "notes"])
+def test_run_does_not_replace_a_file_that_is_not_hdf5(tmp_path, capsys, victim):
+    """run -o takes any name, so a scene, a table or notes given to -o by mistake would be
+    replaced by a result: refused (one line, exit 2, the file intact, nothing else written);
+    an empty file and an earlier result are replaced."""
+    scene = write(tmp_path, _t(PLUG))
+    out = tmp_path / victim
+    out.write_text('name = "another scene"\n')
+    assert main(["run", scene, "-q", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "not an HDF5 file" in err and str(out) in err
+    assert out.read_text() == 'name = "another scene"\n'
+    assert sorted(os.listdir(tmp_path)) == sorted(["s.toml", victim])
+    out.write_bytes(b"")
+    assert main(["run", scene, "-q", "-o", str(out)]) == 0
+    assert main(["show", str(out)]) == 0
+    assert main(["run", scene, "-q", "-o", str(out)]) == 0
+
+
 def test_device_output_refused():
     """-o on a device node (as root, a run would have replaced it by a regular file)."""
     import stat
