@@ -92,7 +92,9 @@ def build_model(scene: Scene) -> Model:
     e = stiffness_exponent(scene)
     if e == 0:
         return _build_model(scene, scene.model)
-    params = {k: _scaled(v, e) if k in MODULI.get(scene.kind, ()) else v for k, v in scene.model.items()}
+    # the moduli the scene leaves at their defaults are scaled with the others
+    given = {**MODULI.get(scene.kind, {}), **scene.model}
+    params = {k: _scaled(v, e) if k in MODULI.get(scene.kind, ()) else v for k, v in given.items()}
     model = _build_model(scene, params)
     material = {k: np.ldexp(np.asarray(v, dtype=float), e) if k in MATERIAL_MODULI else v
                 for k, v in model.material.items()}

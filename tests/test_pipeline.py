@@ -299,6 +299,20 @@ def test_unit_moduli_are_not_rescaled():
     assert stiffness_exponent(scene({"kind": "vgroove_bar", "EA": 3e-7, "eps": 1e-9})) == -22
 
 
+@pytest.mark.parametrize("eps", [1.0, 10.0, 3e5, 2.0 ** -30])
+def test_moduli_left_at_their_defaults_are_scaled_with_the_given_ones(eps):
+    """vgroove_bar with eps given and EA at its default 1: mu^c = tan(theta) + eps / (k
+    sin 2 theta) (SPEC §6; k = EA / L = 1/2 here) = 1 + 2 eps at theta = 45 deg, whatever
+    the exponent eps gives the scene (before: the default EA was left unscaled, eps = 10
+    gave 3.5 instead of 21)."""
+    from hpcwedge.build import stiffness_exponent
+    sc = scene({"kind": "vgroove_bar", "theta_deg": 45.0, "eps": eps}, mu=[2.0 + 2 * eps], mu_max=1e6)
+    want = 1.0 + 2 * eps
+    assert (stiffness_exponent(sc) != 0) == (eps > 1.5)
+    got = run_scene(sc).mu_c
+    assert abs(got - want) <= 1e-9 * want
+
+
 # ------------------------------------------------------------------------ stages and records
 
 def test_condense_stage_record():
