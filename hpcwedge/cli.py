@@ -450,7 +450,17 @@ def _plot(args) -> int:
         plot_result(args.result, args.output, run=args.run, ray=args.ray, pattern=args.pattern)
     except ValueError as e:
         raise _UserError(str(e)) from None
+    except OSError as e:
+        raise _cannot_write(args.output, e) from None
     return 0
+
+
+def _cannot_write(output: str, e: OSError) -> _UserError:
+    """The one line of an output that failed while written (a folder that refuses files
+    although os.access allowed it, as /sys for root; a full disk): nothing is left, as
+    files.replace_atomic removed its temp file."""
+    from .files import error_reason
+    return _UserError(f"{output}: cannot write ({error_reason(e)})")
 
 
 def _export(args) -> int:
@@ -462,7 +472,10 @@ def _export(args) -> int:
                                     pattern=args.pattern)
     except ConfigurationError as e:
         raise _UserError(f"export: {e}") from None
-    write_vtu(config, args.output)
+    try:
+        write_vtu(config, args.output)
+    except OSError as e:
+        raise _cannot_write(args.output, e) from None
     print(f"[hpcwedge] {config.label}: wrote {args.output}", file=sys.stderr)
     return 0
 

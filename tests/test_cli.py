@@ -524,6 +524,37 @@ def test_full_output_disk_refused_before_the_work(tmp_path, capsys):
         assert sorted(os.listdir(d)) == ["filler"]
 
 
+@pytest.mark.parametrize("cmd", ["plot", "export"])
+def test_plot_and_export_that_cannot_be_written_are_one_line(tmp_path, capsys, cmd):
+    """plot and export into a full file system (a 64 kB tmpfs filled up) and, as root, into
+    /sys (os.access allows it, the kernel refuses files there): one line naming the output,
+    exit 2, nothing left (before: an internal OSError or PermissionError, exit 1)."""
+    res = _run_quiet(tmp_path, _t(PLUG), "res")
+    args = {"plot": ["plot", res], "export": ["export", res, "--ray", "0"]}[cmd]
+    suffix = {"plot": "png", "export": "vtu"}[cmd]
+    d = tmp_path / "full"
+    d.mkdir()
+    with tmpfs(d, "size=64k"):
+        fd = os.open(d / "filler", os.O_WRONLY | os.O_CREAT)
+        try:
+            while True:
+                os.write(fd, b"\0" * 4096)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+        out = str(d / f"x.{suffix}")
+        capsys.readouterr()
+        assert main([*args, "-o", out]) == 2
+        err = capsys.readouterr().err
+        assert len(err.splitlines()) == 1 and err.startswith(f"hpcwedge: error: {out}:"), err
+        assert sorted(os.listdir(d)) == ["filler"]
+    if os.geteuid() == 0 and os.path.isdir("/sys/kernel"):
+        assert main([*args, "-o", f"/sys/kernel/x.{suffix}"]) == 2
+        err = capsys.readouterr().err
+        assert err == f"hpcwedge: error: /sys/kernel/x.{suffix}: cannot write (Permission denied)\n"
+
+
 def test_show_into_a_closed_pipe_exits_quietly(tmp_path):
     """`hpcwedge show R.h5 --json | head -c 100` through a real shell pipe: head exits long
     before the ~160 kB of JSON are written; hpcwedge stops quietly (no BrokenPipeError) with
