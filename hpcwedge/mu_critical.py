@@ -75,11 +75,24 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
     if out.mu_c is None or method != "accurate" or out.mu_c * REBALANCE > ref:
         return out
     again = solve(out.mu_c, out.mu_c * (1 + REBALANCE_BRACKET), out.mu_c * (1 - REBALANCE_BRACKET))
-    again.solves += out.solves
-    again.undecided += out.undecided
-    for k, v in out.statuses.items():
-        again.statuses[k] = again.statuses.get(k, 0) + v
-    return again if again.mu_c is not None and (again.polished or not out.polished) else out
+    if again.mu_c is None or not again.polished:
+        # balanced that far above it (ref / mu^c ~ 1e6 and more), the first value can be off
+        # by more than the bracket (plug2d at mu_max = 1e6: 2.8e-4 below mu^c): the whole
+        # search again, in coordinates balanced at it
+        wide = solve(out.mu_c, mu_hi)
+        _merge(wide, again)
+        again = wide
+    best = again if again.mu_c is not None and (again.polished or not out.polished) else out
+    _merge(best, again if best is out else out)
+    return best
+
+
+def _merge(into: MuC, other: MuC) -> None:
+    """Add the decisions counted in `other` to `into`'s."""
+    into.solves += other.solves
+    into.undecided += other.undecided
+    for k, v in other.statuses.items():
+        into.statuses[k] = into.statuses.get(k, 0) + v
 
 
 def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100.0,

@@ -313,6 +313,17 @@ def test_moduli_left_at_their_defaults_are_scaled_with_the_given_ones(eps):
     assert abs(got - want) <= 1e-9 * want
 
 
+@pytest.mark.parametrize("mu_max", [1e5, 3e5, 1e6])
+def test_global_mu_c_with_every_listed_mu_below_it_and_a_large_mu_max(mu_max):
+    """plug2d with mu = 0.1 < mu^c: the global search starts at mu_max, the LPs balanced
+    there; the value is still tan(taper) to 1e-9, certified (before: 2.5e-5 to 2.8e-4
+    below it from mu_max = 3e5 on, an unpolished value under a note claiming 1e-7)."""
+    res = run_scene(scene({"kind": "plug2d", "rows": 2}, mu=[0.1], mu_max=mu_max, mu_c="cones"))
+    want = math.tan(math.radians(10.0))
+    assert abs(res.mu_c - want) <= 1e-9 * want
+    assert res.stats["mu_c_unpolished"] == 0 and not res.stats["numerics"]["flagged"]
+
+
 # ------------------------------------------------------------------------ stages and records
 
 def test_condense_stage_record():
