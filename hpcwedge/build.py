@@ -222,6 +222,11 @@ def raw_stiffness(scene: Scene) -> ContactProblem:
                 N = N.T
             else:
                 raise SceneError(f"model.null_space: expected {n} rows (columns = rigid modes), got shape {N.shape}")
+        if N.shape[1] == 0:                     # no rigid modes given: a supported body
+            if lam[0] <= SINGULAR_RTOL * lam[-1]:
+                raise SceneError("model.null_space: empty, but K is singular (give its null space, "
+                                 "or leave model.null_space out)")
+            return ContactProblem(scene.dim, K, np.zeros((n, 0)), eigenvalues=lam)
         if np.linalg.matrix_rank(N) < N.shape[1]:
             raise SceneError("model.null_space: columns are linearly dependent")
         Q = np.linalg.qr(N)[0]

@@ -337,6 +337,8 @@ def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.nd
             info = F.getMumpsInfog(1)
             if info == -10:
                 raise _singular(model, "MUMPS INFOG(1) = -10")
+            if info == -2 and F.getMumpsInfog(2) == 0:
+                raise _singular(model, "no stiffness at all, MUMPS INFOG(1) = -2")
             if info < 0:
                 raise RuntimeError(f"condense: MUMPS failed, INFOG(1) = {info}, INFOG(2) = {F.getMumpsInfog(2)}")
             nnull = F.getMumpsInfog(28)

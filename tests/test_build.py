@@ -37,6 +37,30 @@ def test_given_null_space_checked():
         raw_stiffness(sc({"K": K, "null_space": [[1.0], [0.0]]}))
 
 
+@pytest.mark.parametrize("empty", [[[], []], []])
+def test_empty_null_space_means_no_rigid_modes(empty):
+    """An empty null space (no columns) declares a supported body: accepted for a regular K
+    (the same problem as without it), refused by name for a singular one (before: an
+    internal ValueError from a zero-size reduction, exit 1)."""
+    K = [[2.0, 0.5], [0.5, 1.0]]
+    p = raw_stiffness(sc({"K": K, "null_space": empty}))
+    assert p.N.shape == (2, 0) and np.array_equal(p.K, raw_stiffness(sc({"K": K})).K)
+    with pytest.raises(SceneError, match="^model.null_space: empty, but K is singular"):
+        raw_stiffness(sc({"K": [[1.0, -1.0], [-1.0, 1.0]], "null_space": empty}))
+
+
+@pytest.mark.parametrize("ext", ["npy", "npz"])
+def test_complex_K_file_refused(tmp_path, ext):
+    """A complex K in a file (numpy would drop the imaginary part with a warning): refused."""
+    K = np.array([[2.0, 0.5 + 1j], [0.5 - 1j, 1.0]])
+    f = tmp_path / f"k.{ext}"
+    np.save(f, K) if ext == "npy" else np.savez(f, K=K)
+    scene = parse_scene({"name": "s", "dim": 2, "model": {"kind": "stiffness", "file": f.name},
+                         "friction": {"mu": [1.0]}}, base_dir=str(tmp_path))
+    with pytest.raises(SceneError, match="^model.file.*complex entries"):
+        raw_stiffness(scene)
+
+
 def test_files(tmp_path):
     import h5py
     K = np.array([[2.0, 0.5], [0.5, 1.0]])

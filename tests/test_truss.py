@@ -49,6 +49,8 @@ def test_truss_3d_bar_axial():
     ({"supports": [[0, 0], [1, 2]]}, r"model.supports \(dof\): dof 2 does not exist"),
     ({"supports": [[2, 1]]}, r"model.supports: contact node 2 .* has fixed dof 1"),
     ({"tangents": [[-1, 0], [1, 0]]}, r"contact.tangents: 2D tangent must be t = \(n_y, -n_x\)"),
+    # before: an internal error from the condensation (MUMPS INFOG(1) = -2), exit 1
+    ({"nodes": [[0, 0], [1, 0], [1, 1], [0, 1], [5, 5]]}, r"model.nodes: node 4 is in no bar"),
 ])
 def test_truss_validation(kw, msg):
     args = dict(nodes=X2, bars=B2, EA=1.0, supports=None, contact_nodes=[2, 3], normals=N2)

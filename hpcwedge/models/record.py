@@ -145,7 +145,10 @@ class Model:
 # ---------------------------------------------------------------------------
 
 def as_float_array(x, key: str, ndim: int | None = None) -> np.ndarray:
-    """np.asarray(x, float) with a one-line ValueError naming `key` on ragged/non-numeric/NaN input."""
+    """np.asarray(x, float) with a one-line ValueError naming `key` on ragged, non-numeric,
+    complex (a complex array from a file; numpy would drop its imaginary part) or NaN input."""
+    if isinstance(x, np.ndarray) and np.iscomplexobj(x):
+        raise ValueError(f"{key}: complex entries (a stiffness is real)")
     try:
         a = np.asarray(x, dtype=float)
     except (TypeError, ValueError):

@@ -90,6 +90,9 @@ def truss_model(nodes, bars, EA, supports, contact_nodes, normals, tangents=None
     if np.any(ea <= 0):
         raise ValueError("model.EA: must be > 0" + (f" (bar {int(np.flatnonzero(ea <= 0)[0])})" if ea.ndim else ""))
     _bar_geometry(X, B)
+    loose = np.setdiff1d(np.arange(n), B.ravel())
+    if loose.size:
+        raise ValueError(f"model.nodes: node {int(loose[0])} is in no bar (connect it or remove it)")
     fixed = check_supports(supports, n, dim)
     c = check_contact_nodes(contact_nodes, n)
     check_contact_free(fixed, c, dim)
