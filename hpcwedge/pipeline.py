@@ -460,12 +460,16 @@ def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:
     """The global mu^c: the least of the first listed mu's cone / pattern values (any
     pattern feasible below that mu lies in one of its cones / patterns); when no mu lists
     any, or none of them has a value, the global search (global_mu_c.global_mu_critical: tree
-    or MILP route, below mu_max)."""
+    or MILP route, below mu_max). A least value above mu_max (a listed mu above it) is
+    "none_up_to_mu_max", as the search gives when no listed mu is that high (SPEC §2: the
+    global mu^c does not depend on the listed mu)."""
+    scene = ctx.scene
     if values.first is not None:
         found = [v for v in (values.by_key[key].mu_c for key in values.first) if v is not None]
         if found:
-            return GlobalMuC(min(found), "found")
-    scene, bnb = ctx.scene, BnBStats()
+            least = min(found)
+            return GlobalMuC(least, "found") if least <= scene.mu_max else GlobalMuC(None, "none_up_to_mu_max")
+    bnb = BnBStats()
     mu_c, status = global_mu_critical(ctx.param, ctx.m, scene.mu_max, method=scene.mu_c_method,
                                       tol=scene.mu_c_tol, stats=bnb, symmetry=ctx.symmetry, scale=ctx.scale)
     search = GlobalRouteStats(solves=bnb.solves, skipped=bnb.skipped, undecided=bnb.undecided,

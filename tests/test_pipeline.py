@@ -324,6 +324,20 @@ def test_global_mu_c_with_every_listed_mu_below_it_and_a_large_mu_max(mu_max):
     assert res.stats["mu_c_unpolished"] == 0 and not res.stats["numerics"]["flagged"]
 
 
+@pytest.mark.parametrize("mu_max,want", [(0.1, None), (0.2, math.tan(math.radians(10.0)))])
+def test_global_mu_c_does_not_depend_on_the_listed_mu_or_on_enumerate(mu_max, want):
+    """SPEC §2: the global mu^c is the scene's, searched up to mu_max. plug2d (mu^c = tan 10
+    deg) with a listed mu above or below it, enumerating or not: the same answer (before:
+    with mu_max = 0.1 the listed mu = 0.65's cones gave 0.1763 "found", the three other
+    runs null)."""
+    got = set()
+    for mu in (0.65, 0.05):
+        for enumerate_ in (True, False):
+            res = run_scene(scene({"kind": "plug2d", "rows": 2}, mu=[mu], mu_max=mu_max, enumerate=enumerate_))
+            got.add((None if res.mu_c is None else round(res.mu_c, 12), res.mu_c_status))
+    assert got == {(None if want is None else round(want, 12), "none_up_to_mu_max" if want is None else "found")}
+
+
 # ------------------------------------------------------------------------ stages and records
 
 def test_condense_stage_record():
