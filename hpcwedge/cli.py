@@ -73,6 +73,10 @@ def main(argv: list[str] | None = None) -> int:
         code = _error(str(e), 2)
     except BrokenPipeError:
         code = _broken_pipe()
+    except KeyboardInterrupt:
+        # Ctrl-C where no handler of ours is in (start-up, show, plot, export): nothing was
+        # written (outputs are atomic); one line and the status of a process ended by SIGINT
+        code = _error("interrupted (nothing written)", 128 + signal.SIGINT)
     except Exception as e:                      # noqa: BLE001  (a bug: one line, the traceback on request)
         if os.environ.get("HPCWEDGE_DEBUG"):
             import traceback

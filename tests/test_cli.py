@@ -555,6 +555,31 @@ def test_plot_and_export_that_cannot_be_written_are_one_line(tmp_path, capsys, c
         assert err == f"hpcwedge: error: /sys/kernel/x.{suffix}: cannot write (Permission denied)\n"
 
 
+def test_ctrl_c_outside_a_run_is_one_line(tmp_path):
+    """SIGINT to `hpcwedge show R.h5 --json` blocked on a full pipe that nobody reads (a
+    real signal at a known point: the ~160 kB of JSON do not fit the pipe): one line and
+    the status of a process ended by SIGINT, 130 (before: a KeyboardInterrupt traceback)."""
+    res = _run_quiet(tmp_path, _t(PLUG).replace("rows = 2", "rows = 4"), "big")
+    p = subprocess.Popen(command(None, "show", res, "--json"), env=env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 60
+        # blocked once the pipe is full: the kernel shows where it waits
+        while time.monotonic() < deadline:
+            with open(f"/proc/{p.pid}/wchan") as f:
+                if "pipe_write" in f.read():
+                    break
+            time.sleep(0.05)
+        p.send_signal(signal.SIGINT)
+        err = p.stderr.read().decode()
+        p.stdout.close()
+        assert p.wait(timeout=60) == 130
+    finally:
+        p.kill()
+        p.wait()
+    assert err == "hpcwedge: error: interrupted (nothing written)\n", err
+
+
 def test_show_into_a_closed_pipe_exits_quietly(tmp_path):
     """`hpcwedge show R.h5 --json | head -c 100` through a real shell pipe: head exits long
     before the ~160 kB of JSON are written; hpcwedge stops quietly (no BrokenPipeError) with
