@@ -12,6 +12,7 @@ flipped byte anywhere, a truncation) is found, also in bytes h5py would never re
 from __future__ import annotations
 
 import hashlib
+import io
 import os
 import re
 import stat
@@ -72,13 +73,18 @@ def _body_digest(fh) -> str:
     return h.hexdigest()
 
 
+def _checksum_block(digest: str) -> bytes:
+    """The user block that records the SHA-256 `digest` (hex) of the bytes after it."""
+    return (CHECKSUM_MAGIC + digest.encode() + b"\n").ljust(USERBLOCK_SIZE, b"\0")
+
+
 def seal(path: str) -> None:
     """Write the checksum user block of the closed HDF5 file `path` (made with
     userblock_size=USERBLOCK_SIZE, or changed in place after it was sealed) and fsync it."""
     with open(path, "rb+") as fh:
-        block = CHECKSUM_MAGIC + _body_digest(fh).encode() + b"\n"
+        block = _checksum_block(_body_digest(fh))
         fh.seek(0)
-        fh.write(block.ljust(USERBLOCK_SIZE, b"\0"))
+        fh.write(block)
         fh.flush()
         os.fsync(fh.fileno())
 
@@ -177,9 +183,17 @@ def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> N
     file is bad), then renamed, so a bad file never replaces a good one."""
 
     def write(tmp):
-        with h5py.File(tmp, "w", userblock_size=USERBLOCK_SIZE) as f:
+        # HDF5 builds the file in memory; only plain writes touch the disk, so a full disk or
+        # a quota is an OSError here, not a failure inside the HDF5 library (which ended a run
+        # with a segfault and h5py's tracebacks when its file could not be flushed or closed)
+        image = io.BytesIO()
+        with h5py.File(image, "w", userblock_size=USERBLOCK_SIZE) as f:
             fill(f)
-        seal(tmp)
+        body = image.getbuffer()[USERBLOCK_SIZE:]
+        with open(tmp, "wb") as fh:
+            fh.write(_checksum_block(hashlib.sha256(body).hexdigest()))
+            fh.write(body)
+        body.release()
         if verify is not None:
             verify(tmp)
 
