@@ -169,6 +169,7 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     condensed = None if comm is None else condense(scene, comm)    # collective: first, as every rank
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
+    engine.serving = True                        # the workers have gone on to serve tasks
     progress.guard = engine.guard = MemoryGuard(scene.max_memory_gb, ranks_on_host())
     try:
         with single_threaded():

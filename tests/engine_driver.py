@@ -6,7 +6,10 @@ JSON line: seconds of CPU per rank and phase, and each phase's length.
 
 With the argument "cancel": every worker runs a 60 s task that calls
 parallel.task_tick(); the master gets SIGTERM after 0.5 s and closes the
-engine; prints when the job was interrupted and when close() returned."""
+engine; prints when the job was interrupted and when close() returned.
+
+With the argument "boom": a worker's task raises ValueError("injected fault"); the master
+prints the first line of the RuntimeError it gets (all the command line shows of it)."""
 import json
 import os
 import sys
@@ -25,6 +28,13 @@ def spin(ctx, seconds):
 
 
 parallel.register("spin", spin)
+
+
+def boom(ctx, payload):
+    raise ValueError("injected fault")
+
+
+parallel.register("boom", boom)
 
 
 def cpu(pid):
@@ -83,5 +93,18 @@ def cancel():
     print(json.dumps(out), flush=True)
 
 
+def fail():
+    comm = parallel.world()
+    if comm.rank:
+        parallel.serve(comm)
+        return
+    engine = parallel.Engine(comm)
+    try:
+        parallel.run_tasks("boom", None, [1], engine=engine)
+    except RuntimeError as e:
+        print(json.dumps({"first_line": str(e).splitlines()[0]}), flush=True)
+    engine.close(timeout=30.0)
+
+
 if __name__ == "__main__":
-    cancel() if sys.argv[1] == "cancel" else main(float(sys.argv[1]))
+    {"cancel": cancel, "boom": fail}.get(sys.argv[1], lambda: main(float(sys.argv[1])))()

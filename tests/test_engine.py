@@ -61,6 +61,82 @@ def test_engine_signal_checkpoint_resume_in_process(tmp_path, sig):
     assert out.found == ref.found and out.counters["nodes"] == ref.counters["nodes"]
 
 
+def test_second_stop_signal_does_not_interrupt_the_stop_checkpoint(tmp_path):
+    """SLURM's SIGTERM, then mpirun's forwarded one about a second later: the first stops the
+    job (Interrupted), the second arrives while the stop checkpoint is written and must
+    not interrupt it (before: a second Interrupted out of the write, an internal error
+    with exit 1, the stop checkpoint lost). Real signals to this process."""
+    make, _ = tree_factory(41, m=6)
+    ckpt = str(tmp_path / "x.ckpt")
+    calls = []
+
+    def task(ctx, payload):
+        calls.append(1)
+        if len(calls) == 3:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return explore_task(ctx, payload)
+
+    eng = parallel.Engine()
+    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
+    eng.install_signals()
+    try:
+        with parallel.registered("subtree", task):
+            with pytest.raises(parallel.Interrupted):
+                run_patterns(make, [1.0, 4.0], engine=eng, budget=2)
+        os.kill(os.getpid(), signal.SIGTERM)            # the second one, outside every job
+        assert eng.write_checkpoint("SIGTERM")
+    finally:
+        eng.close()
+    assert parallel.Engine().use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True)
+
+
+def test_stop_signal_while_a_checkpoint_is_read_keeps_its_work(tmp_path):
+    """A SIGTERM while --resume reads a large checkpoint (a real signal, sent by a thread
+    once the file is open): Interrupted once it is loaded, and the stop checkpoint holds
+    the loaded work (before: an empty checkpoint written over it, or the good one refused
+    as 'truncated or corrupt')."""
+    import threading
+    import time
+
+    import numpy as np
+
+    from hpcwedge.parallel.checkpoint import read_checkpoint, write_checkpoint
+    ckpt = str(tmp_path / "big.ckpt")
+    data = np.random.default_rng(7).random(4_000_000)          # 32 MB: read for a while
+    header = {"scene_hash": "hash", "inputs": "{}", "elapsed_s": 12.5, "resumes": 0, "ranks": 1,
+              "reason": "timer"}
+    write_checkpoint(ckpt, header, "scene", [("rays", {"attrs": {"kind": "face", "finished": True,
+                                                                 "counters": "{}"}, "data": {"x": data}})])
+
+    def signal_when_open():
+        end = time.monotonic() + 30
+        while time.monotonic() < end:
+            for fd in os.listdir("/proc/self/fd"):
+                try:
+                    if os.readlink(f"/proc/self/fd/{fd}") == ckpt:
+                        os.kill(os.getpid(), signal.SIGTERM)
+                        return
+                except OSError:
+                    pass
+            time.sleep(0.0005)
+
+    eng = parallel.Engine()
+    eng.install_signals()
+    sender = threading.Thread(target=signal_when_open)
+    sender.start()
+    try:
+        with pytest.raises(parallel.Interrupted):
+            eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True)
+            time.sleep(5)                   # not reached when the signal came during the read
+        sender.join()
+        assert eng.write_checkpoint("SIGTERM")
+    finally:
+        eng.close()
+    back = read_checkpoint(ckpt)
+    assert np.array_equal(back["jobs"]["rays"]["data"]["x"], data)
+    assert back["attrs"]["elapsed_s"] >= 12.5 and back["attrs"]["reason"] == "SIGTERM"
+
+
 def test_worker_error_in_serial_mode_propagates():
     parallel.register("boom", lambda ctx, p: 1 / 0)
     with pytest.raises(ZeroDivisionError):

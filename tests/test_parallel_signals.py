@@ -180,3 +180,33 @@ def test_stats_same_for_plain_resumed_and_3_ranks(tmp_path, dim):
     got = show_json(resumed)
     assert got["stats"]["parallel"]["resumes"] == 1
     assert same_part(got) == same_part(want)
+
+
+@needs_mpirun
+def test_sigterm_to_the_master_before_the_workers_serve_ends_the_job(tmp_path):
+    """mpirun -n 3 on a body whose condensation (collective, all ranks) takes seconds: a
+    SIGTERM to rank 0 as soon as its handler is in, before the workers leave the collective
+    start-up for their task loop. The job ends with exit 75 and every rank gone (before:
+    the master exited, the workers waited in the broadcast forever, spinning)."""
+    scene = tmp_path / "block.toml"
+    scene.write_text('name = "b"\ndim = 2\n[model]\nkind = "block2d"\nrows = 3\nrefine = 150\n'
+                     '[friction]\nmu = [0.65]\n[compute]\nmu_c = "none"\n')
+    proc = launch(3, "run", str(scene), "-o", str(tmp_path / "b.h5"), "-q")
+    try:
+        pids = rank_pids(proc.pid, 3)
+        bit = 1 << (signal.SIGTERM - 1)
+        end = time.monotonic() + 60
+        while time.monotonic() < end:
+            with open(f"/proc/{pids[0]}/status") as f:
+                caught = int(next(ln for ln in f if ln.startswith("SigCgt")).split(":")[1], 16)
+            if caught & bit:
+                break
+            time.sleep(0.002)
+        os.kill(pids[0], signal.SIGTERM)
+        assert proc.wait(timeout=60) == 75
+    finally:
+        proc.kill()
+        proc.wait()
+    assert all_gone(pids.values())
+    assert not (tmp_path / "b.h5").exists()
+

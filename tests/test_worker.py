@@ -26,3 +26,17 @@ def test_sigterm_cancels_long_tasks():
     assert got["interrupted"] is not None and got["interrupted"] < 10, got
     assert got["closed"] - got["interrupted"] < 5, got
     assert time.monotonic() - t < 40, got
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_a_worker_error_names_its_exception_on_the_first_line():
+    """A worker's task raises: the master's error names the worker's exception on its first
+    line, the only line the command line prints (before: 'worker rank 1 failed on a
+    'boom' task:' and nothing of the cause)."""
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", "-x", "PYTHONPATH",
+                        sys.executable, os.path.join(ROOT, "tests", "engine_driver.py"), "boom"],
+                       env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    assert got["first_line"] == "worker rank 1 failed on a 'boom' task: ValueError: injected fault"

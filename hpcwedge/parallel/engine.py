@@ -76,9 +76,12 @@ class SignalState:
         if signum == signal.SIGUSR1:
             self.flags.add(name)
             return
+        stopping = self.stop_reason() is not None
         self.flags.add("STOP:" + name)
-        if not self.defer:
-            self.defer = True        # a second signal must not interrupt the checkpoint write
+        # only the first stop raises: a second one (mpirun forwards SIGTERM to rank 0 about a
+        # second after SLURM's) must not interrupt the stop checkpoint's write
+        if not self.defer and not stopping:
+            self.defer = True
             raise Interrupted(name)
 
     def stop_reason(self) -> str | None:
@@ -141,6 +144,9 @@ class Engine:
         self.guard = None
         self.checkpoints = Checkpointer()
         self.signals = SignalState()
+        #: every rank is past the collective start-up (pipeline.condense) and the workers
+        #: serve tasks: the master can stop them with a message (else only MPI_Abort can)
+        self.serving = comm is None
         self.master = Master(comm) if comm is not None and self.rank == 0 else None
         self.tasks_per_rank = [0] * self.size  # this session, merged tasks by the rank that ran them
         self._jobs: dict = {}            # finished jobs, by name, in order
@@ -171,8 +177,17 @@ class Engine:
     def use_checkpoint(self, path: str, scene_hash: str, scene_text: str, every_s: float,
                        resume: bool, inputs: dict[str, str] | None = None) -> bool:
         """Write checkpoints to `path`; with resume, continue from it if it exists
-        (Checkpointer.use). Returns True when a checkpoint was loaded."""
-        return self.checkpoints.use(path, scene_hash, scene_text, every_s, resume, inputs)
+        (Checkpointer.use). Returns True when a checkpoint was loaded. A SIGTERM/SIGINT while
+        it is read (seconds for a large one) acts once it is loaded: Interrupted then, with
+        the loaded state to save, never an empty one over it."""
+        held, self.signals.defer = self.signals.defer, True
+        try:
+            loaded = self.checkpoints.use(path, scene_hash, scene_text, every_s, resume, inputs)
+        finally:
+            self.signals.defer = held
+        if self.signals.stop_reason():
+            raise Interrupted(self.signals.stop_reason())
+        return loaded
 
     def restored(self, name: str) -> bool:
         """The checkpoint this run resumed from holds a job `name` not run yet in
@@ -329,7 +344,10 @@ class Engine:
             from ..scene import SceneError
             raise SceneError(msg.line)
         if tag == mpi.ERROR:
-            raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task:\n{msg}")
+            # the worker's exception (its traceback's last line) on the first line, which is
+            # all the command line prints; the whole traceback after it (HPCWEDGE_DEBUG=1)
+            cause = (str(msg).strip().splitlines() or ["?"])[-1]
+            raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task: {cause}\n{msg}")
         job.merge(token, msg)
 
     def _stop_workers(self, job, timeout: float = 60.0) -> None:
