@@ -193,11 +193,16 @@ def _run(args) -> int:
             scene = load_scene(args.scene)
             check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
             lock = OutputLock(args.output)
+            # the temp file of a result write that a kill -9 cut short (under the lock: ours)
+            _remove_stale(args.output + ".tmp")
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
                                      inputs=scene.input_digests):
                 done = engine.checkpoints
                 progress.note(f"resuming from {ckpt} (session {done.resumes + 1}; "
                               f"{done.elapsed_before:.1f} s of work before it)")
+                if done.changed_settings:
+                    progress.note(f"{', '.join(done.changed_settings)} differ from the checkpoint's "
+                                  "scene (settings of the run, not of its answers)")
             elif os.path.exists(ckpt):
                 print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
                       f"({'it is missing' if args.resume else 'use --resume to continue from it'})",
@@ -206,7 +211,7 @@ def _run(args) -> int:
             # the signal handlers, before anything is written
             result = run_scene(scene, progress, engine=engine, comm=comm)
             try:
-                write_result(args.output, result)
+                write_result(args.output, result, tmp_path=args.output + ".tmp")
             except (OSError, RuntimeError) as e:     # h5py: RuntimeError for some failed writes
                 raise _UserError(_output_lost(args.output, e, engine, ckpt)) from None
             engine.remove_checkpoint()
@@ -222,7 +227,12 @@ def _run(args) -> int:
                 what = f"no new checkpoint; the previous one, {ckpt}, is kept: rerun with --resume"
             else:
                 what = "stopped before any checkpointable work"
-            print(f"[hpcwedge] {e}: {what}", file=sys.stderr)
+            print(f"[hpcwedge] {e}: {what}", file=sys.stderr, flush=True)
+            if not engine.serving:
+                # stopped before the collective start-up: the workers wait in it and would
+                # never read a stop message (the job hung, the workers spinning in MPI)
+                sys.stdout.flush()
+                comm.Abort(EXIT_INTERRUPTED)
             engine.close(timeout=5.0)
             return EXIT_INTERRUPTED
     finally:
@@ -234,6 +244,15 @@ def _run(args) -> int:
         print(f"[hpcwedge] {scene.name}: mu_c = {mu_c}; wrote {args.output} "
               f"({result.timings['total']:.2f} s)", file=sys.stderr)
     return 0
+
+
+def _remove_stale(path: str) -> None:
+    """Remove the file `path` if it is there (a failure to do so changes nothing: the write
+    replaces it)."""
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
 
 
 def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:

@@ -75,7 +75,8 @@ class MemoryGuard:
                  "machine's available memory)" if self.auto else f"run.max_memory_gb = {self.limit / GB:.3g}")
         raise MemoryLimit(f"run.max_memory_gb: {what}: about {(rss + need) / GB:.3g} GB needed "
                           f"({rss / GB:.3g} GB in use), more than {whose}; stopped before it runs out "
-                          "(nothing written): raise run.max_memory_gb if the machine has the memory, "
+                          "(no result written; a checkpoint already written keeps its work): raise "
+                          "run.max_memory_gb if the machine has the memory (--resume then goes on), "
                           "or run a smaller scene (fewer contact nodes, mu nearer mu^c)")
 
     def dd_step(self, info: dict, where: str = "") -> None:

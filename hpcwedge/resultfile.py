@@ -47,8 +47,9 @@ def compression(arr: np.ndarray) -> str | None:
     return "gzip" if arr.size > 4096 and arr.dtype.kind not in "fc" else None
 
 
-def write_result(path: str, result) -> None:
-    """Store a pipeline.Result (see module doc)."""
+def write_result(path: str, result, tmp_path: str | None = None) -> None:
+    """Store a pipeline.Result (see module doc). tmp_path: the temp file's fixed name
+    (files.replace_atomic; default: a fresh hidden name in the same folder)."""
 
     def fill(f):
         s = result.scene
@@ -84,7 +85,7 @@ def write_result(path: str, result) -> None:
             if run.patterns is not None:
                 g.create_dataset("patterns_json", data=json.dumps(run.patterns, default=_plain))
 
-    write_atomic(path, fill)
+    write_atomic(path, fill, tmp_path)
 
 
 #: what h5py, numpy and json raise on a file whose structure is not a result's

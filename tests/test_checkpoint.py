@@ -405,6 +405,25 @@ def test_resume_with_another_scene_exit_2(tmp_path):
     assert os.path.exists(out) and not os.path.exists(ckpt)
 
 
+def test_resume_with_other_run_settings_goes_on(tmp_path, reference):
+    """The memory guard's advice is to raise run.max_memory_gb and resume; the checkpoint
+    interval may change too: settings of the run, not of its answers, so --resume takes the
+    checkpoint (one note naming them) and ends with the uninterrupted answers (before: 'the
+    checkpoint belongs to another scene', exit 2). Any other change is still refused."""
+    scene, out = _some_checkpoint(tmp_path)
+    text = open(scene).read()
+    assert "checkpoint_every_s = 0.1" in text
+    changed = text.replace("checkpoint_every_s = 0.1", "checkpoint_every_s = 30.0\nmax_memory_gb = 64")
+    other = write_scene(tmp_path, name="other.toml", text=changed.replace("1.0]", "1.5]"))
+    _refused(other, out, "another scene")
+    same = write_scene(tmp_path, name="same.toml", text=changed)
+    p = run(None, "run", same, "-o", out, "--resume")
+    assert "run.max_memory_gb, run.checkpoint_every_s differ from the checkpoint's scene" in p.stderr
+    got, want = (answers({**d, "timings": None, "stats": {**d["stats"], "parallel": None}})
+                 for d in (show(out), reference))
+    assert got.pop("scene_hash") != want.pop("scene_hash") and got == want
+
+
 def _refused(scene: str, out: str, phrase: str) -> None:
     """`run --resume` must refuse the checkpoint of `out`: exit 2, one line naming the
     checkpoint and `phrase`, the checkpoint byte for byte as it was, no result written."""

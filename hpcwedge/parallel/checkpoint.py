@@ -163,6 +163,8 @@ class Checkpointer:
         self.resumes = 0
         self.written = 0
         self.reason: str | None = None
+        #: SETTINGS in which the scene differs from the checkpoint's (a resume under new ones)
+        self.changed_settings: list[str] = []
 
     @property
     def active(self) -> bool:
@@ -183,7 +185,8 @@ class Checkpointer:
             return False
         ck = read_checkpoint(path)
         a = ck["attrs"]
-        if a["scene_hash"] != scene_hash:
+        self.changed_settings = [] if a["scene_hash"] == scene_hash else _settings_only(ck["scene_text"], scene_text)
+        if a["scene_hash"] != scene_hash and not self.changed_settings:
             raise CheckpointError(f"{path}: the checkpoint belongs to another scene (scene hash "
                                   f"{a['scene_hash'][:12]}..., this scene {scene_hash[:12]}...); "
                                   f"use the scene it was started with, or remove it to start afresh")
@@ -252,6 +255,29 @@ class Checkpointer:
                 pass
             except OSError as e:
                 print(f"hpcwedge: warning: cannot remove {p} ({error_reason(e)})", file=sys.stderr)
+
+
+#: [run] keys that change neither the answers nor their bits (SPEC §5), only how the run goes:
+#: a checkpoint resumes under other values of them (raising the memory limit the guard names)
+SETTINGS = ("max_memory_gb", "checkpoint_every_s")
+
+
+def _settings_only(saved: str, now: str) -> list[str]:
+    """The SETTINGS keys ("run.<key>") in which two scene texts differ, when they differ in
+    nothing else (parsed: comments and layout aside); [] otherwise."""
+    try:
+        old, new = tomllib.loads(saved.lstrip("\ufeff")), tomllib.loads(now.lstrip("\ufeff"))
+    except tomllib.TOMLDecodeError:
+        return []
+    changed = []
+    for key in SETTINGS:
+        a, b = old.get("run", {}).pop(key, None), new.get("run", {}).pop(key, None)
+        if a != b:
+            changed.append(f"run.{key}")
+    for scene in (old, new):
+        if scene.get("run") == {}:
+            del scene["run"]
+    return changed if old == new else []
 
 
 def _plain(v):
