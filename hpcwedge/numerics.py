@@ -137,6 +137,25 @@ def settle_rays_2d(dd: DDResult, p_mu: Parametrization, cond_T: float, m: int, m
     return dd, pq
 
 
+#: a listed mu this close above a cone's mu^c (relative) has that cone's rays nearly parallel
+NEAR_MU_C_RTOL = 1e-9
+
+
+def note_near_mu_c(numerics: NumericsReport, runs) -> None:
+    """Note the float runs (2D rays) whose mu lies within NEAR_MU_C_RTOL above the mu^c of
+    one of their cones: there the cone is a sliver whose extreme rays floating point can
+    merge with no close call seen (plug2d at tan 10 deg (1 + 1e-11): 1 wedged ray, exact
+    arithmetic 8); runs: pipeline Runs with cones and their mu^c."""
+    exact = {r["mu"] for r in numerics.runs if r.get("exact")}
+    near = [run.mu for run in runs if run.cones and run.mu not in exact
+            and any(c.get("mu_c") is not None and run.mu <= c["mu_c"] * (1 + NEAR_MU_C_RTOL) for c in run.cones)]
+    if near:
+        numerics.notes.append(f"mu = {', '.join(f'{mu:.17g}' for mu in near)} lies within "
+                              f"{NEAR_MU_C_RTOL:g} above a cone's mu^c: its rays there are nearly parallel and "
+                              "floating point may merge them (ray counts possibly short; compute.exact = "
+                              "true decides them)")
+
+
 def note_mu_c(numerics: NumericsReport, unpolished: int, undecided: int) -> None:
     """Record mu^c values left unpolished and LP solves no solver decided."""
     if unpolished:

@@ -105,3 +105,21 @@ def test_float_answer_differing_from_exact_is_flagged():
                 missed.append(label)
     assert not missed, f"float differs from exact but not flagged: {missed}"
     assert differ, "no scene differs: the property was not exercised"
+
+
+@pytest.mark.parametrize("delta,exact,noted", [(1e-11, False, True), (0.0, False, True),
+                                               (1e-11, True, False), (3e-5, False, False)])
+def test_a_listed_mu_just_above_a_cones_mu_c_is_noted(delta, exact, noted):
+    """plug2d (m = 8) at mu = tan 10 deg (1 + delta): within 1e-9 above the cone's mu^c its 8
+    extreme rays (exact arithmetic) are nearly parallel, and the float DD returned 1 with no
+    close call, unflagged; now the run is flagged with a note naming that mu. The exact
+    route and a mu further above are not noted."""
+    from hpcwedge.pipeline import run_scene
+    from hpcwedge.scene import parse_scene
+    mu = math.tan(math.radians(10.0)) * (1 + delta)
+    res = run_scene(parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 4},
+                                 "friction": {"mu": [mu]}, "compute": {"mu_c": "cones", "exact": exact}}))
+    notes = [n for n in res.stats["numerics"]["notes"] if "above a cone's mu^c" in n]
+    assert bool(notes) == noted and (not noted or res.stats["numerics"]["flagged"])
+    if exact:
+        assert res.runs[0].n_wedged_rays == 8
