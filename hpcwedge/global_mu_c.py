@@ -11,7 +11,7 @@ import numpy as np
 
 from .feasibility import DEFAULT_OPTIONS, decide
 from .milp import WedgeMilp, wedge_milp
-from .mu_critical import MuC, mu_critical
+from .mu_critical import MuC, add_counts, mu_critical
 from .parallel import task_tick
 from .patterns import BnBStats, PatternTree, Subtree, sign_patterns
 from .problem import Parametrization
@@ -185,9 +185,6 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
 
 def _absorb(stats: BnBStats, r: MuC) -> None:
     """Count a mu^c computation (mu_critical.MuC) into the search statistics."""
-    stats.solves += r.solves
-    stats.undecided += r.undecided
-    for k, v in r.statuses.items():
-        stats.statuses[k] = stats.statuses.get(k, 0) + v
+    add_counts(stats, r)
     key = "mu_c_polished" if r.polished else "mu_c_unpolished"
     stats.extra[key] = stats.extra.get(key, 0) + 1

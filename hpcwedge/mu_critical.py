@@ -80,15 +80,16 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
         # by more than the bracket (plug2d at mu_max = 1e6: 2.8e-4 below mu^c): the whole
         # search again, in coordinates balanced at it
         wide = solve(out.mu_c, mu_hi)
-        _merge(wide, again)
+        add_counts(wide, again)
         again = wide
     best = again if again.mu_c is not None and (again.polished or not out.polished) else out
-    _merge(best, again if best is out else out)
+    add_counts(best, again if best is out else out)
     return best
 
 
-def _merge(into: MuC, other: MuC) -> None:
-    """Add the decisions counted in `other` to `into`'s."""
+def add_counts(into, other: MuC) -> None:
+    """Add the decisions counted in `other` (solves, undecided, statuses) to `into`'s (a
+    MuC, or anything counting them alike: patterns.BnBStats)."""
     into.solves += other.solves
     into.undecided += other.undecided
     for k, v in other.statuses.items():

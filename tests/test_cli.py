@@ -501,6 +501,18 @@ def test_read_only_output_refused_before_the_work(tmp_path, capsys, read_only_di
     assert "read-only" in err
 
 
+def _fill_up(folder) -> None:
+    """Fill the file system of `folder` up (a file "filler" grown until a write fails)."""
+    fd = os.open(folder / "filler", os.O_WRONLY | os.O_CREAT)
+    try:
+        while True:
+            os.write(fd, b"\0" * 4096)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def test_full_output_disk_refused_before_the_work(tmp_path, capsys):
     """-o on a real, full file system (a 64 kB tmpfs filled up): one line naming the output,
     exit 2, before any work, and no lock file left (before: an internal OSError, exit 1)."""
@@ -508,14 +520,7 @@ def test_full_output_disk_refused_before_the_work(tmp_path, capsys):
     d.mkdir()
     scene = write(tmp_path, _t(PLUG))
     with tmpfs(d, "size=64k"):
-        fd = os.open(d / "filler", os.O_WRONLY | os.O_CREAT)
-        try:
-            while True:
-                os.write(fd, b"\0" * 4096)
-        except OSError:
-            pass
-        finally:
-            os.close(fd)
+        _fill_up(d)
         out = str(d / "r.h5")
         assert main(["run", scene, "-o", out, "-q"]) == 2
         err = capsys.readouterr().err
@@ -535,14 +540,7 @@ def test_plot_and_export_that_cannot_be_written_are_one_line(tmp_path, capsys, c
     d = tmp_path / "full"
     d.mkdir()
     with tmpfs(d, "size=64k"):
-        fd = os.open(d / "filler", os.O_WRONLY | os.O_CREAT)
-        try:
-            while True:
-                os.write(fd, b"\0" * 4096)
-        except OSError:
-            pass
-        finally:
-            os.close(fd)
+        _fill_up(d)
         out = str(d / f"x.{suffix}")
         capsys.readouterr()
         assert main([*args, "-o", out]) == 2
