@@ -177,6 +177,7 @@ def _run(args) -> int:
         condense(None, comm)                    # the master's run_scene: the collective condense stage
         serve(comm)
         return 0
+    from .files import remove_if_there
     from .parallel.checkpoint import CheckpointError, checkpoint_path
     from .pipeline import run_scene
     from .progress import Progress
@@ -194,7 +195,7 @@ def _run(args) -> int:
             check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
             lock = OutputLock(args.output)
             # the temp file of a result write that a kill -9 cut short (under the lock: ours)
-            _remove_stale(args.output + ".tmp")
+            remove_if_there(args.output + ".tmp")
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
                                      inputs=scene.input_digests):
                 done = engine.checkpoints
@@ -246,15 +247,6 @@ def _run(args) -> int:
     return 0
 
 
-def _remove_stale(path: str) -> None:
-    """Remove the file `path` if it is there (a failure to do so changes nothing: the write
-    replaces it)."""
-    try:
-        os.unlink(path)
-    except OSError:
-        pass
-
-
 def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     """The message for a result that could not be written at the end of a run, after saving
     the engine's state as a checkpoint (if it can) so that --resume does not redo the work."""
@@ -303,7 +295,8 @@ def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool
                 raise _UserError(f"{path}: is the input {inp}; writing the output would destroy it")
         if not os.access(path, os.W_OK):
             raise _UserError(f"{path}: not writable")
-        if replaces_hdf5_only and st.st_size and not _is_hdf5(path):
+        from .files import is_hdf5
+        if replaces_hdf5_only and st.st_size and not is_hdf5(path):
             raise _UserError(f"{path}: exists and is not an HDF5 file (not a result); refusing to "
                              "replace it (remove it first, or give another -o)")
     elif os.path.islink(path):
@@ -317,16 +310,6 @@ def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool
             name_check(path)
         except ValueError as e:
             raise _UserError(str(e)) from None
-
-
-def _is_hdf5(path: str) -> bool:
-    """Does the file at `path` carry HDF5's signature (after a user block, as a result's
-    checksum)? False when it cannot be read."""
-    import h5py
-    try:
-        return bool(h5py.is_hdf5(path))
-    except OSError:
-        return False
 
 
 class OutputLock:

@@ -198,3 +198,21 @@ def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> N
             verify(tmp)
 
     replace_atomic(path, write, ".h5", tmp_path)
+
+
+def is_hdf5(path: str) -> bool:
+    """Does the file at `path` carry HDF5's signature (after a user block, as a result's
+    checksum block)? False when it cannot be read."""
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError:
+        return False
+
+
+def remove_if_there(path: str) -> None:
+    """Remove the file `path` if it is there (a stale temp file; one that cannot be removed
+    is left: the next write replaces it)."""
+    try:
+        os.unlink(path)
+    except OSError:
+        pass

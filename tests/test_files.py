@@ -88,3 +88,18 @@ def test_replace_atomic_fixed_temp_name_overwrites_a_stale_one(tmp_path):
     tmp.write_bytes(b"stale from a killed writer")
     replace_atomic(str(path), lambda t: open(t, "wb").write(b"fresh"), ".h5", tmp_path=str(tmp))
     assert path.read_bytes() == b"fresh" and not tmp.exists()
+
+
+def test_is_hdf5_sees_the_signature_after_the_checksum_block(tmp_path):
+    """A file write_atomic made starts with the checksum block, its HDF5 signature after it:
+    HDF5; text, an empty file and a missing one are not."""
+    from hpcwedge.files import HDF5_SIGNATURE, is_hdf5, remove_if_there, write_atomic
+    h5 = tmp_path / "r.h5"
+    write_atomic(str(h5), lambda f: f.create_dataset("x", data=[1.0]))
+    assert not h5.read_bytes().startswith(HDF5_SIGNATURE) and is_hdf5(str(h5))
+    (tmp_path / "s.toml").write_text('name = "s"\n')
+    (tmp_path / "empty").write_bytes(b"")
+    assert not any(is_hdf5(str(tmp_path / n)) for n in ("s.toml", "empty", "missing"))
+    remove_if_there(str(h5))
+    remove_if_there(str(h5))                    # gone already: nothing to do
+    assert not h5.exists()
