@@ -390,10 +390,12 @@ def _show(args) -> int:
     mu_c = "null" if res["mu_c"] is None else f"{res['mu_c']:.12g}"
     print(f"{res['name']}: dim {res['dim']}, m {res['m']}, mu_c = {mu_c}"
           + (f" ({res['mu_c_status']})" if res["mu_c_status"] else ""))
-    print(f"{'mu':>8} {'wedged':>8} {'trivial':>8} {'cones':>6} {'patterns':>9}")
+    # mu as given (shortest round-trip digits): runs 1e-11 apart stay apart
+    w = max([8] + [len(repr(float(run["mu"]))) for run in res["runs"]])
+    print(f"{'mu':>{w}} {'wedged':>8} {'trivial':>8} {'cones':>6} {'patterns':>9}")
     for run in res["runs"]:
         cells = [run[k] for k in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns")]
-        print(f"{run['mu']:8.4g} " + " ".join(f"{'-' if v is None else v:>{w}}"
+        print(f"{float(run['mu'])!r:>{w}} " + " ".join(f"{'-' if v is None else v:>{w}}"
                                                for v, w in zip(cells, (8, 8, 6, 9))))
         for j, cone in enumerate(run["cones"] or []):
             print(f"         cone {j}: {len(cone['rays'])} rays, zero_u {cone['zero_u']}, "

@@ -707,3 +707,13 @@ def test_mpirun_error_on_one_worker_only_ends_the_job(tmp_path):
         import fcntl
         with open(tmp_path / "r.h5.lock") as f:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+
+
+def test_show_prints_each_mu_as_given(tmp_path, capsys):
+    """The table's mu column has the listed values' shortest round-trip digits: two runs
+    1e-11 apart stay apart (before: 4 significant digits, both 0.1763), and 0.65 is 0.65."""
+    res = _run_quiet(tmp_path, _t(PLUG).replace("mu = [0.65]", "mu = [0.1763269807, 0.17632698071, 0.65]"), "mus")
+    capsys.readouterr()
+    assert main(["show", res]) == 0
+    rows = [ln.split()[0] for ln in capsys.readouterr().out.splitlines()[2:] if not ln.lstrip().startswith("cone")]
+    assert rows[:3] == ["0.1763269807", "0.17632698071", "0.65"]
