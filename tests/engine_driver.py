@@ -72,12 +72,20 @@ def main(period):
     print(json.dumps(out), flush=True)
 
 
-def cancel():
-    import signal
-    import threading
+def _master():
+    """The world's communicator on the master; None on a worker, after it has served."""
     comm = parallel.world()
     if comm.rank:
         parallel.serve(comm)
+        return None
+    return comm
+
+
+def cancel():
+    import signal
+    import threading
+    comm = _master()
+    if comm is None:
         return
     engine = parallel.Engine(comm)
     engine.install_signals()
@@ -94,9 +102,8 @@ def cancel():
 
 
 def fail():
-    comm = parallel.world()
-    if comm.rank:
-        parallel.serve(comm)
+    comm = _master()
+    if comm is None:
         return
     engine = parallel.Engine(comm)
     try:

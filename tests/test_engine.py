@@ -19,6 +19,26 @@ from mpi_helpers import THREADS_1, THREADS_2, THREADS_UNSET, answers, needs_mpir
 # ---------------------------------------------------------------- in-process
 
 
+def _signalling_task(calls: list, at: int, sig):
+    """A subtree task that counts its calls in `calls` and sends `sig` to this process on
+    call number `at` (a real signal in the middle of a job)."""
+    def task(ctx, payload):
+        calls.append(1)
+        if len(calls) == at:
+            os.kill(os.getpid(), sig)
+        return explore_task(ctx, payload)
+    return task
+
+
+def _checkpointing_engine(ckpt: str) -> parallel.Engine:
+    """An in-process engine writing checkpoints to `ckpt` (a fresh start), its signal
+    handlers installed."""
+    eng = parallel.Engine()
+    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
+    eng.install_signals()
+    return eng
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGUSR1])
 def test_engine_signal_checkpoint_resume_in_process(tmp_path, sig):
     """A signal in the middle of a job (sent by a task to its own process):
@@ -30,16 +50,8 @@ def test_engine_signal_checkpoint_resume_in_process(tmp_path, sig):
     ref = run_patterns(make, mus, budget=2)
     ckpt = str(tmp_path / "x.ckpt")
     calls = []
-
-    def task(ctx, payload):
-        calls.append(1)
-        if len(calls) == 5:
-            os.kill(os.getpid(), sig)
-        return explore_task(ctx, payload)
-
-    eng = parallel.Engine()
-    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
-    eng.install_signals()
+    task = _signalling_task(calls, 5, sig)
+    eng = _checkpointing_engine(ckpt)
     try:
         with parallel.registered("subtree", task):
             if sig == signal.SIGTERM:
@@ -68,17 +80,8 @@ def test_second_stop_signal_does_not_interrupt_the_stop_checkpoint(tmp_path):
     with exit 1, the stop checkpoint lost). Real signals to this process."""
     make, _ = tree_factory(41, m=6)
     ckpt = str(tmp_path / "x.ckpt")
-    calls = []
-
-    def task(ctx, payload):
-        calls.append(1)
-        if len(calls) == 3:
-            os.kill(os.getpid(), signal.SIGTERM)
-        return explore_task(ctx, payload)
-
-    eng = parallel.Engine()
-    eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=False)
-    eng.install_signals()
+    task = _signalling_task([], 3, signal.SIGTERM)
+    eng = _checkpointing_engine(ckpt)
     try:
         with parallel.registered("subtree", task):
             with pytest.raises(parallel.Interrupted):
