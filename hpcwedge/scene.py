@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .models.library import BUILTIN_DIM, BUILTINS  # the one table of built-ins
+from .models.library import BUILTIN_DIM, BUILTINS, WHOLE_MINIMUM  # the one table of built-ins
 
 KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 
@@ -358,8 +358,9 @@ def _check_builtin(kind: str, params: dict) -> None:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise SceneError(f"model.{k}: must be a finite number, got {v!r}")
         if isinstance(default, int) and not isinstance(default, bool):
-            if not isinstance(v, int) or v < 1:
-                raise SceneError(f"model.{k}: must be a whole number >= 1, got {v!r}")
+            lo = WHOLE_MINIMUM[kind][k]
+            if not isinstance(v, int) or v < lo:
+                raise SceneError(f"model.{k}: must be a whole number >= {lo}, got {v!r}")
     _check_patch(params)
 
 

@@ -134,7 +134,9 @@ def test_block2d_large_is_vectorised():
 
 
 @pytest.mark.parametrize("kind,params,msg", [
-    ("plug2d", {"rows": 1}, r"model.rows: must be an integer >= 2"),
+    ("plug2d", {"rows": 1}, r"model.rows: must be a whole number >= 2"),
+    ("plug2d", {"rows": 0}, r"model.rows: must be a whole number >= 2"),
+    ("plug3d", {"ring": 2}, r"model.ring: must be a whole number >= 3"),
     ("plug2d", {"taper_deg": 95}, r"model.taper_deg: must lie in \[0, 90\)"),
     ("plug2d", {"rosw": 3}, r"model.rosw: unknown parameter for plug2d"),
     ("vgroove_bar", {"eps": -1}, r"model.eps"),

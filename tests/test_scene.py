@@ -106,6 +106,8 @@ NAN, INF = float("nan"), float("inf")
     ({"contact": {"nodes": [0]}}, "contact.nodes"),
     # built-ins: [model] and [contact]
     ({"model": {"kind": "plug2d", "rows": True}}, "model.rows"),
+    ({"model": {"kind": "plug2d", "rows": 1}}, "model.rows"),       # the model's own least value
+    ({"model": {"kind": "plug3d", "ring": 2}, "dim": 3}, "model.ring"),
     ({"model": {"kind": "plug2d", "taper_deg": NAN}}, "model.taper_deg"),
     ({"model": {"kind": "plug2d"}, "contact": {"normals": [[1.0, 0.0]]}}, "contact.normals"),
     # truss: [model] and [contact]
@@ -134,6 +136,24 @@ def test_type_slips_typos_nan_name_the_key(over, key):
         parse_scene(scene(**over))
     msg = str(e.value)
     assert msg.startswith(key + ":") and "\n" not in msg, msg
+
+
+def test_whole_number_bounds_are_the_models_own():
+    """A built-in's whole-number parameter is refused at parse time with the bound its model
+    checks (models.library.WHOLE_MINIMUM), in the same words."""
+    import inspect
+    from hpcwedge.models.library import BUILTINS, WHOLE_MINIMUM, builtin
+    for kind, f in BUILTINS.items():
+        ints = {k for k, p in inspect.signature(f).parameters.items()
+                if isinstance(p.default, int) and not isinstance(p.default, bool)}
+        assert ints == set(WHOLE_MINIMUM.get(kind, {})), kind
+        for k in ints:
+            lo = WHOLE_MINIMUM[kind][k]
+            with pytest.raises(ValueError) as built:
+                builtin(kind, {k: lo - 1})
+            with pytest.raises(SceneError) as parsed:
+                parse_scene(scene(dim=3 if kind == "plug3d" else 2, model={"kind": kind, k: lo - 1}))
+            assert str(parsed.value) == str(built.value) == f"model.{k}: must be a whole number >= {lo}, got {lo - 1}"
 
 
 def test_valid_tables_of_every_kind_still_parse():

@@ -21,9 +21,15 @@ from .rigid import rigid_modes
 from .truss import truss_model
 
 
-def _int(v, key: str, lo: int) -> int:
+#: the least value of each whole-number parameter of a built-in (scene.py checks scenes by it)
+WHOLE_MINIMUM = {"plug2d": {"rows": 2, "cols": 2}, "plug3d": {"levels": 1, "ring": 3},
+                 "block2d": {"rows": 1, "cols": 1, "refine": 1}}
+
+
+def _int(v, key: str, kind: str) -> int:
+    lo = WHOLE_MINIMUM[kind][key]
     if isinstance(v, bool) or not isinstance(v, numbers.Integral) or int(v) < lo:
-        raise ValueError(f"model.{key}: must be an integer >= {lo}, got {v!r}")
+        raise ValueError(f"model.{key}: must be a whole number >= {lo}, got {v!r}")
     return int(v)
 
 
@@ -80,7 +86,7 @@ def plug2d(rows: int = 4, cols: int = 3, taper_deg: float = 10.0) -> Model:
     column bottom to top, then right column (m = 2 rows); normals left (cos τ, sin τ), right
     (-cos τ, sin τ). Free body (3 rigid modes). Global mu^c = tan τ.
     """
-    rows, cols = _int(rows, "rows", 2), _int(cols, "cols", 2)
+    rows, cols = _int(rows, "rows", "plug2d"), _int(cols, "cols", "plug2d")
     tau = math.radians(_real(taper_deg, "taper_deg", 0.0, 90.0))
     y = np.arange(rows) / (rows - 1)
     hw = 0.5 + y * math.tan(tau)
@@ -105,7 +111,7 @@ def plug3d(levels: int = 2, ring: int = 5, taper_deg: float = 10.0) -> Model:
     (counter-clockwise seen from above), t2 = n x t1. Free body: 6 rigid modes.
     levels = 1 is flat: the centre node is then a mechanism out of plane (condense() rejects it).
     """
-    levels, ring = _int(levels, "levels", 1), _int(ring, "ring", 3)
+    levels, ring = _int(levels, "levels", "plug3d"), _int(ring, "ring", "plug3d")
     tau = math.radians(_real(taper_deg, "taper_deg", 0.0, 90.0))
     z = np.arange(levels) / (levels - 1) if levels > 1 else np.zeros(1)
     r = 0.5 + z * math.tan(tau)
@@ -150,7 +156,8 @@ def block2d(rows: int = 5, cols: int = 2, refine: int = 1, taper_deg: float = 10
     contact_patch_kind = "hat": the contact DOFs are hat-weighted means over the patches instead.
     K is assembled on first access (model.assembly: condense_distributed assembles rows only).
     """
-    rows, cols, refine = _int(rows, "rows", 1), _int(cols, "cols", 1), _int(refine, "refine", 1)
+    rows, cols = _int(rows, "rows", "block2d"), _int(cols, "cols", "block2d")
+    refine = _int(refine, "refine", "block2d")
     tau = math.radians(_real(taper_deg, "taper_deg", 0.0, 90.0))
     E = _real(E, "E", 0.0, math.inf, lo_open=True)
     nu = _real(nu, "nu", -1.0, 0.5, lo_open=True)
