@@ -193,6 +193,7 @@ def _run(args) -> int:
             # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
             scene = load_scene(args.scene)
             check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
+            _refuse_non_hdf5(ckpt)                  # the checkpoint beside it is written too
             lock = OutputLock(args.output)
             # the temp file of a result write that a kill -9 cut short (under the lock: ours)
             remove_if_there(args.output + ".tmp")
@@ -263,6 +264,14 @@ def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
 
 
+def _refuse_non_hdf5(path: str) -> None:
+    """_UserError when `path` is a non-empty regular file that is not HDF5 (not ours to replace)."""
+    from .files import is_hdf5
+    if os.path.isfile(path) and os.path.getsize(path) and not is_hdf5(path):
+        raise _UserError(f"{path}: exists and is not an HDF5 file; refusing to replace it (remove it "
+                         "first, or give another -o)")
+
+
 def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool = False) -> None:
     """Refuse an output path before any work (_UserError naming it): empty, a directory or
     any other existing non-regular file (a device, a pipe), in a missing or read-only
@@ -295,10 +304,8 @@ def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool
                 raise _UserError(f"{path}: is the input {inp}; writing the output would destroy it")
         if not os.access(path, os.W_OK):
             raise _UserError(f"{path}: not writable")
-        from .files import is_hdf5
-        if replaces_hdf5_only and st.st_size and not is_hdf5(path):
-            raise _UserError(f"{path}: exists and is not an HDF5 file (not a result); refusing to "
-                             "replace it (remove it first, or give another -o)")
+        if replaces_hdf5_only:
+            _refuse_non_hdf5(path)
     elif os.path.islink(path):
         raise _UserError(f"{path}: a dangling symbolic link; refusing to write through it")
     if not os.path.isdir(folder):

@@ -373,6 +373,18 @@ def test_run_does_not_replace_a_file_that_is_not_hdf5(tmp_path, capsys, victim):
     assert main(["run", scene, "-q", "-o", str(out)]) == 0
 
 
+def test_run_does_not_replace_a_file_named_like_its_checkpoint(tmp_path, capsys):
+    """The checkpoint RESULT.h5.ckpt is written beside the result: a user's file of that name
+    that is not HDF5 is refused as -o's would be (one line, exit 2, intact, nothing written)."""
+    scene = write(tmp_path, _t(PLUG))
+    ckpt = tmp_path / "r.h5.ckpt"
+    ckpt.write_text("my notes\n")
+    assert main(["run", scene, "-q", "-o", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "not an HDF5 file" in err and str(ckpt) in err
+    assert ckpt.read_text() == "my notes\n" and sorted(os.listdir(tmp_path)) == ["r.h5.ckpt", "s.toml"]
+
+
 def test_device_output_refused():
     """-o on a device node (as root, a run would have replaced it by a regular file)."""
     import stat
