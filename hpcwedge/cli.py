@@ -68,6 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     item.add_argument("--pattern", type=int, help="sign pattern J (a feasible point at the run's mu)")
     try:
         args = p.parse_args(argv)
+        if main_thread and args.cmd == "run":
+            # a stop signal before the run's own handlers are in (imports: ~0.4 s) is kept
+            # for them (_run), not the default death with status 143 and no word
+            signal.signal(signal.SIGTERM, lambda signum, frame: _EARLY_STOP.append(signum))
         code = {"run": _run, "show": _show, "plot": _plot, "export": _export}[args.cmd](args)
     except _UserError as e:
         code = _error(str(e), 2)
@@ -90,6 +94,10 @@ def main(argv: list[str] | None = None) -> int:
         if argv is not None:
             sys.stderr = stderr
     return code
+
+
+#: stop signals received before the run's handlers were in (main -> _run)
+_EARLY_STOP: list = []
 
 
 class _Stderr:
@@ -177,7 +185,7 @@ def _run(args) -> int:
         condense(None, comm)                    # the master's run_scene: the collective condense stage
         serve(comm)
         return 0
-    from .files import remove_if_there
+    from .files import FileError, OutputLock, remove_if_there
     from .parallel.checkpoint import CheckpointError, checkpoint_path
     from .pipeline import run_scene
     from .progress import Progress
@@ -190,6 +198,8 @@ def _run(args) -> int:
     lock = None
     try:
         try:
+            if _EARLY_STOP:
+                engine.signals.replay(_EARLY_STOP.pop())
             # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
             scene = load_scene(args.scene)
             check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
@@ -218,7 +228,7 @@ def _run(args) -> int:
                 raise _UserError(_output_lost(args.output, e, engine, ckpt)) from None
             engine.remove_checkpoint()
             engine.mark_done()
-        except (SceneError, CheckpointError) as e:
+        except (SceneError, CheckpointError, FileError) as e:
             raise _UserError(str(e)) from None
         except Interrupted as e:
             written = engine.write_checkpoint(str(e))
@@ -317,55 +327,6 @@ def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool
             name_check(path)
         except ValueError as e:
             raise _UserError(str(e)) from None
-
-
-class OutputLock:
-    """An exclusive lock on a run's output: flock on OUTPUT.lock, held by the master for the
-    whole run (the kernel releases it when the process dies, even by kill -9). A second run on
-    the same output gets _UserError naming the holder's pid. release() removes the file while
-    still holding the lock; a run that opened the file before the removal notices that the
-    path no longer names what it locked, and tries again."""
-
-    def __init__(self, output: str):
-        import fcntl
-        self.path = output + ".lock"
-        while True:
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            except OSError as e:
-                raise _UserError(f"{self.path}: cannot create the output's lock file ({e.strerror})") from None
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-                os.close(fd)
-                raise _UserError(f"{output}: another hpcwedge run (pid {holder}) is writing this output "
-                                 f"(lock {self.path}); wait for it to end or choose another -o") from None
-            try:
-                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
-            except FileNotFoundError:
-                same = False
-            if same:
-                break
-            os.close(fd)                        # removed by the run that held it: lock the new file
-        self.fd = fd
-        try:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        except OSError as e:                    # a full or failing disk: refuse before the work
-            self.release()
-            raise _UserError(f"{output}: cannot write in its folder ({e.strerror})") from None
-
-    def release(self) -> None:
-        """Remove the lock file and release the lock (idempotent)."""
-        if self.fd is None:
-            return
-        try:
-            os.unlink(self.path)
-        except OSError:
-            pass
-        os.close(self.fd)
-        self.fd = None
 
 
 def _read(path: str, with_rays: bool = True) -> dict:

@@ -216,3 +216,52 @@ def remove_if_there(path: str) -> None:
         os.unlink(path)
     except OSError:
         pass
+
+
+class OutputLock:
+    """An exclusive lock on a run's output: flock on OUTPUT.lock, held by the master for the
+    whole run (the kernel releases it when the process dies, even by kill -9). A second run on
+    the same output gets FileError naming the holder's pid. release() removes the file while
+    still holding the lock; a run that opened the file before the removal notices that the
+    path no longer names what it locked, and tries again."""
+
+    def __init__(self, output: str):
+        import fcntl
+        self.path = output + ".lock"
+        while True:
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as e:
+                raise FileError(f"{self.path}: cannot create the output's lock file ({e.strerror})") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+                os.close(fd)
+                raise FileError(f"{output}: another hpcwedge run (pid {holder}) is writing this output "
+                                 f"(lock {self.path}); wait for it to end or choose another -o") from None
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)                        # removed by the run that held it: lock the new file
+        self.fd = fd
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError as e:                    # a full or failing disk: refuse before the work
+            self.release()
+            raise FileError(f"{output}: cannot write in its folder ({e.strerror})") from None
+
+    def release(self) -> None:
+        """Remove the lock file and release the lock (idempotent)."""
+        if self.fd is None:
+            return
+        try:
+            os.unlink(self.path)
+        except OSError:
+            pass
+        os.close(self.fd)
+        self.fd = None

@@ -729,3 +729,26 @@ def test_show_prints_each_mu_as_given(tmp_path, capsys):
     assert main(["show", res]) == 0
     rows = [ln.split()[0] for ln in capsys.readouterr().out.splitlines()[2:] if not ln.lstrip().startswith("cone")]
     assert rows[:3] == ["0.1763269807", "0.17632698071", "0.65"]
+
+
+def test_sigterm_before_the_runs_handlers_are_in(tmp_path):
+    """A real SIGTERM while `run` starts up, after its arguments are read and before the
+    engine's handlers are in (sent by the process to itself at that point): the run stops as
+    one stopped later does, one line and exit 75, nothing written (before: the default
+    action, status 143 and no word)."""
+    scene = write(tmp_path, _t(PLUG))
+    out = str(tmp_path / "r.h5")
+    code = ("import os, signal, sys\n"
+            "from hpcwedge import cli\n"
+            "from hpcwedge.parallel import Engine\n"
+            "install = Engine.install_signals\n"
+            "def early(self):\n"
+            "    os.kill(os.getpid(), signal.SIGTERM)\n"
+            "    install(self)\n"
+            "Engine.install_signals = early\n"
+            "sys.exit(cli.main())\n")
+    p = subprocess.run([sys.executable, "-c", code, "run", scene, "-o", out], env=env(), capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode == 75, p.stderr
+    assert p.stderr == "[hpcwedge] SIGTERM: stopped before any checkpointable work\n", p.stderr
+    assert sorted(os.listdir(tmp_path)) == ["s.toml"]

@@ -84,6 +84,10 @@ class SignalState:
             self.defer = True
             raise Interrupted(name)
 
+    def replay(self, signum: int) -> None:
+        """Act on a signal that arrived before install() as if it arrived now."""
+        self._on_signal(signum, None)
+
     def stop_reason(self) -> str | None:
         """The name of the SIGTERM/SIGINT received, if any."""
         return next((f[5:] for f in self.flags if f.startswith("STOP:")), None)
