@@ -43,6 +43,7 @@ bench: setup-bench
 	PYTHONPATH=. $(PY) scripts/bench_search_3d.py --full
 	PYTHONPATH=. $(PY) scripts/bench_cores.py
 	PYTHONPATH=. $(PY) scripts/bench_lp_screens.py
+	PYTHONPATH=. $(PY) scripts/bench_socp_solvers.py
 
 bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick --out results/quick

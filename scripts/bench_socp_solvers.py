@@ -1,0 +1,188 @@
+#!/usr/bin/env python3
+"""Clarabel against QOCO on the 3D tree's SOCPs (issue 13): could another interior-point
+solver for small SOCPs take the tree's solves?
+
+    PYTHONPATH=. python scripts/bench_socp_solvers.py [--scene 3x6] [--mu 0.65] [--sample 1500]
+                                                      [--repeat 2] [--out results/bench_socp_solvers]
+
+The SOCPs are the first attempts that plug3d LEVELSxRING's enumeration tree (mu, no
+symmetry, bench_search_3d.scene) hands to conic.solve, recorded as the tree runs (the
+product's settings: long steps, no objective), the first `sample` of them. Each is then
+solved again on a new solver by each engine, its matrices built before the clock starts:
+Clarabel (conic.settings of that attempt) and QOCO (bench extras, BSD-3; "missing" without
+it) with the zero cone as its equalities, the rest as its cone constraints, objective 0.
+A point counts as verified when the problem's rows hold at it to socp.VERIFY_TOL (absolute:
+the rows are unit-scaled and sum r_n = 1); a verified point of a problem that the tree proved
+infeasible (a checked Farkas certificate) would be a contradiction, a SOLVED status there a
+false claim of feasibility. Reported per class of SOCP
+(Clarabel's status in the tree: Solved, PrimalInfeasible): how many, each engine's mean
+iterations and statuses, and the microseconds per solve (each solve's best of `repeat`
+passes).
+Writes <out>.json (with the environment record); prints a summary.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from bench_search_3d import scene  # noqa: E402
+
+
+def available() -> bool:
+    try:
+        import qoco  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def tree_socps(levels: int, ring: int, mu: float, sample: int) -> tuple[list, dict]:
+    """The first `sample` first-attempt SOCPs of the enumeration tree, as (A dense, b, n_zero,
+    n_lin, n_soc, long_steps, tree status), and the tree's counts."""
+    from hpcwedge import socp
+    from hpcwedge.build import contact_problem
+    from hpcwedge.patterns import PatternTree
+    from hpcwedge.problem import parametrize
+    recorded = []
+    solve = socp.solve
+
+    def recording(problem, attempt, tight, long_steps=False):
+        sol = solve(problem, attempt, tight, long_steps)
+        if attempt == 0 and not tight and problem.q is None and len(recorded) < sample:
+            A = problem.A.toarray() if hasattr(problem.A, "toarray") else np.array(problem.A)
+            recorded.append((A, np.array(problem.b), problem.n_zero, problem.n_lin, problem.n_soc,
+                             long_steps, sol.status))
+        return sol
+
+    prob = contact_problem(scene("enumerate", levels, ring))
+    param, m = parametrize(prob), prob.m
+    socp.solve = recording
+    try:
+        tree = PatternTree(param, m, mu)
+        ex = tree.explore(tree.root())
+    finally:
+        socp.solve = solve
+    return recorded, {"m": m, "patterns": len(ex.found), "socps": ex.stats.solves}
+
+
+def _residual_ok(A, b, n_zero, n_lin, n_soc, w, tol: float) -> bool:
+    """A w + s = b with s in [zero | nonneg | SOC(3)...] to tol (absolute: b is sum r_n = 1
+    and zeros, the rows unit-scaled; relative to ||w|| a point far out along a rigid lift-off
+    would pass on an infeasible problem)."""
+    s = b - A @ w
+    size = 1.0
+    if n_zero and np.abs(s[:n_zero]).max() > tol * size:
+        return False
+    if n_lin and s[n_zero:n_zero + n_lin].min() < -tol * size:
+        return False
+    c = s[n_zero + n_lin:].reshape(n_soc, 3)
+    return not n_soc or float((np.hypot(c[:, 1], c[:, 2]) - c[:, 0]).max()) <= tol * size
+
+
+def clarabel_engine(problems):
+    """Prepared Clarabel solves: a list of callables returning (status, iterations, x)."""
+    import clarabel
+    from hpcwedge.conic import settings
+    out = []
+    for A, b, nz, nl, ns, long_steps, _ in problems:
+        n = A.shape[1]
+        P, q, Ac = sp.csc_matrix((n, n)), np.zeros(n), sp.csc_matrix(A)
+        cones = [clarabel.ZeroConeT(nz)] + ([clarabel.NonnegativeConeT(nl)] if nl else [])
+        cones += [clarabel.SecondOrderConeT(3)] * ns
+        opts = settings(0, False, feasibility=True, long_steps=long_steps)
+
+        def run(P=P, q=q, Ac=Ac, b=b, cones=cones, opts=opts):
+            sol = clarabel.DefaultSolver(P, q, Ac, b, cones, opts).solve()
+            return str(sol.status), sol.iterations, np.asarray(sol.x)
+        out.append(run)
+    return out
+
+
+def qoco_engine(problems):
+    """Prepared QOCO solves (objective 0): callables returning (status, iterations, x)."""
+    import qoco
+    out = []
+    for A, b, nz, nl, ns, _, _ in problems:
+        n = A.shape[1]
+        Aeq, G = sp.csc_matrix(A[:nz]), sp.csc_matrix(A[nz:])
+        beq, h, c = b[:nz], b[nz:], np.zeros(n)
+        qd = np.full(ns, 3, dtype=np.int32)
+
+        def run(n=n, Aeq=Aeq, beq=beq, G=G, h=h, nz=nz, nl=nl, ns=ns, c=c, qd=qd):
+            s = qoco.QOCO()
+            s.setup(n, G.shape[0], nz, None, c, Aeq, beq, G, h, nl, ns, qd, verbose=0)
+            r = s.solve()
+            return str(r.status), int(r.iters), np.asarray(r.x)
+        out.append(run)
+    return out
+
+
+def study(levels: int, ring: int, mu: float, sample: int, repeat: int) -> dict:
+    from hpcwedge.socp import VERIFY_TOL
+    problems, tree = tree_socps(levels, ring, mu, sample)
+    engines = {"clarabel": clarabel_engine}
+    if available():
+        engines["qoco"] = qoco_engine
+    row = {"scene": f"plug3d {levels}x{ring}", "mu": mu, **tree, "sampled": len(problems), "engines": {}}
+    classes = sorted({p[-1] for p in problems})
+    for name, prepare in engines.items():
+        runs = prepare(problems)
+        best, answers = np.full(len(runs), np.inf), None
+        for _ in range(repeat):
+            got, took = [], []
+            for f in runs:
+                t0 = time.perf_counter()
+                got.append(f())
+                took.append(time.perf_counter() - t0)
+            best, answers = np.minimum(best, took), got
+        per = {}
+        for cls in classes:
+            idx = [i for i, p in enumerate(problems) if p[-1] == cls]
+            statuses: dict = {}
+            for i in idx:
+                statuses[answers[i][0]] = statuses.get(answers[i][0], 0) + 1
+            verified = sum(_residual_ok(*problems[i][:5], answers[i][2], VERIFY_TOL) for i in idx)
+            per[cls] = {"count": len(idx), "us_per_solve": round(float(best[idx].mean()) * 1e6, 1),
+                        "mean_iterations": round(float(np.mean([answers[i][1] for i in idx])), 2),
+                        "statuses": statuses, "points_verified": int(verified)}
+        row["engines"][name] = {"us_per_solve": round(float(best.mean()) * 1e6, 1), "by_tree_status": per}
+    if "qoco" not in engines:
+        row["engines"]["qoco"] = "missing"
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default="3x6")
+    ap.add_argument("--mu", type=float, default=0.65)
+    ap.add_argument("--sample", type=int, default=1500)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(HERE), "results", "bench_socp_solvers"))
+    args = ap.parse_args(argv)
+    levels, ring = (int(v) for v in args.scene.split("x"))
+    row = study(levels, ring, args.mu, args.sample, args.repeat)
+    print(f"{row['scene']} (m = {row['m']}, mu = {row['mu']}): {row['sampled']} of the tree's "
+          f"{row['socps']} SOCPs")
+    for name, e in row["engines"].items():
+        if e == "missing":
+            print(f"  {name}: missing (bench extras)")
+            continue
+        parts = [f"{cls} {v['count']}: {v['us_per_solve']} us, {v['mean_iterations']} iterations, {v['statuses']}, "
+                 f"{v['points_verified']} points verified" for cls, v in e["by_tree_status"].items()]
+        print(f"  {name}: {e['us_per_solve']} us a solve; " + "; ".join(parts))
+    from hpcwedge.environment import environment
+    with open(args.out + ".json", "w") as f:
+        json.dump({"rows": [row], "environment": environment()}, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
