@@ -187,9 +187,9 @@ def _run(args) -> int:
         return 0
     from .files import FileError, OutputLock, remove_if_there
     from .parallel.checkpoint import CheckpointError, checkpoint_path
-    from .pipeline import run_scene
+    from .pipeline import release_workers, run_scene
     from .progress import Progress
-    from .resultfile import write_result
+    from .resultfile import result_state, write_result
     from .scene import SceneError, load_scene
     progress = Progress(quiet=args.quiet)
     engine = Engine(comm, progress=None if args.quiet else progress)
@@ -215,6 +215,14 @@ def _run(args) -> int:
                 if done.changed_settings:
                     progress.note(f"{', '.join(done.changed_settings)} differ from the checkpoint's "
                                   "scene (settings of the run, not of its answers)")
+            elif args.resume and result_state(args.output, scene) == "complete":
+                # a requeued or chained job whose run has finished: nothing to redo
+                print(f"[hpcwedge] {args.output} is already complete for this scene and its input "
+                      "files; nothing to do (remove it to recompute)", file=sys.stderr)
+                if comm is not None:
+                    release_workers(comm)
+                    engine.serving = True
+                return 0
             elif os.path.exists(ckpt):
                 print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
                       f"({'it is missing' if args.resume else 'use --resume to continue from it'})",

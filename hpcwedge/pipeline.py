@@ -261,6 +261,13 @@ def _context(scene: Scene, plan: Plan, problem: ContactProblem, engine: Engine, 
 
 # ---------------------------------------------------------------------------- the stages
 
+def release_workers(comm) -> None:
+    """The master's side of `condense` when it runs nothing (the result is complete already):
+    the workers leave the collective start-up for the task loop, where Engine.close stops
+    them."""
+    comm.bcast(None, root=0)
+
+
 def condense(scene: Scene | None, comm=None) -> Condensed | None:
     """The condense stage. Serially (comm None): the scene's model built and condensed
     (build.build_model, build.contact_problem), or a raw K read (no model, 0 s).

@@ -148,6 +148,19 @@ def read_result(path: str, with_rays: bool = True) -> dict:
         return _result_object(f, (lambda ds: ds[()].tolist()) if with_rays else None)
 
 
+def result_state(path: str, scene) -> str:
+    """What the file at `path` is for `scene` (a scene.Scene): "missing"; "complete" or
+    "incomplete", a result of this scene text and these input files' bytes (the scene's
+    hash and input digests); "other-scene" when either differs. FileError for a file that
+    is not a readable result; SceneError when an input file cannot be read."""
+    if not os.path.exists(path):
+        return "missing"
+    r = read_result(path, with_rays=False)
+    if r["scene_hash"] != scene.hash or (r["inputs"] or {}) != scene.input_digests:
+        return "other-scene"
+    return "complete" if r["complete"] else "incomplete"
+
+
 def dump_result_json(path: str, out, with_rays: bool = True) -> None:
     """Write read_result(path, with_rays) as one JSON object to the text stream `out`, the
     ray arrays streamed RAY_CHUNK rows at a time: a result with millions of rays (plug2d

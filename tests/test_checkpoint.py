@@ -623,6 +623,35 @@ def test_checkpoint_that_cannot_be_replaced_nor_removed(tmp_path, reference):
     assert answers(show_json(out)) == reference
 
 
+@pytest.mark.parametrize("ranks", [None, pytest.param(3, marks=needs_mpirun)])
+def test_resume_on_a_complete_result_does_nothing(tmp_path, reference, ranks):
+    """A chained or requeued job whose run has finished: `run --resume` on the complete result
+    of this scene and these input files' bytes says so and exits 0, the file untouched (under
+    mpirun too, the workers released); once the K file's bytes change it is another scene's
+    result and the run computes again (before: every such rerun computed everything again)."""
+    from hpcwedge.resultfile import result_state
+    from hpcwedge.scene import load_scene
+    scene = write_scene(tmp_path)
+    out = str(tmp_path / "r.h5")
+    run(None, "run", scene, "-o", out, "-q")
+    before = open(out, "rb").read()
+    assert result_state(out, load_scene(scene)) == "complete"
+    t0 = time.monotonic()
+    p = run(ranks, "run", scene, "-o", out, "--resume", timeout=60)
+    assert p.stderr.splitlines()[-1] == (f"[hpcwedge] {out} is already complete for this scene and its input "
+                                         "files; nothing to do (remove it to recompute)"), p.stderr
+    assert open(out, "rb").read() == before and sorted(os.listdir(tmp_path)) == ["plug8.npz", "r.h5", "scene.toml"]
+    assert time.monotonic() - t0 < 50
+    k = dict(np.load(tmp_path / "plug8.npz"))
+    k["K"] = 2.0 * k["K"]                       # the same wedged states, other bytes
+    np.savez(tmp_path / "plug8.npz", **k)
+    assert result_state(out, load_scene(scene)) == "other-scene"
+    p = run(ranks, "run", scene, "-o", out, "--resume", "-q")
+    assert "already complete" not in p.stderr and open(out, "rb").read() != before
+    assert result_state(out, load_scene(scene)) == "complete"
+    assert result_state(str(tmp_path / "none.h5"), load_scene(scene)) == "missing"
+
+
 def test_resume_without_checkpoint_starts_fresh(tmp_path, reference):
     """SLURM requeue / job chains: `run --resume` is always safe to repeat."""
     scene = write_scene(tmp_path)
