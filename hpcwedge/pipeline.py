@@ -167,6 +167,7 @@ def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | N
     and the engine's merges (sign patterns, mu^c: Engine.guard), and a MemoryError that
     still happens becomes one line (progress.MemoryLimit, a SceneError: exit status 2,
     nothing written)."""
+    scene.input_digests          # the bytes of its files as solved (cached): what the result records
     condensed = None if comm is None else condense(scene, comm)    # collective: first, as every rank
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()

@@ -149,6 +149,22 @@ def test_relative_files_of_a_dict_scene(tmp_path, monkeypatch):
         hw.solve(hw.Scene.from_dict(d))
 
 
+def test_the_result_records_the_files_as_solved(tmp_path):
+    """A file the scene names that changes between hw.solve and hw.write_result: the result
+    records the digest of the bytes that were solved (before: of the file at the write, so
+    that a later export rebuilt the body from the changed file without a word)."""
+    import hashlib
+    k = tmp_path / "k.npz"
+    np.savez(k, K=np.array(K2))
+    solved = hashlib.sha256(k.read_bytes()).hexdigest()
+    s = hw.Scene.from_dict({"name": "k", "dim": 2, "model": {"kind": "stiffness", "file": "k.npz"},
+                            "friction": {"mu": 5.0}}, base_dir=str(tmp_path))
+    r = hw.solve(s)
+    np.savez(k, K=2.0 * np.array(K2))
+    hw.write_result(r, str(tmp_path / "r.h5"))
+    assert hw.read_result(str(tmp_path / "r.h5"), with_rays=False)["inputs"] == {"model.file k.npz": solved}
+
+
 def test_progress_goes_to_stderr_only_when_asked(capfd):
     hw.solve(hw.Scene.builtin("plug2d", rows=2))
     assert capfd.readouterr() == ("", "")
