@@ -156,6 +156,31 @@ def note_near_mu_c(numerics: NumericsReport, runs) -> None:
                               "true decides them)")
 
 
+#: a pattern feasible at a mu this far (relative) below its own polished mu^c was feasible to the
+#: solver's tolerance only: the polished mu^c (certified to ~1e-15) decides
+BELOW_MU_C_RTOL = 1e-12
+
+
+def drop_below_mu_c(numerics: NumericsReport, runs) -> None:
+    """Drop from each run (pipeline Runs) the sign patterns whose polished mu^c lies more than
+    BELOW_MU_C_RTOL above the run's mu, with a note naming the mu and the count: the pattern
+    problem's point verified to socp.VERIFY_TOL there (plug3d ring 3 at tan 10 deg (1 - 1e-8)
+    listed its all-contact pattern, whose certified mu^c is tan 10 deg), but no pattern is
+    feasible below its mu^c."""
+    dropped = []
+    for run in runs:
+        if not run.patterns:
+            continue
+        keep = [p for p in run.patterns if not (p.get("mu_c") is not None and p.get("mu_c_polished")
+                                                and run.mu < p["mu_c"] * (1 - BELOW_MU_C_RTOL))]
+        if len(keep) < len(run.patterns):
+            dropped.append(f"{len(run.patterns) - len(keep)} at mu = {run.mu:.17g}")
+            run.patterns = keep
+    if dropped:
+        numerics.notes.append(f"sign patterns feasible only to the solver's tolerance below their own "
+                              f"certified mu^c, not listed: {'; '.join(dropped)}")
+
+
 def note_mu_c(numerics: NumericsReport, unpolished: int, undecided: int) -> None:
     """Record mu^c values left unpolished and LP solves no solver decided."""
     if unpolished:

@@ -35,8 +35,8 @@ from .global_mu_c import global_mu_critical
 from .models.record import Model
 from .mu_critical import MuC, mu_critical, run_mu_c
 from .nodesets import bits_to_nodes, canonical_order, pattern_key, to_bits, to_mask
-from .numerics import (NumericsReport, checked_rays_2d, note_mu_c, note_near_mu_c, recheck_patterns_2d,
-                       settle_rays_2d)
+from .numerics import (NumericsReport, checked_rays_2d, drop_below_mu_c, note_mu_c, note_near_mu_c,
+                       recheck_patterns_2d, settle_rays_2d)
 from .parallel import Engine, ranks_on_host
 from .patterns import BnBStats, PatternTree, expand_orbits, run_patterns, solver_statuses
 from .problem import (ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize,
@@ -224,6 +224,7 @@ def _run_plan(scene: Scene, progress: Progress, engine: Engine, condensed: Conde
                 stats.bnb = g.search
                 stats.add(polished=g.polished, unpolished=g.unpolished)
         _report(result, step, time.perf_counter() - t)
+    drop_below_mu_c(ctx.numerics, result.runs)
     note_mu_c(ctx.numerics, stats.mu_c_unpolished, stats.lp_undecided)
     note_near_mu_c(ctx.numerics, result.runs)
     for line in ctx.numerics.warnings():

@@ -126,3 +126,21 @@ def test_a_listed_mu_just_above_a_cones_mu_c_is_noted(delta, exact, noted):
     assert (bool(notes) or redone) == noted and (not noted or num["flagged"])
     if exact:
         assert res.runs[0].n_wedged_rays == 8 and not notes
+
+
+@pytest.mark.parametrize("delta,listed", [(-1e-8, 0), (-1e-9, 0), (-1e-11, 0), (1e-8, 1), (0.0, 1)])
+def test_a_pattern_below_its_own_mu_c_is_not_listed(delta, listed):
+    """plug3d ring 3 at mu = tan 10 deg (1 + delta), its only pattern (every node in contact) of
+    certified mu^c tan 10 deg: below it the pattern SOCP's point verified to socp.VERIFY_TOL
+    and the pattern was listed at a mu below its own and the global mu^c; it is dropped now,
+    with a note. At and above its mu^c it is listed, with no note."""
+    from hpcwedge.pipeline import run_scene
+    from hpcwedge.scene import parse_scene
+    mu = math.tan(math.radians(10.0)) * (1 + delta)
+    res = run_scene(parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d", "ring": 3},
+                                 "friction": {"mu": [mu]}}))
+    assert abs(res.mu_c - math.tan(math.radians(10.0))) <= 1e-14
+    notes = [n for n in res.stats["numerics"]["notes"] if "below their own certified mu^c" in n]
+    assert res.runs[0].n_patterns == listed and bool(notes) == (listed == 0)
+    if listed:
+        assert res.runs[0].patterns[0]["contact"] == list(range(6))
