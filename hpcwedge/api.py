@@ -114,7 +114,7 @@ def builtin_scene(kind: str, *, mu: float | Sequence[float] = DEFAULT_MU, name: 
     hpcwedge.scene.SceneError: model.row: unknown parameter of plug2d (allowed: rows, cols, taper_deg)
     """
     from .models.library import BUILTIN_DIM
-    if kind not in BUILTIN_DIM:
+    if not isinstance(kind, str) or kind not in BUILTIN_DIM:
         raise SceneError(f"model.kind: {kind!r} is not a built-in model (one of {', '.join(BUILTIN_DIM)}; "
                          "Scene.from_stiffness, Scene.from_truss or Scene.load for the others)")
     model = {k: v for k, v in params.items() if k not in COMPUTE_DEFAULTS and k not in RUN_DEFAULTS}
@@ -306,8 +306,16 @@ def solve(scene: Scene | str | os.PathLike | Mapping, *, progress: bool = False)
 
 def write_result(result: Result, path: str | os.PathLike) -> None:
     """Write `result` as a result file (SPEC §4; atomic, checksummed: resultfile.write_result),
-    which ``hpcwedge show``, ``plot`` and ``export`` read like one written by ``hpcwedge run``."""
+    which ``hpcwedge show``, ``plot`` and ``export`` read like one written by ``hpcwedge run``.
+    FileError (one line, nothing written) where ``run -o`` would refuse the path: an existing
+    file that is neither empty nor HDF5, a directory, a missing or read-only folder."""
+    from .files import check_output
     from .resultfile import write_result as write
+    if not isinstance(result, Result):
+        raise TypeError(f"write_result: result must be a Result (hpcwedge.solve), got {type(result).__name__}")
+    # as `hpcwedge run -o`: an existing file is replaced only if it is empty or HDF5, the
+    # folder must exist (FileError, one line)
+    check_output(os.fspath(path), replaces_hdf5_only=True)
     write(os.fspath(path), result)
 
 
@@ -326,6 +334,25 @@ def read_result(path: str | os.PathLike, *, with_rays: bool = True) -> dict:
     """
     from .resultfile import read_result as read
     return read(os.fspath(path), with_rays=with_rays)
+
+
+def _indices(**given: Any) -> dict:
+    """The given indices (None: left out), each a whole number (ValueError naming it: 1.9 or
+    "1" are not silently truncated to 1)."""
+    import numbers
+    out = {}
+    for name, v in given.items():
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+            raise ValueError(f"{name}: a whole number, got {v!r}")
+        out[name] = int(v)
+    return out
+
+
+def _inputs(result: Result | str | os.PathLike) -> tuple[str, ...]:
+    """The result file an output must not replace (none for a Result in memory)."""
+    return () if isinstance(result, Result) else (os.fspath(result),)
 
 
 @contextlib.contextmanager
@@ -361,12 +388,15 @@ def plot(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: 
     Raises
     ------
     ValueError
-        One line: a 3D result, a bad index, a missing or damaged file.
+        One line: a bad index, a missing or damaged file, an output that cannot be
+        written or would replace another kind of file (FileError).
     """
-    from .plot import plot_result
+    from .files import check_output
+    from .plot import figure_format, plot_result
+    item = _indices(run=run, ray=ray, pattern=pattern)
+    check_output(os.fspath(output), _inputs(result), figure_format)
     with _result_file(result) as path:
-        item = {k: v for k, v in (("ray", ray), ("pattern", pattern)) if v is not None}
-        plot_result(path, os.fspath(output), run=run, **item)
+        plot_result(path, os.fspath(output), **item)
 
 
 def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *, run: int = -1,
@@ -411,9 +441,11 @@ def export_vtu(result: Result | str | os.PathLike, output: str | os.PathLike, *,
     (6, 2)
     """
     from .export import check_vtu_name, write_vtu
+    from .files import check_output
     from .recovery import load_configuration
-    check_vtu_name(output)
+    item = _indices(run=run, ray=ray, cone=cone, pattern=pattern)
+    check_output(os.fspath(output), _inputs(result), check_vtu_name)
     with _result_file(result) as path:
-        config = load_configuration(path, run=run, ray=ray, cone=cone, pattern=pattern)
+        config = load_configuration(path, **item)
     write_vtu(config, os.fspath(output))
     return config

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import os
 import signal
-import stat
 import sys
 
 
@@ -82,12 +81,16 @@ def main(argv: list[str] | None = None) -> int:
         # written (outputs are atomic); one line and the status of a process ended by SIGINT
         code = _error("interrupted (nothing written)", 128 + signal.SIGINT)
     except Exception as e:                      # noqa: BLE001  (a bug: one line, the traceback on request)
-        if os.environ.get("HPCWEDGE_DEBUG"):
-            import traceback
-            traceback.print_exc()
-        what = (str(e).strip().splitlines() or [""])[0]
-        code = _error(f"internal error: {type(e).__name__}{': ' + what if what else ''} "
-                      "(set HPCWEDGE_DEBUG=1 for the traceback)", 1)
+        from .files import FileError
+        if isinstance(e, FileError):            # a file a user can fix (files.check_output, ...)
+            code = _error(str(e), 2)
+        else:
+            if os.environ.get("HPCWEDGE_DEBUG"):
+                import traceback
+                traceback.print_exc()
+            what = (str(e).strip().splitlines() or [""])[0]
+            code = _error(f"internal error: {type(e).__name__}{': ' + what if what else ''} "
+                          "(set HPCWEDGE_DEBUG=1 for the traceback)", 1)
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
@@ -185,7 +188,7 @@ def _run(args) -> int:
         condense(None, comm)                    # the master's run_scene: the collective condense stage
         serve(comm)
         return 0
-    from .files import FileError, OutputLock, remove_if_there
+    from .files import FileError, OutputLock, check_output, refuse_non_hdf5, remove_if_there
     from .parallel.checkpoint import CheckpointError, checkpoint_path
     from .pipeline import release_workers, run_scene
     from .progress import Progress
@@ -203,7 +206,7 @@ def _run(args) -> int:
             # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
             scene = load_scene(args.scene)
             check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
-            _refuse_non_hdf5(ckpt)                  # the checkpoint beside it is written too
+            refuse_non_hdf5(ckpt)                   # the checkpoint beside it is written too
             lock = OutputLock(args.output)
             # the temp file of a result write that a kill -9 cut short (under the lock: ours)
             remove_if_there(args.output + ".tmp")
@@ -280,61 +283,6 @@ def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
         return f"{output}: cannot write the result ({why})"
     engine.mark_done()
     return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
-
-
-def _refuse_non_hdf5(path: str) -> None:
-    """_UserError when `path` is a non-empty regular file that is not HDF5 (not ours to replace)."""
-    from .files import is_hdf5
-    if os.path.isfile(path) and os.path.getsize(path) and not is_hdf5(path):
-        raise _UserError(f"{path}: exists and is not an HDF5 file; refusing to replace it (remove it "
-                         "first, or give another -o)")
-
-
-def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool = False) -> None:
-    """Refuse an output path before any work (_UserError naming it): empty, a directory or
-    any other existing non-regular file (a device, a pipe), in a missing or read-only
-    folder, not writable, the same file as one of `inputs` (hard and symbolic links
-    included), a name that name_check(path) refuses (ValueError: a suffix of the wrong
-    format), or, with replaces_hdf5_only (run: -o takes any name), an existing non-empty
-    file that is not HDF5 (a scene, a mesh or a table given to -o by mistake). Used by
-    run, plot and export."""
-    if not path:
-        raise _UserError("-o: empty file name")
-    folder = os.path.dirname(os.path.abspath(path))
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        st = None
-    except OSError as e:
-        raise _UserError(f"{path}: cannot use as output ({e.strerror})") from None
-    if st is not None:
-        if stat.S_ISDIR(st.st_mode):
-            raise _UserError(f"{path}: is a directory (give a file name to -o)")
-        if not stat.S_ISREG(st.st_mode):
-            raise _UserError(f"{path}: exists and is not a regular file (a device, pipe or socket); "
-                             "refusing to replace it")
-        for inp in inputs:
-            try:
-                same = os.path.samefile(path, inp)
-            except OSError:
-                same = False
-            if same:
-                raise _UserError(f"{path}: is the input {inp}; writing the output would destroy it")
-        if not os.access(path, os.W_OK):
-            raise _UserError(f"{path}: not writable")
-        if replaces_hdf5_only:
-            _refuse_non_hdf5(path)
-    elif os.path.islink(path):
-        raise _UserError(f"{path}: a dangling symbolic link; refusing to write through it")
-    if not os.path.isdir(folder):
-        raise _UserError(f"{path}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise _UserError(f"{path}: cannot write in {folder} (read-only file system or no permission)")
-    if name_check is not None:
-        try:
-            name_check(path)
-        except ValueError as e:
-            raise _UserError(str(e)) from None
 
 
 def _read(path: str, with_rays: bool = True) -> dict:
@@ -427,6 +375,7 @@ def _show_checkpoint(args) -> int:
 
 
 def _plot(args) -> int:
+    from .files import check_output
     from .plot import figure_format, plot_result
     check_output(args.output, (args.result,), figure_format)
     _read(args.result, with_rays=False)
@@ -449,6 +398,7 @@ def _cannot_write(output: str, e: OSError) -> _UserError:
 
 def _export(args) -> int:
     from .export import check_vtu_name, write_vtu
+    from .files import check_output
     from .recovery import ConfigurationError, load_configuration
     check_output(args.output, (args.result,), check_vtu_name)
     try:

@@ -147,7 +147,6 @@ def replace_atomic(path: str, write, suffix: str, tmp_path: str | None = None) -
     write (OSError: full disk, read-only folder...) raises, removes tmp and leaves `path`
     as it was."""
     folder = os.path.dirname(os.path.abspath(path)) or "."
-    os.makedirs(folder, exist_ok=True)
     if tmp_path is None:
         fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=suffix, dir=folder)
         os.close(fd)
@@ -265,3 +264,57 @@ class OutputLock:
             pass
         os.close(self.fd)
         self.fd = None
+
+
+def refuse_non_hdf5(path: str) -> None:
+    """FileError when `path` is a non-empty regular file that is not HDF5 (not ours to replace)."""
+    if os.path.isfile(path) and os.path.getsize(path) and not is_hdf5(path):
+        raise FileError(f"{path}: exists and is not an HDF5 file; refusing to replace it (remove it "
+                         "first, or give another -o)")
+
+
+def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool = False) -> None:
+    """Refuse an output path before any work (FileError naming it): empty, a directory or
+    any other existing non-regular file (a device, a pipe), in a missing or read-only
+    folder, not writable, the same file as one of `inputs` (hard and symbolic links
+    included), a name that name_check(path) refuses (ValueError: a suffix of the wrong
+    format), or, with replaces_hdf5_only (run: -o takes any name), an existing non-empty
+    file that is not HDF5 (a scene, a mesh or a table given to -o by mistake). Used by
+    run, plot and export, and by the API's writers (api.py)."""
+    if not path:
+        raise FileError("-o: empty file name")
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:
+        raise FileError(f"{path}: cannot use as output ({e.strerror})") from None
+    if st is not None:
+        if stat.S_ISDIR(st.st_mode):
+            raise FileError(f"{path}: is a directory (give a file name to -o)")
+        if not stat.S_ISREG(st.st_mode):
+            raise FileError(f"{path}: exists and is not a regular file (a device, pipe or socket); "
+                             "refusing to replace it")
+        for inp in inputs:
+            try:
+                same = os.path.samefile(path, inp)
+            except OSError:
+                same = False
+            if same:
+                raise FileError(f"{path}: is the input {inp}; writing the output would destroy it")
+        if not os.access(path, os.W_OK):
+            raise FileError(f"{path}: not writable")
+        if replaces_hdf5_only:
+            refuse_non_hdf5(path)
+    elif os.path.islink(path):
+        raise FileError(f"{path}: a dangling symbolic link; refusing to write through it")
+    if not os.path.isdir(folder):
+        raise FileError(f"{path}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise FileError(f"{path}: cannot write in {folder} (read-only file system or no permission)")
+    if name_check is not None:
+        try:
+            name_check(path)
+        except ValueError as e:
+            raise FileError(str(e)) from None

@@ -237,3 +237,35 @@ def test_plot_stays_the_function_after_the_plot_module_is_imported():
     out = python("import hpcwedge as hw\nimport hpcwedge.plot\nfrom hpcwedge.plot import plot_result\n"
                  "from hpcwedge import plot\nprint(hw.plot is hw.api.plot, plot is hw.plot, callable(plot_result))")
     assert out.split() == ["True", "True", "True"]
+
+
+def test_writers_check_their_output_as_the_command_line_does(tmp_path):
+    """hw.write_result, hw.plot and hw.export_vtu refuse, in one line naming the path and before
+    any work, what `hpcwedge run -o`, `plot` and `export` refuse: a file that is not HDF5 (a
+    scene, a mesh), a missing folder (before: made, even at the file system's root), a
+    directory (before: a raw OSError), the result file itself; an index that is not a whole
+    number is refused, not truncated (ray=1.9 drew ray 1)."""
+    r = hw.solve(hw.Scene.builtin("plug2d", rows=2))
+    scene = tmp_path / "s.toml"
+    scene.write_text('name = "s"\n')
+    for bad, phrase in ((scene, "not an HDF5 file"), (tmp_path / "no" / "r.h5", "does not exist"),
+                        (tmp_path, "is a directory")):
+        with pytest.raises(hw.FileError, match=phrase):
+            hw.write_result(r, bad)
+    assert scene.read_text() == 'name = "s"\n' and sorted(os.listdir(tmp_path)) == ["s.toml"]
+    with pytest.raises(TypeError, match="Result"):
+        hw.write_result("x", tmp_path / "x.h5")
+    res = tmp_path / "r.h5"
+    hw.write_result(r, res)
+    with pytest.raises(hw.FileError, match="is the input"):
+        hw.plot(res, res)
+    with pytest.raises(hw.FileError, match="does not exist"):
+        hw.export_vtu(r, tmp_path / "no" / "x.vtu", ray=0)
+    for bad in (1.9, "1", True):
+        with pytest.raises(ValueError, match="ray: a whole number"):
+            hw.export_vtu(r, tmp_path / "x.vtu", ray=bad)
+        with pytest.raises(ValueError, match="ray: a whole number"):
+            hw.plot(r, tmp_path / "x.png", ray=bad)
+    with pytest.raises(hw.SceneError, match="model.kind"):
+        hw.Scene.builtin(["plug2d"])
+    assert sorted(os.listdir(tmp_path)) == ["r.h5", "s.toml"]

@@ -388,12 +388,12 @@ def test_run_does_not_replace_a_file_named_like_its_checkpoint(tmp_path, capsys)
 def test_device_output_refused():
     """-o on a device node (as root, a run would have replaced it by a regular file)."""
     import stat
-    from hpcwedge.cli import _UserError, check_output
+    from hpcwedge.files import FileError, check_output
     devices = [d for d in ("/dev/full", "/dev/zero", "/dev/random")
                if os.path.exists(d) and stat.S_ISCHR(os.stat(d).st_mode)]
     if not devices:
         pytest.skip("no character device found")
-    with pytest.raises(_UserError, match="not a regular file"):
+    with pytest.raises(FileError, match="not a regular file"):
         check_output(devices[0])
 
 

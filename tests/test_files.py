@@ -22,7 +22,7 @@ def test_write_atomic_seals_and_a_failed_verify_keeps_the_old_file(tmp_path):
 
 
 def test_replace_atomic_writes_through_a_temp_file_in_the_folder(tmp_path):
-    path = tmp_path / "new" / "deeper" / "f.png"
+    path = tmp_path / "f.png"
     seen = []
 
     def write(tmp):
@@ -33,6 +33,10 @@ def test_replace_atomic_writes_through_a_temp_file_in_the_folder(tmp_path):
     replace_atomic(str(path), write, ".png")
     assert path.read_bytes() == b"picture" and os.listdir(path.parent) == ["f.png"]
     assert not os.path.exists(seen[0])
+    # a missing folder is not made (before: /nonexistent/dir/r.h5 from the API made /nonexistent)
+    with pytest.raises(FileNotFoundError):
+        replace_atomic(str(tmp_path / "new" / "f.png"), write, ".png")
+    assert os.listdir(tmp_path) == ["f.png"]
 
 
 @pytest.fixture
