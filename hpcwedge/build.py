@@ -189,6 +189,9 @@ def _raw_arrays(scene: Scene):
         if N is not None:
             raise SceneError("model.null_space: given both inline and in model.file")
         N = array(m["null_space"], "model.null_space")
+    if N is not None and N.ndim not in (1, 2):
+        key = f"model.file {m['file']}: null_space" if "file" in m and "null_space" not in m else "model.null_space"
+        raise SceneError(f"{key}: must be a vector or a matrix (columns = rigid modes), got a {N.ndim}-D array")
     return K, N
 
 
@@ -264,12 +267,13 @@ def _load_file(path: str, key: str):
         if ext in (".h5", ".hdf5"):
             import h5py
             with h5py.File(path, "r") as f:
-                if "K" not in f:
-                    raise SceneError(f"model.file: {key} has no dataset K")
+                if not isinstance(f.get("K"), h5py.Dataset):
+                    raise SceneError(f"model.file: {key} has no dataset K" + (" (K is a group)" if "K" in f else ""))
                 N = array(f["null_space"][()], "model.file null_space") if "null_space" in f else None
                 return array(f["K"][()], "model.file K", 2), N
     except SceneError:
         raise
     except Exception as e:  # unreadable file of a known type
-        raise SceneError(f"model.file: cannot read {key} ({type(e).__name__})") from None
+        why = (str(e).strip().splitlines() or [""])[0]
+        raise SceneError(f"model.file: cannot read {key} ({type(e).__name__}{': ' + why if why else ''})") from None
     raise SceneError(f"model.file: {key}: unsupported file type (use .npy, .npz or .h5)")

@@ -101,3 +101,25 @@ def test_raw_K_eigenvalues_computed_once():
     from hpcwedge.problem import stiffness_range
     p = raw_stiffness(sc({"K": [[2.0, 0.0], [0.0, 8.0]]}))
     assert p.spectrum is p.eigenvalues and stiffness_range(p) == (0.25, 1.0)      # K scaled by 2**-3
+
+
+def test_unreadable_files_and_null_spaces_say_why(tmp_path):
+    """A null space that is neither a vector nor a matrix (inline or in the file) is a one-line
+    SceneError naming it (before: an internal error, numpy's 'truth value of an array is
+    ambiguous'); an unreadable K file says why, not only the exception's type."""
+    import h5py
+    K = [[2.0, -2.0], [-2.0, 2.0]]
+    with pytest.raises(SceneError, match=r"^model.null_space: must be a vector or a matrix .* 3-D array"):
+        raw_stiffness(sc({"K": K, "null_space": [[[1.0]], [[1.0]]]}))
+    np.savez(tmp_path / "k.npz", K=np.array(K), null_space=np.ones((2, 1, 1)))
+    np.save(tmp_path / "obj.npy", np.array([[1, "a"]], dtype=object))
+    with h5py.File(tmp_path / "g.h5", "w") as f:
+        f.create_group("K")
+    for name, phrase in (("k.npz", "model.file k.npz: null_space: must be a vector or a matrix"),
+                         ("obj.npy", "cannot read obj.npy (ValueError: Object arrays cannot be loaded"),
+                         ("g.h5", "g.h5 has no dataset K (K is a group)")):
+        s = parse_scene({"name": "s", "dim": 2, "model": {"kind": "stiffness", "file": name},
+                         "friction": {"mu": [1.0]}}, base_dir=str(tmp_path))
+        with pytest.raises(SceneError) as e:
+            raw_stiffness(s)
+        assert phrase in str(e.value) and "\n" not in str(e.value), str(e.value)
