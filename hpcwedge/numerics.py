@@ -7,7 +7,11 @@ A float enumeration can differ from exact arithmetic where rounding decides a si
   - a new ray computed with catastrophic cancellation (stats "cancellation" below
     dd.CANCELLATION_MIN): its rounding error reaches the zero tolerance;
   - an ill-conditioned stiffness: the parametrisation u = F r carries relative errors of
-    about cond(K) eps, which reach the zero tolerance above COND_SUSPECT.
+    about cond(K) eps, which reach the zero tolerance above COND_SUSPECT;
+  - ill-conditioned balanced coordinates at the mu (problem.balanced_2d's cond(T), ~ 70 /
+    taper^2 on plug2d, taper in units of 10 deg) above COND_T_SUSPECT: at a 0.001 deg taper
+    (cond(T) 7e9) the float DD found 0 lift-off rays where exact arithmetic has 6, with no
+    close call seen (at 0.01 deg, 7e7, it agrees with exact arithmetic).
 Any of them makes the enumeration at that mu *suspect*. A suspect enumeration is redone in
 exact rational arithmetic when m <= the scene's compute.exact_fallback_max_m (the answer
 is then exact); otherwise it is kept and reported as unresolved. The 2D sign patterns of
@@ -32,6 +36,8 @@ from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows
 #: cond(K on range K) above this makes a float enumeration suspect: relative errors of
 #: cond * eps in u reach the DD's zero tolerance
 COND_SUSPECT = FLOAT_ZERO_TOL / float(np.finfo(float).eps)
+#: cond(T) of the balanced coordinates above this makes a float enumeration suspect (module doc)
+COND_T_SUSPECT = 1e9
 
 
 @dataclass
@@ -121,7 +127,8 @@ def settle_rays_2d(dd: DDResult, p_mu: Parametrization, cond_T: float, m: int, m
         return dd, p_mu
     st = dd.stats
     suspect = (st["close_calls"] > 0 or st["cancellation"] < CANCELLATION_MIN
-               or numerics.cond > numerics.cond_suspect)
+               or numerics.cond > numerics.cond_suspect
+               or (cond_T is not None and cond_T > COND_T_SUSPECT))
     record = {"mu": mu, "exact": False, "suspect": suspect, "close_calls": st["close_calls"],
               "closest": st["closest"], "cancellation": st["cancellation"], "cond_T": cond_T}
     numerics.runs.append(record)

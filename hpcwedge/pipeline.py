@@ -39,8 +39,7 @@ from .numerics import (NumericsReport, checked_rays_2d, drop_below_mu_c, note_mu
                        recheck_patterns_2d, settle_rays_2d)
 from .parallel import Engine, ranks_on_host
 from .patterns import BnBStats, PatternTree, expand_orbits, run_patterns, solver_statuses
-from .problem import (ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize,
-                      ray_vectors, strip_exact)
+from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize, ray_vectors
 from .progress import MemoryGuard, Progress, out_of_memory
 from .results import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
 from .scene import Plan, Scene, SceneError
@@ -79,6 +78,10 @@ class Context:
     param: Parametrization
     numerics: NumericsReport
     exact_param: Callable[[], Parametrization]   # the exact parametrisation, made on first call
+    #: the float engines' (LP/SOCP trees, mu^c): always the float route's orthonormal one —
+    #: the exact one's rational bases, rounded, left plug2d's mu^c at a 0.1 deg taper 2.6e-4
+    #: off (and 0.65, unbracketed) under compute.exact = true
+    float_param: Parametrization
     symmetry: Symmetry | None                    # the node symmetries (order > 1), or None
     engine: Engine
     progress: Progress
@@ -258,7 +261,8 @@ def _context(scene: Scene, plan: Plan, problem: ContactProblem, engine: Engine, 
         sym = sym if sym.order > 1 else None
     numerics = NumericsReport.of(problem, scene.exact_fallback_max_m)
     exact_param = (lambda: param) if scene.exact else once(lambda: parametrize(problem, exact=True))
-    return Context(scene, problem.m, param, numerics, exact_param, sym, engine, progress)
+    float_param = parametrize(problem) if scene.exact else param
+    return Context(scene, problem.m, param, numerics, exact_param, float_param, sym, engine, progress)
 
 
 # ---------------------------------------------------------------------------- the stages
@@ -391,7 +395,7 @@ def patterns(ctx: Context) -> PatternSets:
     representatives, expanded here). 2D: redone from the exact rays when the LP decisions
     are suspect and m small (numerics.recheck_patterns_2d). A warning for undecided ones."""
     scene, m, sym = ctx.scene, ctx.m, ctx.symmetry
-    make_tree = partial(PatternTree, strip_exact(ctx.param), m, symmetry=sym)
+    make_tree = partial(PatternTree, ctx.float_param, m, symmetry=sym)
     pats = run_patterns(make_tree, scene.mu, engine=ctx.engine, budget=scene.task_budget)
     items = []
     for found, doubt in zip(pats.found, pats.undecided):
@@ -460,7 +464,7 @@ def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
         for key, zu, zr, _ in entry:
             if key not in tasks:
                 tasks[key] = (to_mask(zu, m), to_mask(zr, m), run.mu)
-    solve = partial(mu_critical, strip_exact(ctx.param), m, mu_max=ctx.scene.mu_max,
+    solve = partial(mu_critical, ctx.float_param, m, mu_max=ctx.scene.mu_max,
                     method=ctx.scene.mu_c_method, tol=ctx.scene.mu_c_tol, scale=ctx.scale)
     by_key = dict(zip(tasks, run_mu_c(solve, list(tasks.values()), engine=ctx.engine)))
     keyed = [[(key, item) for key, _, _, item in entry] for entry in entries]
@@ -482,7 +486,7 @@ def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:
             least = min(found)
             return GlobalMuC(least, "found") if least <= scene.mu_max else GlobalMuC(None, "none_up_to_mu_max")
     bnb = BnBStats()
-    mu_c, status = global_mu_critical(ctx.param, ctx.m, scene.mu_max, method=scene.mu_c_method,
+    mu_c, status = global_mu_critical(ctx.float_param, ctx.m, scene.mu_max, method=scene.mu_c_method,
                                       tol=scene.mu_c_tol, stats=bnb, symmetry=ctx.symmetry, scale=ctx.scale)
     search = GlobalRouteStats(solves=bnb.solves, skipped=bnb.skipped, undecided=bnb.undecided,
                               nodes=bnb.nodes, route=bnb.extra.get("route", "tree"),

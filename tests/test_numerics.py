@@ -144,3 +144,36 @@ def test_a_pattern_below_its_own_mu_c_is_not_listed(delta, listed):
     assert res.runs[0].n_patterns == listed and bool(notes) == (listed == 0)
     if listed:
         assert res.runs[0].patterns[0]["contact"] == list(range(6))
+
+
+def test_exact_scenes_take_mu_c_in_the_float_routes_coordinates():
+    """compute.exact = true: the cones' mu^c come from the same float parametrisation as a
+    float run's (bit for bit), not from the exact one's rational bases rounded, which left
+    plug2d at a 0.1 deg taper with the all-contact cone 2.6e-4 below tan 0.1 deg and four
+    cones at 0.65, unbracketed."""
+    from hpcwedge.pipeline import run_scene
+    from hpcwedge.scene import parse_scene
+    got = []
+    for exact in (False, True):
+        res = run_scene(parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 4, "taper_deg": 0.1},
+                                     "friction": {"mu": [0.65]}, "compute": {"exact": exact}}))
+        got.append({(tuple(c["zero_u"]), tuple(c["zero_r"])): (c["mu_c"], c["mu_c_polished"])
+                    for c in res.runs[0].cones})
+        assert abs(res.mu_c - tan(0.1)) <= 1e-10 * tan(0.1)
+    assert got[0] == got[1] and all(polished for _, polished in got[1].values())
+
+
+def test_ill_conditioned_balanced_coordinates_make_a_run_suspect():
+    """plug2d rows 2 at a 0.001 deg taper: cond(T) of the balanced coordinates is ~7e9; the
+    float DD saw no close call and returned 14 wedged rays, 0 lift-offs and 2 cones where
+    exact arithmetic has 12, 4 and 1, unflagged. Such a run is now suspect: redone exactly
+    (m <= the fallback limit), flagged."""
+    from hpcwedge.pipeline import run_scene
+    from hpcwedge.scene import parse_scene
+    runs = [run_scene(parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 2, "taper_deg": 0.001},
+                                   "friction": {"mu": [0.65]}, "compute": {"exact": exact}})) for exact in (False, True)]
+    (flt, ex) = (r.runs[0] for r in runs)
+    assert (flt.n_wedged_rays, flt.n_trivial_rays, flt.n_cones) == (ex.n_wedged_rays, ex.n_trivial_rays, ex.n_cones) \
+        == (12, 4, 1)
+    num = runs[0].stats["numerics"]
+    assert num["flagged"] and num["exact_fallback"] == [0.65] and num["runs"][0]["cond_T"] > 1e9
