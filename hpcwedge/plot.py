@@ -141,7 +141,8 @@ def _read(f, path: str, run: int, ray: int | None = None, pattern: int | None = 
     if dim not in (2, 3):
         raise PlotError(f"plot: {path}: dim must be 2 or 3, got {dim}")
     if dim == 2 and pattern is not None:
-        raise PlotError("plot: --pattern is for 3D results; this result is 2D (draw a wedged ray with --ray)")
+        raise PlotError("plot: --pattern is for 3D results; this result is 2D (draw a wedged ray with --ray; "
+                        "`hpcwedge export --pattern J` writes a 2D sign pattern's configuration)")
     if dim == 3 and ray is not None:
         raise PlotError("plot: --ray is for 2D results; this result is 3D (draw a sign pattern with --pattern)")
     if dim == 3:
@@ -156,7 +157,7 @@ def _read(f, path: str, run: int, ray: int | None = None, pattern: int | None = 
     out = {"name": text(a.get("name", os.path.basename(path))), "dim": dim, "m": m,
            "run": k, "n_runs": n_runs, "mu": float(g.attrs["mu"]), "mu_c": mu_c_attr(a),
            "rays": rays, "ray": j,
-           "cones": read_items(g, "cones"),
+           "cones": read_items(g, "cones"), "patterns": read_items(g, "patterns"),
            "model": checked_model(f, path, dim, m)}
     check_items(out["cones"], None, n_rays, m)
     if out["model"] is not None:
@@ -178,8 +179,10 @@ def _split(ray_vec: np.ndarray, m: int):
 
 def _config_panel(ax, d: dict) -> None:
     if d["rays"] is None:
-        message(ax, "wedged rays were not enumerated for this run\n(compute.enumerate = false)",
-                 "wedged configuration")
+        why = ("(compute.enumerate = false)" if d.get("patterns") is None else
+               f'(compute.enumerate = "patterns": {len(d["patterns"])} sign patterns;\n'
+               "hpcwedge export --pattern J writes one's configuration)")
+        message(ax, f"wedged rays were not enumerated for this run\n{why}", "wedged configuration")
         return
     if d["ray"] is None:
         message(ax, f"no wedged configuration at mu = {d['mu']:.6g}\n(the run has no wedged rays)",

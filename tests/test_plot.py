@@ -224,3 +224,24 @@ def test_block2d_whole_body_von_mises(tmp_path):
     assert d["config"] is None and "differs" in d["config_note"]
     plot_result(h5, str(png), ray=1)
     check_png(png)
+
+
+def test_2d_patterns_result_panel_says_what_was_enumerated(tmp_path):
+    """A 2D result of enumerate = "patterns" (no rays): the configuration panel names the
+    patterns and the command that draws one (before: "compute.enumerate = false", which is
+    not what the scene asked), and --pattern's refusal points to it too."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from hpcwedge.plot import _config_panel, _load
+    h5 = result_file(tmp_path, PLUG2D_TOML.replace("[friction]", '[compute]\nenumerate = "patterns"\n[friction]'))
+    d = _load(h5, -1)
+    assert d["rays"] is None and d["patterns"]
+    fig, ax = plt.subplots()
+    _config_panel(ax, d)
+    shown = " ".join(t.get_text() for t in ax.texts)
+    plt.close(fig)
+    assert f'compute.enumerate = "patterns": {len(d["patterns"])} sign patterns' in shown
+    assert "export --pattern" in shown and "= false" not in shown
+    with pytest.raises(ValueError, match="export --pattern J"):
+        plot_result(h5, str(tmp_path / "bad.png"), pattern=0)
