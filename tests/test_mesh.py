@@ -390,3 +390,45 @@ def test_cli_bad_mesh_exit_2_nothing_written(block_files, tmp_path, capsys):
     assert main(["run", s, "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err
     assert "model.file: quad element 3 has a non-positive Jacobian" in err and not out.exists()
+
+
+def test_boundary_nodes_of_each_cell_type():
+    """models.mesh.boundary_nodes: on a 2 x 2 grid of quads (and of triangles, each quad
+    split) and a 2 x 2 x 2 grid of hexahedra (and of tetrahedra, each cube in six), every
+    node but the centre is on the boundary."""
+    from hpcwedge.models.mesh import boundary_nodes
+    g2 = np.arange(9).reshape(3, 3)
+    quads = np.array([[g2[i, j], g2[i, j + 1], g2[i + 1, j + 1], g2[i + 1, j]] for i in range(2) for j in range(2)])
+    tris = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    g3 = np.arange(27).reshape(3, 3, 3)
+    hexes = np.array([[g3[i, j, k], g3[i, j, k + 1], g3[i, j + 1, k + 1], g3[i, j + 1, k],
+                       g3[i + 1, j, k], g3[i + 1, j, k + 1], g3[i + 1, j + 1, k + 1], g3[i + 1, j + 1, k]]
+                      for i in range(2) for j in range(2) for k in range(2)])
+    tets = np.vstack([h[[0, p, q, 6]] for h in hexes for p, q in ((1, 2), (2, 3), (3, 7), (7, 4), (4, 5), (5, 1))])
+    for n, cells, centre in ((9, {"quad": quads}, 4), (9, {"triangle": tris}, 4),
+                             (27, {"hexahedron": hexes}, 13), (27, {"tetra": tets}, 13)):
+        b = boundary_nodes(n, cells)
+        assert not b[centre] and b.sum() == n - 1, cells.keys()
+
+
+def test_given_normals_and_nodes_checked_against_the_body(tmp_path):
+    """contact.nodes with contact.normals on block2d's mesh: its own inward normals are taken;
+    one flipped out of the body, or an interior node, is a one-line error naming the key
+    (before: accepted, and the flipped normal gave mu^c none_at_any_mu, exit 0)."""
+    ref = block2d(3, 2)
+    write_gmsh(tmp_path / "b.msh", ref.coords, "quad", ref.cells["quad"])
+    nodes = ref.contact_nodes.tolist()
+    good = write_scene(tmp_path, 'file = "b.msh"', f"nodes = {nodes}\nnormals = {ref.normals.tolist()}",
+                       name="good.toml")
+    assert np.allclose(build_model(load_scene(good)).normals, ref.normals)
+    flipped = ref.normals.copy()
+    flipped[2] *= -1
+    bad = write_scene(tmp_path, 'file = "b.msh"', f"nodes = {nodes}\nnormals = {flipped.tolist()}", name="flip.toml")
+    with pytest.raises(SceneError, match=r"^contact.normals\[2\]: points out of the body"):
+        build_model(load_scene(bad))
+    from hpcwedge.models.mesh import boundary_nodes
+    inner = int(np.flatnonzero(~boundary_nodes(len(ref.coords), ref.cells))[0])
+    inside = write_scene(tmp_path, 'file = "b.msh"',
+                         f"nodes = {nodes[:-1] + [inner]}\nnormals = {ref.normals.tolist()}", name="in.toml")
+    with pytest.raises(SceneError, match=rf"^contact.nodes: node {inner} lies inside the body"):
+        build_model(load_scene(inside))

@@ -171,6 +171,35 @@ def inward_vectors(points: np.ndarray, cells: dict) -> np.ndarray:
     return acc
 
 
+#: each cell type's facets (its edges in 2D, its faces in 3D) by local node index
+FACETS = {"triangle": ((0, 1), (1, 2), (2, 0)), "quad": ((0, 1), (1, 2), (2, 3), (3, 0)),
+          "tetra": ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)),
+          "hexahedron": ((0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))}
+
+
+def boundary_nodes(n: int, cells: dict) -> np.ndarray:
+    """(n,) bool: the nodes on a facet that only one cell has (the body's boundary)."""
+    by_size: dict = {}
+    for t, conn in cells.items():
+        for f in FACETS[t]:
+            by_size.setdefault(len(f), []).append(np.sort(conn[:, f], axis=1))
+    out = np.zeros(n, dtype=bool)
+    for facets in by_size.values():
+        uniq, count = np.unique(np.vstack(facets), axis=0, return_counts=True)
+        out[uniq[count == 1].ravel()] = True
+    return out
+
+
+def _require_into_body(nrm: np.ndarray, inward: np.ndarray, c: np.ndarray) -> None:
+    """ValueError naming contact.normals when a given normal points out of the body (against
+    `inward`, rows of inward_vectors at the contact nodes c): normals point into the body."""
+    out = np.flatnonzero((nrm * inward).sum(axis=1) < -1e-6 * np.linalg.norm(inward, axis=1))
+    if out.size:
+        i = int(out[0])
+        raise ValueError(f"contact.normals[{i}]: points out of the body at contact node {int(c[i])} "
+                         "(normals point from the obstacle into the body)")
+
+
 def _require_in_body(ids: np.ndarray, used: np.ndarray, key: str) -> None:
     bad = ids[~used[ids]]
     if bad.size:
@@ -215,6 +244,10 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
         c = check_contact_nodes(contact_nodes, n, "contact.nodes")
         ckey = "contact.nodes"
     _require_in_body(c, used, ckey)
+    inside = c[~boundary_nodes(n, mesh.cells)[c]]
+    if inside.size:
+        raise ValueError(f"{ckey}: node {int(inside[0])} lies inside the body (on no boundary facet of its "
+                         "elements): a contact node is on the body's surface")
     # supports (file ids -> fixed file DOFs)
     fixed = check_supports(supports, n, dim)
     if support_group is not None:
@@ -234,6 +267,7 @@ def mesh_model(mesh: MeshData, *, E=1.0, nu=0.3, thickness=1.0,
                          "or obstacle surfaces)")
     if normals is not None:
         nrm, tan = contact_frames(normals, dim, m, tangents)
+        _require_into_body(nrm, inward_vectors(X, mesh.cells)[c], c)
     else:
         if tangents is not None:
             raise ValueError("contact.tangents: only with contact.normals")
