@@ -149,6 +149,10 @@ def as_float_array(x, key: str, ndim: int | None = None) -> np.ndarray:
     complex (a complex array from a file; numpy would drop its imaginary part) or NaN input."""
     if isinstance(x, np.ndarray) and np.iscomplexobj(x):
         raise ValueError(f"{key}: complex entries (a stiffness is real)")
+    text = _first_text(x)
+    if text is not None:
+        # "2" would convert, yet mu = "0.5" is refused: numbers are numbers everywhere
+        raise ValueError(f"{key}: numbers expected, got text {text!r}")
     try:
         a = np.asarray(x, dtype=float)
     except (TypeError, ValueError):
@@ -159,6 +163,24 @@ def as_float_array(x, key: str, ndim: int | None = None) -> np.ndarray:
         bad = np.argwhere(~np.isfinite(a))[0]
         raise ValueError(f"{key}: NaN or infinite entry at index {tuple(int(i) for i in bad)}")
     return a
+
+
+def _first_text(x):
+    """The first str or bytes entry of a (nested) value, or None (a numeric array: at C speed)."""
+    if isinstance(x, (str, bytes, np.str_, np.bytes_)):
+        return x
+    try:
+        kind = np.asarray(x).dtype.kind
+    except (TypeError, ValueError):             # ragged: look entry by entry
+        kind = "O"
+    if kind not in "USO":
+        return None
+    if isinstance(x, (list, tuple, np.ndarray)):
+        for v in x:
+            t = _first_text(v)
+            if t is not None:
+                return t
+    return None
 
 
 def as_index_array(x, key: str, n: int, what: str = "node", ndim: int | None = None) -> np.ndarray:
