@@ -122,8 +122,15 @@ def _build_model(scene: Scene, params: dict) -> Model:
         return library.builtin(scene.kind, params)
     except SceneError:
         raise
+    except MemoryError:
+        raise SceneError(f"model: {_TOO_LARGE}") from None
     except (ValueError, TypeError, IndexError) as e:
-        raise SceneError(str(e).splitlines()[0]) from None
+        line = str(e).splitlines()[0]
+        # numpy's refusal of an array too large to index (model.rows = 10**30)
+        raise SceneError(f"model: {_TOO_LARGE}" if "Maximum allowed size" in line else line) from None
+
+
+_TOO_LARGE = "too large to build: its arrays do not fit in memory (check the model's sizes)"
 
 
 def _mesh_model(scene: Scene, m: dict) -> Model:
