@@ -8,6 +8,9 @@ With the argument "cancel": every worker runs a 60 s task that calls
 parallel.task_tick(); the master gets SIGTERM after 0.5 s and closes the
 engine; prints when the job was interrupted and when close() returned.
 
+With the arguments "stuck PATH": every worker runs an 8 s task that never ticks; the master,
+checkpointing to PATH, gets SIGTERM after 0.5 s; prints when PATH appeared.
+
 With the argument "boom": a worker's task raises ValueError("injected fault"); the master
 prints the first line of the RuntimeError it gets (all the command line shows of it)."""
 import json
@@ -101,6 +104,38 @@ def cancel():
     print(json.dumps(out), flush=True)
 
 
+def stuck(path):
+    """Every worker in an 8 s task that never ticks; SIGTERM to the master after 0.5 s, with
+    checkpoints to `path`: prints when the checkpoint file appeared and when the job was
+    interrupted (seconds from the start)."""
+    import signal
+    import threading
+    comm = _master()
+    if comm is None:
+        return
+    engine = parallel.Engine(comm)
+    engine.install_signals()
+    engine.use_checkpoint(path, "h", "scene", 3600.0, resume=False)
+    t = time.perf_counter()
+    out = {"checkpoint_at": None, "interrupted": None}
+
+    def watch():
+        while out["checkpoint_at"] is None and time.perf_counter() - t < 60:
+            if os.path.exists(path):
+                out["checkpoint_at"] = time.perf_counter() - t
+            time.sleep(0.01)
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
+    try:
+        parallel.run_tasks("spin", None, [8.0] * (comm.size - 1), engine=engine)
+    except parallel.Interrupted:
+        out["interrupted"] = time.perf_counter() - t
+    watcher.join()
+    engine.close(timeout=30.0)
+    print(json.dumps(out), flush=True)
+
+
 def fail():
     comm = _master()
     if comm is None:
@@ -114,4 +149,7 @@ def fail():
 
 
 if __name__ == "__main__":
-    {"cancel": cancel, "boom": fail}.get(sys.argv[1], lambda: main(float(sys.argv[1])))()
+    if sys.argv[1] == "stuck":
+        stuck(sys.argv[2])
+    else:
+        {"cancel": cancel, "boom": fail}.get(sys.argv[1], lambda: main(float(sys.argv[1])))()

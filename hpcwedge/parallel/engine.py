@@ -331,7 +331,11 @@ class Engine:
                 self._take_result(job, w, tag, msg)
             try:
                 self._safe_point()
-            except Interrupted:
+            except Interrupted as e:
+                # the state as of the signal first (tasks in flight as open): a task that does
+                # not tick keeps its worker up to _stop_workers' timeout, and mpirun's SIGKILL
+                # follows its SIGTERM within ~2 s; the caller writes again after the collection
+                self.write_checkpoint(str(e))
                 self._stop_workers(job)
                 raise
             last_note = self._note(job, last_note)
@@ -355,8 +359,9 @@ class Engine:
         job.merge(token, msg)
 
     def _stop_workers(self, job, timeout: float = 60.0) -> None:
-        """SIGTERM/SIGINT on the master, inside a job: stop every worker and collect
-        what is in flight before the checkpoint — a subtree task hands back what it
+        """SIGTERM/SIGINT on the master, inside a job, once the checkpoint of the state at
+        the signal is written: stop every worker and collect what is in flight for the stop
+        checkpoint that follows — a subtree task hands back what it
         found and its open subtrees (merged, nothing lost), another kind is
         cancelled (kept as open); a failed one stays open too (the checkpoint must
         still be written). At most `timeout` seconds; afterwards close() has
