@@ -32,7 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from .conic import ConicProblem
-from .feasibility import pyramid_sides_for
+from .feasibility import Decision, pyramid_sides_for
 from .kkt import APEX_RTOL, kkt_polish
 from .mu_bracket import BRACKET_RTOL, Probe, bisect
 from .parallel import task_tick
@@ -68,7 +68,7 @@ def mu_critical_3d(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: n
     if first.status == Status.INFEASIBLE:
         return None, False, None
     if method != "accurate":
-        return bisect(lambda mu, _: probe.feasible(rows, mu), 0.0, hi, tol)[1], False, None
+        return bracket_3d(rows, hi, probe, tol, first), False, None
     zu, zr = np.asarray(zero_u, bool), np.asarray(zero_r, bool)
     if probe.options.tight:
         return _accurate_3d(param, m, zu, zr, rows, hi, first, probe, depth=0)
@@ -147,16 +147,17 @@ def _accurate_3d(param, m, zu, zr, rows, hi, first, probe: Probe, depth, seek=Tr
                 return True
             return False
 
-        before = probe.undecided
+        before, top = probe.undecided, hi
         lo, hi = bisect(ok, 0.0, hi, BRACKET_RTOL)
         x = state["x"]
-        if x is None:
-            return hi, False, None
-        mu, x = dinkelbach(rows, x, hi, probe)
-        pol = kkt_polish(rows, x, mu, options=probe.options) or _polish_from_apex(
-            param, m, zu, zr, rows, x, hi, probe, depth)
+        if x is not None:
+            mu, x = dinkelbach(rows, x, hi, probe)
+            pol = kkt_polish(rows, x, mu, options=probe.options) or _polish_from_apex(
+                param, m, zu, zr, rows, x, hi, probe, depth)
         if pol is None:
-            return hi, False, None
+            # that bisection took undecided and tolerance-feasible points as feasible to seek
+            # a start: its upper end is no bound (random trusses: up to 9e-5 below mu^c)
+            return _fallback_3d(rows, top, probe)
         # the polish certifies mu* whatever the start: the bisection's undecided solves,
         # taken as feasible to seek that start, decide nothing the value rests on
         if probe.undecided > before:
@@ -244,8 +245,32 @@ def _polish_from_apex(param, m, zu, zr, rows, x, hi, probe: Probe, depth):
 def _fallback_3d(rows, hi, probe: Probe):
     """Bisection to BRACKET_RTOL: (upper end, False, None)."""
     count(probe.statuses, "mu_c_unpolished")
-    lo, hi = bisect(lambda mu, _: probe.feasible(rows, mu), 0.0, hi, BRACKET_RTOL)
-    return hi, False, None
+    return bracket_3d(rows, hi, probe, BRACKET_RTOL), False, None
+
+
+def bracket_3d(rows: ConeRows, hi: float, probe: Probe, rtol: float, first: Decision | None = None) -> float:
+    """An upper bound of the pattern's mu^c below hi (a mu known feasible), by bisection to
+    rtol: the upper end moves only to the friction ratio max ||r_t|| / r_n (max_ratio) of a
+    point shown feasible (Probe.below), at which that point is feasible, never to a mu merely
+    not proven infeasible nor to a point's mu when its ratio lies above it (the point
+    verifies to socp.VERIFY_TOL relative to all the reactions, which at a node carrying a
+    small share of them allows a ratio well above mu: random trusses' brackets ended up to
+    9e-5 below mu^c); it starts at the ratio of hi's own point (`first`: the decision at hi,
+    if made already), which can lie above hi when hi was feasible only to that tolerance. The lower end is where no such point was found."""
+    d = first if first is not None else probe.decide(rows, hi)
+    if d.status == Status.FEASIBLE and d.x is not None and math.isfinite(ratio := max_ratio(rows, d.x)):
+        hi = ratio               # hi itself may hold to the solver's tolerance only
+    lo, top = 0.0, hi
+    while hi - lo > rtol * hi and hi > 1e-12 * top:
+        task_tick()
+        mid = 0.5 * (lo + hi)
+        d = probe.decide(rows, mid, pyramid_sides_for(0.5 * (hi - lo) / mid))
+        ratio = max_ratio(rows, d.x) if d.status == Status.FEASIBLE and d.x is not None else math.inf
+        if ratio < hi:
+            hi, lo = ratio, min(lo, ratio)
+        else:
+            lo = mid
+    return hi
 
 
 def max_ratio(rows: ConeRows, x: np.ndarray) -> float:

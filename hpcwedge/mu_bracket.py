@@ -46,11 +46,12 @@ class Probe:
         self.solves += 1
         d = decide(rows, mu, self.options, self.statuses, pyramid_sides=sides)
         if d.status == Status.UNDECIDED:
-            self.undecided += 1       # conservative: taken as feasible (keeps the bracket valid above)
+            self.undecided += 1
         return d
 
     def feasible(self, rows: Rows | ConeRows, mu: float) -> bool:
-        """Not proven infeasible at mu (undecided counts as feasible)."""
+        """Not proven infeasible at mu (undecided counts as feasible): whether a pattern has a
+        mu^c below mu_max at all, which nothing but a proof rules out."""
         return self.decide(rows, mu).status != Status.INFEASIBLE
 
 
@@ -84,7 +85,7 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
 
     def ok(mu: float, _spread: float) -> bool:
         d = probe.decide(rows, mu)
-        if d.status == Status.INFEASIBLE:
+        if d.status != Status.FEASIBLE:         # undecided: no step down, so hi stays an upper bound
             return False
         last["x"] = d.x
         return True

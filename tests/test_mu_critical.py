@@ -96,8 +96,8 @@ def _plug3d_pattern(ring: int = 10):
 
 
 def test_3d_mu_c_task_stops_within_one_solve():
-    """A 3D mu^c task (plug3d m = 20, bisection to 1e-9: 34 SOCP decisions, ~30 s here)
-    in an engine that is stopping: TaskCancelled within a solve or two of the first check
+    """A 3D mu^c task (plug3d m = 20, bisection to 1e-9: dinkelbach.bracket_3d, its decisions
+    near mu^c, where the pyramid fallback ticks too) in an engine that is stopping: TaskCancelled within a solve or two of the first check
     (50 ms), not at the end of the computation (before: mu_critical never looked, and a
     SIGTERM waited for the whole task). The accurate route ticks in the same loops
     (Dinkelbach, polish), but ends within a few solves anyway."""
