@@ -272,7 +272,8 @@ def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float 
     """Run the scene with --resume again and again; in each run, once the engine
     has written a checkpoint, wait a random moment and interrupt it with
     how(proc) (which returns the pids that must be gone afterwards). A run that
-    finishes first is simply restarted (from scratch: its checkpoint is gone).
+    finishes first is simply restarted from scratch: its result is removed (--resume on a
+    complete result does nothing) and its checkpoint is gone.
     Returns (interruptions, exit statuses of the interrupted runs)."""
     scene = write_scene(tmp_path)
     out = str(tmp_path / "r.h5")
@@ -283,10 +284,12 @@ def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float 
         p = launch(ranks, "run", scene, "-o", out, "-q", "--resume")
         if not wait_for_checkpoint(ckpt, since, p):
             assert p.wait() == 0, p.stderr.read()
+            os.remove(out)
             continue
         time.sleep(rng.uniform(0.0, max_delay))
         if p.poll() is not None:
             assert p.returncode == 0, p.stderr.read()
+            os.remove(out)
             continue
         gone = how(p) or []
         code = p.wait(timeout=60)
@@ -296,9 +299,11 @@ def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float 
         assert all_gone(gone), "ranks left behind"
         if code == 0:                 # it had finished: a signal after the result changes nothing
             assert os.path.exists(out) and not os.path.exists(ckpt), err
+            os.remove(out)
             continue
         if not os.path.exists(ckpt):  # killed after the result was written and the checkpoint
             assert os.path.exists(out), err   # removed, before the process exited: finished
+            os.remove(out)
             continue
         codes.append(code)
         done += 1
