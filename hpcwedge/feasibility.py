@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lp import LP_OPTIONS, lp_feasible
+from .parallel import task_tick
 from .rows import ZERO_ROW_RTOL, ConeRows, Rows, Status, count, pyramid_rows
 from .socp import pattern_attempts, verified
 
@@ -128,7 +129,6 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
             # before the retries in the null space of the equalities: sum r_n vanishes there
             count(counts, "eq_infeasible")
             return Decision(Status.INFEASIBLE)
-    from .parallel import task_tick
     for sides in pyramid_sides:
         task_tick()              # a fine pyramid's LPs take up to a second or so: a stop acts here
         status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, LP_OPTIONS, counts=counts)

@@ -149,12 +149,19 @@ def as_float_array(x, key: str, ndim: int | None = None) -> np.ndarray:
     complex (a complex array from a file; numpy would drop its imaginary part) or NaN input."""
     if isinstance(x, np.ndarray) and np.iscomplexobj(x):
         raise ValueError(f"{key}: complex entries (a stiffness is real)")
-    text = _first_text(x)
-    if text is not None:
-        # "2" would convert, yet mu = "0.5" is refused: numbers are numbers everywhere
-        raise ValueError(f"{key}: numbers expected, got text {text!r}")
     try:
-        a = np.asarray(x, dtype=float)
+        raw = np.asarray(x)                     # converted once; None: ragged
+    except (TypeError, ValueError):
+        raw = None
+    if raw is None or raw.dtype.kind in "USO":
+        text = _first_text(x)
+        if text is not None:
+            # "2" would convert, yet mu = "0.5" is refused: numbers are numbers everywhere
+            raise ValueError(f"{key}: numbers expected, got text {text!r}")
+    try:
+        if raw is None:
+            raise ValueError
+        a = raw.astype(float, copy=False)
     except (TypeError, ValueError):
         raise ValueError(f"{key}: not a numeric array (ragged or non-numeric entries)") from None
     if ndim is not None and a.ndim != ndim:
@@ -166,15 +173,9 @@ def as_float_array(x, key: str, ndim: int | None = None) -> np.ndarray:
 
 
 def _first_text(x):
-    """The first str or bytes entry of a (nested) value, or None (a numeric array: at C speed)."""
+    """The first str or bytes entry of a (nested) value, or None."""
     if isinstance(x, (str, bytes, np.str_, np.bytes_)):
         return x
-    try:
-        kind = np.asarray(x).dtype.kind
-    except (TypeError, ValueError):             # ragged: look entry by entry
-        kind = "O"
-    if kind not in "USO":
-        return None
     if isinstance(x, (list, tuple, np.ndarray)):
         for v in x:
             t = _first_text(v)
