@@ -292,6 +292,7 @@ def condense(scene: Scene | None, comm=None) -> Condensed | None:
             return Condensed(None, contact_problem(scene))
         t = time.perf_counter()
         model = build_model(scene)
+        guard_condensed(scene, model)
         problem = contact_problem(scene, model)
         return Condensed(model, problem, time.perf_counter() - t)
     if comm.rank == 0 and (not scene.plan().condense or scene.condense == "serial"):
@@ -302,6 +303,7 @@ def condense(scene: Scene | None, comm=None) -> Condensed | None:
     t = time.perf_counter()
     try:
         model = build_model(scene)
+        guard_condensed(scene, model)
     except Exception:                            # noqa: BLE001  (the master's own run reports it)
         model = None
     if comm.allreduce(int(model is None)):      # a sum: on any rank
@@ -315,6 +317,22 @@ def condense(scene: Scene | None, comm=None) -> Condensed | None:
             raise
         return None
     return Condensed(model, problem, time.perf_counter() - t) if comm.rank == 0 else None
+
+
+#: the condense stage and the parametrisation hold about this many dense copies of the
+#: condensed stiffness (dim m x dim m) at their peak (plug2d rows 500 and 1000: 7.3-7.5)
+CONDENSED_COPIES = 8
+
+
+def guard_condensed(scene: Scene, model: Model) -> None:
+    """progress.MemoryLimit (one line naming run.max_memory_gb) when the dense condensed
+    problem of `model`, CONDENSED_COPIES times its (dim m)^2 float64s, would not fit: checked
+    before the condensation, which would otherwise run until the machine kills it."""
+    m = len(model.contact_nodes)
+    n = model.dim * m
+    MemoryGuard(scene.max_memory_gb, ranks_on_host()).check(
+        CONDENSED_COPIES * 8.0 * n * n,
+        f"the condensed stiffness of {m:,} contact nodes ({n:,} x {n:,} dense) and its parametrisation")
 
 
 def rays(ctx: Context) -> list[Rays]:

@@ -62,6 +62,7 @@ class MemoryGuard:
 
     def __init__(self, limit_gb: float | str = "auto", ranks_here: int = 1):
         self.auto = limit_gb == "auto"
+        self.ranks_here = max(1, ranks_here)
         if self.auto:
             self.limit = AUTO_FRACTION * (available_bytes() + rss_bytes() * ranks_here) / max(1, ranks_here)
         else:
@@ -71,8 +72,9 @@ class MemoryGuard:
         rss = rss_bytes()
         if rss + need <= self.limit:
             return
+        share = "" if self.ranks_here == 1 else f", shared by its {self.ranks_here} ranks"
         whose = (f"run.max_memory_gb = \"auto\" ({self.limit / GB:.3g} GB: {AUTO_FRACTION:.0%} of this "
-                 "machine's available memory)" if self.auto else f"run.max_memory_gb = {self.limit / GB:.3g}")
+                 f"machine's available memory{share})" if self.auto else f"run.max_memory_gb = {self.limit / GB:.3g}")
         raise MemoryLimit(f"run.max_memory_gb: {what}: about {(rss + need) / GB:.3g} GB needed "
                           f"({rss / GB:.3g} GB in use), more than {whose}; stopped before it runs out "
                           "(no result written; a checkpoint already written keeps its work): raise "

@@ -388,3 +388,18 @@ def test_each_mu_c_says_whether_it_is_polished(method):
     assert sum(not p["mu_c_polished"] for p in r3.runs[0].patterns) == r3.stats["mu_c_unpolished"]
     none = run_scene(scene({"kind": "plug2d", "rows": 2}, mu_c="none"))
     assert all("mu_c_polished" not in c for c in none.runs[0].cones)
+
+
+def test_a_condensed_problem_too_large_for_memory_is_refused_before_condensing():
+    """plug2d rows 1000 (m = 2,000): the dense condensed stiffness and its parametrisation need
+    about 1 GB (about 8 dense 4,000 x 4,000 copies, measured); with 0.5 GB allowed the run
+    stops with one line before condensing (before: it condensed, and at rows 5,000 grew to
+    16 GB). A model of a tenth the size runs under the same limit."""
+    from hpcwedge.api import builtin_scene
+    from hpcwedge.progress import MemoryLimit
+    scene = builtin_scene("plug2d", rows=1000, enumerate=False, mu_c="none", max_memory_gb=0.5)
+    with pytest.raises(MemoryLimit, match=r"^run\.max_memory_gb: the condensed stiffness of 2,000 contact "
+                                          r"nodes \(4,000 x 4,000 dense\)"):
+        condense(scene)
+    small = builtin_scene("plug2d", rows=100, enumerate=False, mu_c="none", max_memory_gb=4)
+    assert condense(small).problem.m == 200

@@ -118,11 +118,16 @@ def test_progress_lines_give_the_time_left():
 
 
 def test_guard_on_3d_pattern_stage(tmp_path):
-    """The engine checks the guard after its merges: a 3D pattern run (plug3d m = 10)
-    with run.max_memory_gb below what the process holds stops at the first merge, in
-    one line naming the key and the stage (exit 2, nothing written)."""
+    """The engine checks the guard after its merges: a 3D pattern run (plug3d m = 10, its
+    condensed K given as a stiffness scene, so that no condensation is checked first) with
+    run.max_memory_gb below what the process holds stops at the first merge, in one line
+    naming the key and the stage (exit 2, nothing written)."""
+    from hpcwedge.api import builtin_scene
+    from hpcwedge.pipeline import condense
+    problem = condense(builtin_scene("plug3d")).problem
     scene = tmp_path / "s.toml"
-    scene.write_text('name = "p"\ndim = 3\n[model]\nkind = "plug3d"\n[friction]\nmu = [1.0]\n'
+    scene.write_text(f'name = "p"\ndim = 3\n[model]\nkind = "stiffness"\nK = {problem.K.tolist()!r}\n'
+                     f'null_space = {problem.N.tolist()!r}\n[friction]\nmu = [1.0]\n'
                      '[compute]\nenumerate = true\nmu_c = "none"\n[run]\nmax_memory_gb = 0.01\n')
     out = tmp_path / "r.h5"
     p = subprocess.run(command(None, "run", str(scene), "-o", str(out), "-q"), env=env(), capture_output=True,
