@@ -129,8 +129,9 @@ def stiffness_scene(K: Any, *, dim: int, null_space: Any = None, mu: float | Seq
 
     Parameters
     ----------
-    K : array_like, (dim*m, dim*m)
-        The condensed, block-ordered local stiffness of the m contact nodes (SPEC §1, §3).
+    K : array_like or scipy sparse matrix, (dim*m, dim*m)
+        The condensed, block-ordered local stiffness of the m contact nodes (SPEC §1, §3);
+        kept dense (it is dense once condensed).
     dim : int
         2 or 3.
     null_space : array_like, optional
@@ -213,8 +214,9 @@ def _tables(options: Mapping) -> dict:
 
 
 def _plain(value: Any, key: str) -> Any:
-    """value with numpy arrays and scalars as Python lists and numbers, tuples as lists and
-    None entries of tables left out; SceneError naming the key for anything TOML cannot hold."""
+    """value with numpy arrays and scalars as Python lists and numbers, scipy sparse matrices
+    as dense lists, tuples as lists and None entries of tables left out; SceneError naming
+    the key for anything TOML cannot hold."""
     if isinstance(value, Mapping):
         out = {}
         for k, v in value.items():
@@ -223,6 +225,8 @@ def _plain(value: Any, key: str) -> Any:
             if v is not None:
                 out[k] = _plain(v, f"{key}.{k}" if key else k)
         return out
+    if hasattr(value, "toarray") and hasattr(value, "nnz"):               # scipy sparse
+        value = value.toarray()
     if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):    # numpy array or scalar
         value = value.tolist()
     if isinstance(value, (list, tuple)):

@@ -60,6 +60,16 @@ def test_stiffness_array_gives_the_builtin_answers():
         assert [(c["zero_u"], c["zero_r"]) for c in ra.cones] == [(c["zero_u"], c["zero_r"]) for c in rb.cones]
 
 
+def test_stiffness_as_a_scipy_sparse_matrix():
+    """A sparse K (csr matrix, csc array) is taken as its dense array: the same scene table
+    as from the dense K (before: refused, 'got csr_matrix')."""
+    import scipy.sparse as sp
+    p = contact_problem(hw.Scene.builtin("plug2d", rows=3))
+    dense = hw.Scene.from_stiffness(p.K, null_space=p.N, dim=2)
+    for K in (sp.csr_matrix(p.K), sp.csc_array(p.K)):
+        assert hw.Scene.from_stiffness(K, null_space=p.N, dim=2).model == dense.model
+
+
 # --------------------------------------------------------------------------- scenes
 
 def _plug_truss():
