@@ -334,6 +334,10 @@ def _unknown(table, allowed, prefix):
                              else f"{prefix}{k}: unknown key (this table takes no keys here)")
 
 
+#: the types of plain numbers in a parsed table (bool, a subclass of int, is not one)
+_NUMBERS = frozenset({int, float})
+
+
 def _no_booleans(value, key: str) -> None:
     """SceneError naming the key of the first true/false inside `value` (a model or contact
     table: none of their keys takes a boolean, and numpy would read one as 1.0 or 0.0)."""
@@ -342,7 +346,7 @@ def _no_booleans(value, key: str) -> None:
     if isinstance(value, dict):
         for k, v in value.items():
             _no_booleans(v, f"{key}{k}" if key.endswith(".") else f"{key}.{k}")
-    elif isinstance(value, list):
+    elif isinstance(value, list) and not set(map(type, value)) <= _NUMBERS:     # else: a row of numbers
         for i, v in enumerate(value):
             _no_booleans(v, f"{key}[{i}]")
 

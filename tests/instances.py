@@ -222,3 +222,19 @@ def check_png(path) -> tuple[int, int]:
     assert 600 <= width <= 4000 and 300 <= height <= 3000, (width, height)
     assert size > 10_000, size                     # two drawn panels, not an empty canvas
     return width, height
+
+
+def python_calls(build) -> int:
+    """The function calls (Python and C) made from Python while build() runs (sys.setprofile)."""
+    import sys
+    calls = 0
+
+    def count(frame, event, arg):
+        nonlocal calls
+        calls += event in ("call", "c_call")
+    sys.setprofile(count)
+    try:
+        build()
+    finally:
+        sys.setprofile(None)
+    return calls

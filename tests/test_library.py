@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hpcwedge.models import block2d, builtin, plug2d, plug3d, vgroove_bar
-from instances import kernel_dim
+from instances import kernel_dim, python_calls
 
 
 # ---------------------------------------------------------------- truss element
@@ -122,26 +122,10 @@ def test_block2d_geometry():
     assert math.isclose(area, 1.0 + t, rel_tol=1e-13)
 
 
-def _python_calls(build) -> int:
-    """The function calls (Python and C) made from Python while build() runs (sys.setprofile)."""
-    import sys
-    calls = 0
-
-    def count(frame, event, arg):
-        nonlocal calls
-        calls += event in ("call", "c_call")
-    sys.setprofile(count)
-    try:
-        build()
-    finally:
-        sys.setprofile(None)
-    return calls
-
-
 def test_block2d_large_is_vectorised():
     """Assembly in numpy, not per element: 36 times the elements take no more Python calls
     (a loop over elements or nodes would take thousands more), and the large model is right."""
-    small, large = _python_calls(lambda: block2d(5, 2, 10)), _python_calls(lambda: block2d(5, 2, 60))
+    small, large = python_calls(lambda: block2d(5, 2, 10)), python_calls(lambda: block2d(5, 2, 60))
     assert large <= small + 50, (small, large)
     m = block2d(5, 2, 60)          # 216k DOFs
     assert m.n_dofs == 2 * 301 * 121
