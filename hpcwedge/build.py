@@ -13,7 +13,9 @@ import numpy as np
 
 from . import exact as xq
 from .models.record import Model
+from .parallel import ranks_on_host
 from .problem import ContactProblem, stiffness_range
+from .progress import MemoryGuard
 from .scene import Scene, SceneError, array
 
 SYM_RTOL = 1e-10      # symmetry of a raw K, relative to max |K|
@@ -88,17 +90,21 @@ def build_model(scene: Scene) -> Model:
     """The Model of a non-stiffness scene (ValueError from the models -> SceneError), its
     stiffness K scaled by 2**-stiffness_exponent(scene) (the moduli scaled before assembly,
     so that no modulus overflows it); Model.material keeps the scene's moduli (stresses in
-    the scene's units)."""
+    the scene's units). progress.MemoryLimit when its condensed problem would not fit
+    (guard_condensed)."""
     e = stiffness_exponent(scene)
     if e == 0:
-        return _build_model(scene, scene.model)
-    # the moduli the scene leaves at their defaults are scaled with the others
-    given = {**MODULI.get(scene.kind, {}), **scene.model}
-    params = {k: _scaled(v, e) if k in MODULI.get(scene.kind, ()) else v for k, v in given.items()}
-    model = _build_model(scene, params)
-    material = {k: np.ldexp(np.asarray(v, dtype=float), e) if k in MATERIAL_MODULI else v
-                for k, v in model.material.items()}
-    return dataclasses.replace(model, material=material)
+        model = _build_model(scene, scene.model)
+    else:
+        # the moduli the scene leaves at their defaults are scaled with the others
+        given = {**MODULI.get(scene.kind, {}), **scene.model}
+        params = {k: _scaled(v, e) if k in MODULI.get(scene.kind, ()) else v for k, v in given.items()}
+        model = _build_model(scene, params)
+        material = {k: np.ldexp(np.asarray(v, dtype=float), e) if k in MATERIAL_MODULI else v
+                    for k, v in model.material.items()}
+        model = dataclasses.replace(model, material=material)
+    guard_condensed(scene, model)
+    return model
 
 
 def _build_model(scene: Scene, params: dict) -> Model:
@@ -284,3 +290,19 @@ def _load_file(path: str, key: str):
         why = (str(e).strip().splitlines() or [""])[0]
         raise SceneError(f"model.file: cannot read {key} ({type(e).__name__}{': ' + why if why else ''})") from None
     raise SceneError(f"model.file: {key}: unsupported file type (use .npy, .npz or .h5)")
+
+
+#: the condense stage and the parametrisation hold about this many dense copies of the
+#: condensed stiffness (dim m x dim m) at their peak (plug2d rows 500 and 1000: 7.3-7.5)
+CONDENSED_COPIES = 8
+
+
+def guard_condensed(scene: Scene, model: Model) -> None:
+    """progress.MemoryLimit (one line naming run.max_memory_gb) when the dense condensed
+    problem of `model`, CONDENSED_COPIES times its (dim m)^2 float64s, would not fit: checked
+    before the condensation, which would otherwise run until the machine kills it."""
+    m = len(model.contact_nodes)
+    n = model.dim * m
+    MemoryGuard(scene.max_memory_gb, ranks_on_host()).check(
+        CONDENSED_COPIES * 8.0 * n * n,
+        f"the condensed stiffness of {m:,} contact nodes ({n:,} x {n:,} dense) and its parametrisation")

@@ -105,7 +105,7 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
 
 def polish(rows: Rows, x: np.ndarray, lo: float, hi: float, seed: int = 0) -> float | None:
     """Exact root of the active-set pencil inside [lo, hi] (see module doc), or None."""
-    unit = _unit_rows(rows, hi)
+    unit = rows_at(rows, hi)
     slack = (unit @ x) / max(np.linalg.norm(x), 1e-300)
     width = max(hi - lo, 1e-300) / max(hi, 1e-300)
     rng = np.random.default_rng(seed)
@@ -135,8 +135,8 @@ def polish(rows: Rows, x: np.ndarray, lo: float, hi: float, seed: int = 0) -> fl
     return None
 
 
-def _unit_rows(rows: Rows, mu: float) -> np.ndarray:
-    """Rows at mu divided by ||a0|| + mu ||a1|| (not by their norm at mu, which
+def rows_at(rows: Rows, mu: float) -> np.ndarray:
+    """The rows at mu divided by ||a0|| + mu ||a1|| (not by their norm at mu, which
     vanishes for a friction row that is identically tight at mu^c)."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(rows.a0, axis=1) + abs(mu) * np.linalg.norm(rows.a1, axis=1)
@@ -147,7 +147,7 @@ def _unit_rows(rows: Rows, mu: float) -> np.ndarray:
 def _verified(rows: Rows, act: np.ndarray, mu: float) -> bool:
     """The active rows at mu have a null vector (relative singular value <= POLISH_TOL)
     that, scaled to sum(r_n) = 1, satisfies every row to POLISH_TOL."""
-    unit = _unit_rows(rows, mu)
+    unit = rows_at(rows, mu)
     _, s, vt = np.linalg.svd(unit[act])
     if len(s) >= vt.shape[0] and s[-1] > POLISH_TOL * s[0]:
         return False

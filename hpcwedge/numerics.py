@@ -9,9 +9,10 @@ A float enumeration can differ from exact arithmetic where rounding decides a si
   - an ill-conditioned stiffness: the parametrisation u = F r carries relative errors of
     about cond(K) eps, which reach the zero tolerance above COND_SUSPECT;
   - ill-conditioned balanced coordinates at the mu (problem.balanced_2d's cond(T), ~ 70 /
-    taper^2 on plug2d, taper in units of 10 deg) above COND_T_SUSPECT: at a 0.001 deg taper
-    (cond(T) 7e9) the float DD found 0 lift-off rays where exact arithmetic has 6, with no
-    close call seen (at 0.01 deg, 7e7, it agrees with exact arithmetic).
+    taper^2 on plug2d, taper in units of 10 deg) above COND_T_SUSPECT: at 0.005, 0.003 and
+    0.001 deg (cond(T) 2.4e8, 6.6e8, 6e9) the float DD of plug2d rows 2 found 14 wedged rays
+    and no lift-off where exact arithmetic has 12 and 4 (two of them lift-offs with r_n ~
+    -3e-9 taken as wedged), with no close call seen; at 0.01 deg (5.9e7) it agrees.
 Any of them makes the enumeration at that mu *suspect*. A suspect enumeration is redone in
 exact rational arithmetic when m <= the scene's compute.exact_fallback_max_m (the answer
 is then exact); otherwise it is kept and reported as unresolved. The 2D sign patterns of
@@ -37,7 +38,7 @@ from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows
 #: cond * eps in u reach the DD's zero tolerance
 COND_SUSPECT = FLOAT_ZERO_TOL / float(np.finfo(float).eps)
 #: cond(T) of the balanced coordinates above this makes a float enumeration suspect (module doc)
-COND_T_SUSPECT = 1e9
+COND_T_SUSPECT = 1e8
 
 
 @dataclass

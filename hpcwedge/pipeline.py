@@ -30,6 +30,7 @@ import numpy as np
 
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .environment import environment, single_threaded
+from .exact_mu_c import certify_2d
 from .faces import branching_nodes, run_faces
 from .global_mu_c import global_mu_critical
 from .models.record import Model
@@ -292,7 +293,6 @@ def condense(scene: Scene | None, comm=None) -> Condensed | None:
             return Condensed(None, contact_problem(scene))
         t = time.perf_counter()
         model = build_model(scene)
-        guard_condensed(scene, model)
         problem = contact_problem(scene, model)
         return Condensed(model, problem, time.perf_counter() - t)
     if comm.rank == 0 and (not scene.plan().condense or scene.condense == "serial"):
@@ -303,7 +303,6 @@ def condense(scene: Scene | None, comm=None) -> Condensed | None:
     t = time.perf_counter()
     try:
         model = build_model(scene)
-        guard_condensed(scene, model)
     except Exception:                            # noqa: BLE001  (the master's own run reports it)
         model = None
     if comm.allreduce(int(model is None)):      # a sum: on any rank
@@ -317,22 +316,6 @@ def condense(scene: Scene | None, comm=None) -> Condensed | None:
             raise
         return None
     return Condensed(model, problem, time.perf_counter() - t) if comm.rank == 0 else None
-
-
-#: the condense stage and the parametrisation hold about this many dense copies of the
-#: condensed stiffness (dim m x dim m) at their peak (plug2d rows 500 and 1000: 7.3-7.5)
-CONDENSED_COPIES = 8
-
-
-def guard_condensed(scene: Scene, model: Model) -> None:
-    """progress.MemoryLimit (one line naming run.max_memory_gb) when the dense condensed
-    problem of `model`, CONDENSED_COPIES times its (dim m)^2 float64s, would not fit: checked
-    before the condensation, which would otherwise run until the machine kills it."""
-    m = len(model.contact_nodes)
-    n = model.dim * m
-    MemoryGuard(scene.max_memory_gb, ranks_on_host()).check(
-        CONDENSED_COPIES * 8.0 * n * n,
-        f"the condensed stiffness of {m:,} contact nodes ({n:,} x {n:,} dense) and its parametrisation")
 
 
 def rays(ctx: Context) -> list[Rays]:
@@ -471,8 +454,9 @@ def mu_c_keys(run: Run, m: int, symmetry: Symmetry | None) -> list[tuple[OrbitKe
 def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
     """The mu_c stage: mu^c of the cones / patterns of every run (every_run), or of the first
     run that lists any (for the global value), one task per orbit key (mu_c_keys) at the
-    least mu that lists it (runs in increasing mu), through the engine (mu_critical.run_mu_c)."""
-    m = ctx.m
+    least mu that lists it (runs in increasing mu), through the engine (mu_critical.run_mu_c);
+    2D, certified exactly (exact_mu_c) when the scene is exact or a mu's DD was redone so."""
+    m, scene = ctx.m, ctx.scene
     listed = [r for r in runs if r.cones or r.patterns]
     wanted = runs if every_run else listed[:1]
     # the keys once per run (the master works alone here: workers wait for the tasks)
@@ -482,9 +466,11 @@ def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
         for key, zu, zr, _ in entry:
             if key not in tasks:
                 tasks[key] = (to_mask(zu, m), to_mask(zr, m), run.mu)
-    solve = partial(mu_critical, ctx.float_param, m, mu_max=ctx.scene.mu_max,
-                    method=ctx.scene.mu_c_method, tol=ctx.scene.mu_c_tol, scale=ctx.scale)
+    solve = partial(mu_critical, ctx.float_param, m, mu_max=scene.mu_max, method=scene.mu_c_method,
+                    tol=scene.mu_c_tol, scale=ctx.scale)
     by_key = dict(zip(tasks, run_mu_c(solve, list(tasks.values()), engine=ctx.engine)))
+    if scene.dim == 2 and scene.mu_c_method == "accurate" and (scene.exact or ctx.numerics.exact_fallback):
+        certify_2d(by_key, tasks, ctx.exact_param(), ctx.float_param, m, ctx.scale, ctx.numerics.notes)
     keyed = [[(key, item) for key, _, _, item in entry] for entry in entries]
     first = next((ks for r, ks in zip(wanted, keyed) if r is listed[0]), None) if listed else None
     return MuCValues(by_key, keyed, None if first is None else [key for key, _ in first])

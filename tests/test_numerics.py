@@ -163,17 +163,25 @@ def test_exact_scenes_take_mu_c_in_the_float_routes_coordinates():
     assert got[0] == got[1] and all(polished for _, polished in got[1].values())
 
 
-def test_ill_conditioned_balanced_coordinates_make_a_run_suspect():
-    """plug2d rows 2 at a 0.001 deg taper: cond(T) of the balanced coordinates is ~7e9; the
-    float DD saw no close call and returned 14 wedged rays, 0 lift-offs and 2 cones where
-    exact arithmetic has 12, 4 and 1, unflagged. Such a run is now suspect: redone exactly
-    (m <= the fallback limit), flagged."""
+@pytest.mark.parametrize("taper,cond_T", [(0.001, 1e9), (0.003, 1e8), (0.005, 1e8)])
+def test_ill_conditioned_balanced_coordinates_make_a_run_suspect(taper, cond_T):
+    """plug2d rows 2 at a 0.001, 0.003 or 0.005 deg taper: cond(T) of the balanced coordinates
+    is 6e9, 6.6e8, 2.4e8; the float DD saw no close call and returned 14 wedged rays (two of
+    them lift-offs with r_n ~ -3e-9), 0 lift-offs and 2 cones where exact arithmetic has 12, 4
+    and 1, unflagged (at 0.003 and 0.005 deg until COND_T_SUSPECT came down from 1e9 to 1e8).
+    Such a run is suspect: redone exactly (m <= the fallback limit), flagged; its cone's mu^c
+    is then certified in exact arithmetic (exact_mu_c), tan(taper) to 1e-11 where the float
+    polish was 2.9e-7 below it at 0.001 deg, marked polished."""
     from hpcwedge.pipeline import run_scene
     from hpcwedge.scene import parse_scene
-    runs = [run_scene(parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 2, "taper_deg": 0.001},
+    runs = [run_scene(parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 2, "taper_deg": taper},
                                    "friction": {"mu": [0.65]}, "compute": {"exact": exact}})) for exact in (False, True)]
     (flt, ex) = (r.runs[0] for r in runs)
     assert (flt.n_wedged_rays, flt.n_trivial_rays, flt.n_cones) == (ex.n_wedged_rays, ex.n_trivial_rays, ex.n_cones) \
         == (12, 4, 1)
     num = runs[0].stats["numerics"]
-    assert num["flagged"] and num["exact_fallback"] == [0.65] and num["runs"][0]["cond_T"] > 1e9
+    assert num["flagged"] and num["exact_fallback"] == [0.65] and num["runs"][0]["cond_T"] > cond_T
+    for r in runs:
+        (cone,) = r.runs[0].cones
+        assert cone["mu_c_polished"] and abs(cone["mu_c"] - tan(taper)) <= 1e-11 * tan(taper)
+        assert r.mu_c == cone["mu_c"]
