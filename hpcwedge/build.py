@@ -15,7 +15,7 @@ from . import exact as xq
 from .models.record import Model
 from .parallel import ranks_on_host
 from .problem import ContactProblem, stiffness_range
-from .progress import MemoryGuard
+from .progress import GB, MemoryGuard, physical_bytes
 from .scene import Scene, SceneError, array
 
 SYM_RTOL = 1e-10      # symmetry of a raw K, relative to max |K|
@@ -91,7 +91,7 @@ def build_model(scene: Scene) -> Model:
     stiffness K scaled by 2**-stiffness_exponent(scene) (the moduli scaled before assembly,
     so that no modulus overflows it); Model.material keeps the scene's moduli (stresses in
     the scene's units). progress.MemoryLimit when its condensed problem would not fit
-    (guard_condensed)."""
+    (guard_condensed: a built-in's before it is built)."""
     e = stiffness_exponent(scene)
     if e == 0:
         model = _build_model(scene, scene.model)
@@ -103,7 +103,7 @@ def build_model(scene: Scene) -> Model:
         material = {k: np.ldexp(np.asarray(v, dtype=float), e) if k in MATERIAL_MODULI else v
                     for k, v in model.material.items()}
         model = dataclasses.replace(model, material=material)
-    guard_condensed(scene, model)
+    guard_condensed(scene, len(model.contact_nodes), model.dim)
     return model
 
 
@@ -125,6 +125,7 @@ def _build_model(scene: Scene, params: dict) -> Model:
                                      c["nodes"], c["normals"], c.get("tangents"))
         if scene.kind == "mesh":
             return _mesh_model(scene, params)
+        guard_condensed(scene, library.contact_count(scene.kind, params), scene.dim)
         return library.builtin(scene.kind, params)
     except SceneError:
         raise
@@ -297,12 +298,16 @@ def _load_file(path: str, key: str):
 CONDENSED_COPIES = 8
 
 
-def guard_condensed(scene: Scene, model: Model) -> None:
+def guard_condensed(scene: Scene, m: int, dim: int) -> None:
     """progress.MemoryLimit (one line naming run.max_memory_gb) when the dense condensed
-    problem of `model`, CONDENSED_COPIES times its (dim m)^2 float64s, would not fit: checked
-    before the condensation, which would otherwise run until the machine kills it."""
-    m = len(model.contact_nodes)
-    n = model.dim * m
-    MemoryGuard(scene.max_memory_gb, ranks_on_host()).check(
-        CONDENSED_COPIES * 8.0 * n * n,
-        f"the condensed stiffness of {m:,} contact nodes ({n:,} x {n:,} dense) and its parametrisation")
+    problem of m contact nodes, CONDENSED_COPIES times its (dim m)^2 float64s, would not fit:
+    checked before a built-in is built (its m from its parameters) and before the
+    condensation, either of which would otherwise run until the machine kills it."""
+    n = dim * m
+    need = CONDENSED_COPIES * 8.0 * n * n
+    what = f"the condensed stiffness of {m:,} contact nodes ({n:,} x {n:,} dense) and its parametrisation"
+    if need > physical_bytes():
+        # whatever run.max_memory_gb says: the model itself is the problem
+        raise SceneError(f"model: too large to build: {what} need about {need / GB:.3g} GB, more than "
+                         f"this machine's {physical_bytes() / GB:.3g} GB (check the model's sizes)")
+    MemoryGuard(scene.max_memory_gb, ranks_on_host()).check(need, what)

@@ -2,6 +2,7 @@
 (with an estimate of the time left); the memory guard of a run (run.max_memory_gb)."""
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -51,6 +52,14 @@ def available_bytes() -> float:
     except (OSError, ValueError):
         pass
     return avail
+
+
+def physical_bytes() -> float:
+    """This machine's physical memory (inf where the system does not say)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (OSError, ValueError, AttributeError):
+        return math.inf
 
 
 class MemoryGuard:

@@ -125,10 +125,12 @@ def test_unreadable_files_and_null_spaces_say_why(tmp_path):
         assert phrase in str(e.value) and "\n" not in str(e.value), str(e.value)
 
 
-@pytest.mark.parametrize("rows", [10**18, 10**30])
+@pytest.mark.parametrize("rows", [10**9, 10**18, 10**30])
 def test_a_model_too_large_to_build_names_the_model(rows):
-    """plug2d with 10**18 or 10**30 rows: one line naming the model (before: numpy's 'Maximum
-    allowed size exceeded' without a key, or the memory guard blaming run.max_memory_gb)."""
+    """plug2d with 10**9, 10**18 or 10**30 rows: one line naming the model, before it is built
+    (before: numpy's 'Maximum allowed size exceeded' without a key, or the memory guard
+    blaming run.max_memory_gb; and 10**9 rows built until the kernel killed the run at 24 GB,
+    exit 137 and no word)."""
     from hpcwedge.build import build_model
     with pytest.raises(SceneError, match=r"^model: too large to build"):
         build_model(parse_scene({"name": "s", "dim": 2, "model": {"kind": "plug2d", "rows": rows},

@@ -201,3 +201,14 @@ def builtin(kind: str, params: dict | None = None) -> Model:
         if k not in accepted:
             raise ValueError(f"model.{k}: unknown parameter for {kind} (accepted: {', '.join(accepted)})")
     return fn(**params)
+
+
+#: the contact nodes of each built-in from its parameters, before it is built
+_CONTACTS = {"vgroove_bar": lambda p: 2, "plug2d": lambda p: 2 * p["rows"],
+             "plug3d": lambda p: p["levels"] * p["ring"], "block2d": lambda p: 2 * (p["rows"] * p["refine"] + 1)}
+
+
+def contact_count(kind: str, params: dict) -> int:
+    """m of the built-in `kind` with `params` (its defaults for the others), without building it."""
+    sig = inspect.signature(BUILTINS[kind]).parameters
+    return int(_CONTACTS[kind]({k: params.get(k, v.default) for k, v in sig.items()}))
