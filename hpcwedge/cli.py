@@ -188,7 +188,7 @@ def _run(args) -> int:
         condense(None, comm)                    # the master's run_scene: the collective condense stage
         serve(comm)
         return 0
-    from .files import FileError, OutputLock, check_output, refuse_non_hdf5, remove_if_there
+    from .files import FileError, OutputLock, check_output, refuse_not_ours, remove_if_there
     from .parallel.checkpoint import CheckpointError, checkpoint_path
     from .pipeline import release_workers, run_scene
     from .progress import Progress
@@ -206,7 +206,7 @@ def _run(args) -> int:
             # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
             scene = load_scene(args.scene)
             check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
-            refuse_non_hdf5(ckpt)                   # the checkpoint beside it is written too
+            refuse_not_ours(ckpt)                   # the checkpoint beside it is written too
             lock = OutputLock(args.output)
             # the temp file of a result write that a kill -9 cut short (under the lock: ours)
             remove_if_there(args.output + ".tmp")

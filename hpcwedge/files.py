@@ -266,11 +266,28 @@ class OutputLock:
         self.fd = None
 
 
-def refuse_non_hdf5(path: str) -> None:
-    """FileError when `path` is a non-empty regular file that is not HDF5 (not ours to replace)."""
-    if os.path.isfile(path) and os.path.getsize(path) and not is_hdf5(path):
-        raise FileError(f"{path}: exists and is not an HDF5 file; refusing to replace it (remove it "
-                         "first, or give another -o)")
+def refuse_not_ours(path: str) -> None:
+    """FileError when `path` is a non-empty regular file that hpcwedge did not write (not ours
+    to replace): ours begin with the checksum block (a result or checkpoint, even a damaged
+    one) or, written before checksums, are HDF5 files holding a scene_text."""
+    if not os.path.isfile(path) or not os.path.getsize(path) or written_by_us(path):
+        return
+    kind = "an HDF5 file hpcwedge did not write" if is_hdf5(path) else "not an HDF5 file"
+    raise FileError(f"{path}: exists and is {kind}; refusing to replace it (remove it first, or give "
+                     "another -o)")
+
+
+def written_by_us(path: str) -> bool:
+    """Does `path` begin with our checksum block, or is it an HDF5 file with a scene_text
+    (a result or checkpoint written before checksums)?"""
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(len(CHECKSUM_MAGIC)) == CHECKSUM_MAGIC:
+                return True
+        with h5py.File(path, "r") as f:
+            return "scene_text" in f
+    except (OSError, ValueError):
+        return False
 
 
 def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool = False) -> None:
@@ -279,7 +296,8 @@ def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool
     folder, not writable, the same file as one of `inputs` (hard and symbolic links
     included), a name that name_check(path) refuses (ValueError: a suffix of the wrong
     format), or, with replaces_hdf5_only (run: -o takes any name), an existing non-empty
-    file that is not HDF5 (a scene, a mesh or a table given to -o by mistake). Used by
+    file hpcwedge did not write (a scene, a mesh, a table or a data file given to -o by
+    mistake: refuse_not_ours). Used by
     run, plot and export, and by the API's writers (api.py)."""
     if not path:
         raise FileError("-o: empty file name")
@@ -306,7 +324,7 @@ def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool
         if not os.access(path, os.W_OK):
             raise FileError(f"{path}: not writable")
         if replaces_hdf5_only:
-            refuse_non_hdf5(path)
+            refuse_not_ours(path)
     elif os.path.islink(path):
         raise FileError(f"{path}: a dangling symbolic link; refusing to write through it")
     if not os.path.isdir(folder):

@@ -385,6 +385,43 @@ def test_run_does_not_replace_a_file_named_like_its_checkpoint(tmp_path, capsys)
     assert ckpt.read_text() == "my notes\n" and sorted(os.listdir(tmp_path)) == ["r.h5.ckpt", "s.toml"]
 
 
+def test_run_does_not_replace_an_hdf5_file_it_did_not_write(tmp_path, capsys):
+    """A user's HDF5 data file (h5py, datasets K and measurements) given to -o: refused, one
+    line, intact (before: replaced by the result, exit 0); a result written before checksums
+    (HDF5 with a scene_text, no checksum block) is still replaced."""
+    import h5py
+    import numpy as np
+    scene = write(tmp_path, _t(PLUG))
+    out = tmp_path / "mydata.h5"
+    with h5py.File(out, "w") as f:
+        f["K"] = np.eye(2)
+        f["measurements"] = np.arange(3.0)
+    before = out.read_bytes()
+    assert main(["run", scene, "-q", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "an HDF5 file hpcwedge did not write" in err and str(out) in err
+    assert out.read_bytes() == before
+    old = tmp_path / "old.h5"
+    with h5py.File(old, "w") as f:
+        f["scene_text"] = "name = 'x'"
+    assert main(["run", scene, "-q", "-o", str(old)]) == 0
+    assert main(["show", str(old)]) == 0
+
+
+def test_resume_from_a_truncated_checkpoint_says_it_is_damaged(tmp_path, capsys):
+    """A checkpoint cut to 100 bytes (inside its checksum block, so no HDF5 signature left):
+    --resume says the checkpoint is damaged (before: 'not an HDF5 file; refusing to replace
+    it ... give another -o'), exit 2, the file kept."""
+    from hpcwedge.files import CHECKSUM_MAGIC
+    scene = write(tmp_path, _t(PLUG))
+    ckpt = tmp_path / "r.h5.ckpt"
+    ckpt.write_bytes((CHECKSUM_MAGIC + b"0" * 84)[:100])
+    assert main(["run", scene, "-q", "-o", str(tmp_path / "r.h5"), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "damaged" in err and str(ckpt) in err and "another -o" not in err, err
+    assert ckpt.read_bytes() == (CHECKSUM_MAGIC + b"0" * 84)[:100]
+
+
 def test_device_output_refused():
     """-o on a device node (as root, a run would have replaced it by a regular file)."""
     import stat
