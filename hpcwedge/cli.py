@@ -80,9 +80,14 @@ def main(argv: list[str] | None = None) -> int:
         # Ctrl-C where no handler of ours is in (start-up, show, plot, export): nothing was
         # written (outputs are atomic); one line and the status of a process ended by SIGINT
         code = _error("interrupted (nothing written)", 128 + signal.SIGINT)
-    except Exception as e:                      # noqa: BLE001  (a bug: one line, the traceback on request)
+    except BaseException as e:                  # noqa: BLE001  (a bug: one line, the traceback on request)
         from .files import FileError
-        if isinstance(e, FileError):            # a file a user can fix (files.check_output, ...)
+        if not isinstance(e, Exception):
+            if type(e).__name__ != "Interrupted":
+                raise                           # SystemExit (argparse's exits)
+            # a stop (parallel.Interrupted) outside _run's own handling of it
+            code = _error(f"{e}: stopped before any checkpointable work", 75)
+        elif isinstance(e, FileError):          # a file a user can fix (files.check_output, ...)
             code = _error(str(e), 2)
         else:
             if os.environ.get("HPCWEDGE_DEBUG"):
@@ -256,7 +261,9 @@ def _run(args) -> int:
                 # never read a stop message (the job hung, the workers spinning in MPI)
                 sys.stdout.flush()
                 comm.Abort(EXIT_INTERRUPTED)
-            engine.close(timeout=5.0)
+            # the handlers stay SIG_IGN (mark_done): a second SIGTERM now must not kill a run
+            # whose checkpoint is written (exit 143 after 'checkpoint written')
+            engine.close(timeout=5.0, restore_signals=False)
             return EXIT_INTERRUPTED
     finally:
         engine.close(restore_signals=False)

@@ -135,3 +135,28 @@ def test_a_model_too_large_to_build_names_the_model(rows):
     with pytest.raises(SceneError, match=r"^model: too large to build"):
         build_model(parse_scene({"name": "s", "dim": 2, "model": {"kind": "plug2d", "rows": rows},
                                  "friction": {"mu": [1.0]}}))
+
+
+def test_a_stop_while_k_is_read_is_a_stop_not_an_unreadable_file(tmp_path):
+    """A stop (parallel.Interrupted, raised by the run's SIGTERM handler) that lands while a
+    K file is read goes through as a stop (before: 'model.file: cannot read K.npz
+    (Interrupted: SIGTERM)', exit 2, instead of the checkpointing stop and exit 75)."""
+    import signal
+    from hpcwedge.build import raw_stiffness
+    from hpcwedge.parallel import Interrupted
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((1500, 1500))
+    np.savez_compressed(tmp_path / "K.npz", K=A @ A.T)
+    scene = parse_scene({"name": "s", "dim": 2, "model": {"kind": "stiffness", "file": "K.npz"},
+                         "friction": {"mu": [1.0]}}, base_dir=str(tmp_path))
+
+    def stop(signum, frame):
+        raise Interrupted("SIGTERM")
+    old = signal.signal(signal.SIGALRM, stop)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.002)
+        with pytest.raises(Interrupted):
+            raw_stiffness(scene)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)

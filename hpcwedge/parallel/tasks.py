@@ -27,8 +27,12 @@ WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical", "hpcwedge.faces"]
 TICK_EVERY_S = 0.05
 
 
-class Interrupted(Exception):
-    """SIGTERM/SIGINT reached the master: write the checkpoint and stop."""
+class Interrupted(BaseException):
+    """SIGTERM/SIGINT reached the master: write the checkpoint and stop. A BaseException,
+    like KeyboardInterrupt: the handlers that turn a library's errors into one line (an
+    unreadable K file or mesh, a model that fails to build on a worker) must not take a stop
+    for one (a SIGTERM while K was read gave 'model.file: cannot read ...', exit 2; during
+    a distributed build it was swallowed and the run went on for 20 s)."""
 
 
 class TaskCancelled(Exception):
