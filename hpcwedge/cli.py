@@ -319,8 +319,8 @@ def _show(args) -> int:
             raise _UserError(str(e)) from None
         return 0
     mu_c = "null" if res["mu_c"] is None else f"{res['mu_c']:.12g}"
-    print(f"{res['name']}: dim {res['dim']}, m {res['m']}, mu_c = {mu_c}"
-          + (f" ({res['mu_c_status']})" if res["mu_c_status"] else ""))
+    status = ", ".join(x for x in (res["mu_c_status"], _global_caveat(res)) if x)
+    print(f"{res['name']}: dim {res['dim']}, m {res['m']}, mu_c = {mu_c}" + (f" ({status})" if status else ""))
     # mu as given (shortest round-trip digits): runs 1e-11 apart stay apart
     w = max([8] + [len(repr(float(run["mu"]))) for run in res["runs"]])
     print(f"{'mu':>{w}} {'wedged':>8} {'trivial':>8} {'cones':>6} {'patterns':>9}")
@@ -337,6 +337,22 @@ def _show(args) -> int:
     t = res["timings"]
     print("timings: " + ", ".join(f"{k} {v:.3f} s" for k, v in t.items()))
     return 0
+
+
+def _global_caveat(res: dict) -> str:
+    """What `show` adds to the global mu^c when it is not certified to 1e-9: the listed value
+    it is is not polished, or the global search left values unpolished or solves undecided."""
+    if res["mu_c"] is None:
+        return ""
+    items = [it for run in res["runs"] for it in (run["cones"] or []) + (run["patterns"] or [])]
+    source = [it for it in items if it.get("mu_c") == res["mu_c"]]
+    if source:
+        return "" if all(it.get("mu_c_polished") is not False for it in source) else "not polished: an upper bound"
+    st = res["stats"]
+    unpolished, undecided = st.get("mu_c_unpolished", 0), (st.get("bnb") or {}).get("undecided", 0)
+    if unpolished or undecided:
+        return f"not certified to 1e-9: {unpolished} value(s) not polished, {undecided} solve(s) undecided"
+    return ""
 
 
 def _mu_c_text(item: dict) -> str:

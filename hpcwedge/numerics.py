@@ -193,8 +193,9 @@ def note_mu_c(numerics: NumericsReport, unpolished: int, undecided: int) -> None
     """Record mu^c values left unpolished and LP solves no solver decided."""
     if unpolished:
         numerics.notes.append(f"{unpolished} mu^c value(s) not polished: upper bounds, a bisection "
-                              f"bracket's end (1e-7 relative{', less where LP solves were undecided' if undecided else ''})"
-                              " or a 3D point not certified (mu_c_polished = false in the result, marked by show)")
+                              "bracket's end (1e-7 relative where its solves were decided; looser where "
+                              "solves were undecided, taken as feasible) or a 3D point not certified "
+                              "(mu_c_polished = false in the result, marked by show)")
     if undecided:
         numerics.notes.append(f"{undecided} LP solve(s) of the mu^c stage undecided by every solver "
                               "(taken as feasible)")

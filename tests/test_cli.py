@@ -58,6 +58,22 @@ def test_show_marks_the_mu_c_left_at_a_bracket(tmp_path, capsys, method):
     for line, pat in zip(lines, pats):
         assert pat["mu_c_polished"] is (method == "accurate")
         assert line.endswith("(not polished: an upper bound)") is (not pat["mu_c_polished"])
+    # the global mu^c is the least listed value: marked as that value is (before: a plain "(found)")
+    assert main(["show", out]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert head.endswith("(found)" if method == "accurate" else "(found, not polished: an upper bound)"), head
+
+
+def test_show_says_when_the_global_search_left_mu_c_uncertified():
+    """A global mu^c from the search (no listed value) with values left unpolished or solves
+    undecided (plug3d at a 0.01 deg taper: 4 and 98, the value 1.5e-4 above tan 0.01 deg):
+    show says it is not certified; with none, nothing is added."""
+    from hpcwedge.cli import _global_caveat
+    res = {"mu_c": 0.5, "runs": [{"cones": None, "patterns": None}],
+           "stats": {"mu_c_unpolished": 4, "bnb": {"undecided": 98}}}
+    assert _global_caveat(res) == "not certified to 1e-9: 4 value(s) not polished, 98 solve(s) undecided"
+    res["stats"] = {"mu_c_unpolished": 0, "bnb": {"undecided": 0}}
+    assert _global_caveat(res) == ""
 
 
 @pytest.mark.parametrize("text,key", [
