@@ -37,6 +37,7 @@ import numpy as np
 from . import __version__
 from .files import (CHECKPOINT_FORMAT, CheckpointGiven, FileError, checkpoint_path, error_reason, resume_hint,
                     verify_checksum, write_atomic)
+from .scene import changed_settings
 
 
 def compression(arr: np.ndarray) -> str | None:
@@ -150,13 +151,18 @@ def read_result(path: str, with_rays: bool = True) -> dict:
 
 def result_state(path: str, scene) -> str:
     """What the file at `path` is for `scene` (a scene.Scene): "missing"; "complete" or
-    "incomplete", a result of this scene text and these input files' bytes (the scene's
-    hash and input digests); "other-scene" when either differs. FileError for a file that
+    "incomplete", a result of this scene (its text, or one that differs only in comments,
+    layout and run settings: scene.changed_settings) and these input files' bytes; else
+    "other-scene". FileError for a file that
     is not a readable result; SceneError when an input file cannot be read."""
     if not os.path.exists(path):
         return "missing"
     r = read_result(path, with_rays=False)
-    if r["scene_hash"] != scene.hash or (r["inputs"] or {}) != scene.input_digests:
+    if r["scene_hash"] != scene.hash:
+        with open_result(path) as f:
+            if changed_settings(stored_scene(f)[0], scene.text) is None:
+                return "other-scene"
+    if (r["inputs"] or {}) != scene.input_digests:
         return "other-scene"
     return "complete" if r["complete"] else "incomplete"
 

@@ -422,3 +422,28 @@ def array(value, key: str, ndim: int | None = None) -> np.ndarray:
         return as_float_array(value, key, ndim)
     except ValueError as e:
         raise SceneError(str(e)) from None
+
+
+#: [run] keys that change neither the answers nor their bits (SPEC §5), only how the run goes:
+#: a checkpoint resumes, and a complete result stands, under other values of them
+SETTINGS = ("max_memory_gb", "checkpoint_every_s")
+
+
+def changed_settings(saved: str, now: str) -> list[str] | None:
+    """The SETTINGS keys ("run.<key>") in which two scene texts differ when they differ in
+    nothing else, parsed (comments and layout aside: [] when only those differ); None when
+    they are other scenes (or either is not TOML). The one rule of "the same scene" for
+    checkpoints and results."""
+    try:
+        old, new = tomllib.loads(saved.lstrip("\ufeff")), tomllib.loads(now.lstrip("\ufeff"))
+    except tomllib.TOMLDecodeError:
+        return None
+    changed = []
+    for key in SETTINGS:
+        a, b = old.get("run", {}).pop(key, None), new.get("run", {}).pop(key, None)
+        if a != b:
+            changed.append(f"run.{key}")
+    for scene in (old, new):
+        if scene.get("run") == {}:
+            del scene["run"]
+    return changed if old == new else None

@@ -448,6 +448,27 @@ def test_resume_with_other_run_settings_goes_on(tmp_path, reference):
     assert got.pop("scene_hash") != want.pop("scene_hash") and got == want
 
 
+def test_a_comment_or_a_setting_is_the_same_scene_for_checkpoints_and_results(tmp_path, reference):
+    """One rule for "the same scene": texts that differ in comments, layout or run settings
+    only. A comment added resumes the checkpoint (before: 'belongs to another scene', while a
+    comment plus a changed setting resumed); a complete result stands under a changed
+    checkpoint interval (before: recomputed in full)."""
+    scene, out = _some_checkpoint(tmp_path)
+    text = open(scene).read()
+    commented = write_scene(tmp_path, name="commented.toml", text="# the same body\n" + text)
+    p = run(None, "run", commented, "-o", out, "--resume")
+    assert "resuming from" in p.stderr and not os.path.exists(checkpoint_path(out))
+    got, want = show(out), dict(reference)
+    assert got.pop("scene_hash") != want.pop("scene_hash") and got == want
+    interval = write_scene(tmp_path, name="interval.toml",
+                           text=text.replace("checkpoint_every_s = 0.1", "checkpoint_every_s = 30.0"))
+    p = run(None, "run", interval, "-o", out, "--resume")
+    assert "is already complete for this scene" in p.stderr, p.stderr
+    other = write_scene(tmp_path, name="other.toml", text=text.replace("1.0]", "1.5]"))
+    p = run(None, "run", other, "-o", out, "-q", "--resume")
+    assert "already complete" not in p.stderr
+
+
 def _refused(scene: str, out: str, phrase: str) -> None:
     """`run --resume` must refuse the checkpoint of `out`: exit 2, one line naming the
     checkpoint and `phrase`, the checkpoint byte for byte as it was, no result written."""

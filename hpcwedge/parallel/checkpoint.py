@@ -41,6 +41,7 @@ from .. import __version__
 from ..files import CHECKPOINT_FORMAT as FORMAT
 from ..files import FileError, checkpoint_path, error_reason, verify_checksum, write_atomic
 from ..resultfile import compression
+from ..scene import changed_settings
 
 #: 2: checksummed (files.write_atomic), with the scene's input digests
 FORMAT_VERSION = 2
@@ -185,11 +186,12 @@ class Checkpointer:
             return False
         ck = read_checkpoint(path)
         a = ck["attrs"]
-        self.changed_settings = [] if a["scene_hash"] == scene_hash else _settings_only(ck["scene_text"], scene_text)
-        if a["scene_hash"] != scene_hash and not self.changed_settings:
+        changed = [] if a["scene_hash"] == scene_hash else changed_settings(ck["scene_text"], scene_text)
+        if changed is None:
             raise CheckpointError(f"{path}: the checkpoint belongs to another scene (scene hash "
                                   f"{a['scene_hash'][:12]}..., this scene {scene_hash[:12]}...); "
                                   f"use the scene it was started with, or remove it to start afresh")
+        self.changed_settings = changed
         try:
             saved = json.loads(a["inputs"])
             changed = sorted(k for k in saved.keys() | inputs.keys() if saved.get(k) != inputs.get(k))
@@ -255,29 +257,6 @@ class Checkpointer:
                 pass
             except OSError as e:
                 print(f"hpcwedge: warning: cannot remove {p} ({error_reason(e)})", file=sys.stderr)
-
-
-#: [run] keys that change neither the answers nor their bits (SPEC §5), only how the run goes:
-#: a checkpoint resumes under other values of them (raising the memory limit the guard names)
-SETTINGS = ("max_memory_gb", "checkpoint_every_s")
-
-
-def _settings_only(saved: str, now: str) -> list[str]:
-    """The SETTINGS keys ("run.<key>") in which two scene texts differ, when they differ in
-    nothing else (parsed: comments and layout aside); [] otherwise."""
-    try:
-        old, new = tomllib.loads(saved.lstrip("\ufeff")), tomllib.loads(now.lstrip("\ufeff"))
-    except tomllib.TOMLDecodeError:
-        return []
-    changed = []
-    for key in SETTINGS:
-        a, b = old.get("run", {}).pop(key, None), new.get("run", {}).pop(key, None)
-        if a != b:
-            changed.append(f"run.{key}")
-    for scene in (old, new):
-        if scene.get("run") == {}:
-            del scene["run"]
-    return changed if old == new else []
 
 
 def _plain(v):
