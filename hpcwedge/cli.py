@@ -211,6 +211,11 @@ def _run(args) -> int:
             # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
             scene = load_scene(args.scene)
             check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
+            if os.path.islink(args.output):
+                # through a symbolic link: the lock, the checkpoint and the result are the
+                # target's (a second run on the link went unlocked; the link became a file)
+                args.output = os.path.realpath(args.output)
+                ckpt = checkpoint_path(args.output)
             refuse_not_ours(ckpt)                   # the checkpoint beside it is written too
             lock = OutputLock(args.output)
             # the temp file of a result write that a kill -9 cut short (under the lock: ours)

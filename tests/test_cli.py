@@ -461,6 +461,28 @@ def test_sigusr1_is_ignored_before_the_command_line_loads():
     assert p.stdout.strip().splitlines()[-1] == "True", p.stdout + p.stderr
 
 
+def test_run_through_a_symlink_writes_and_locks_its_target(tmp_path, capsys):
+    """-o a symbolic link to a result: the result is written to the target and the link
+    stays a link (before: the link was replaced by a regular file, the target left stale),
+    and the target's lock is the one taken (a second run on the link was not refused)."""
+    from hpcwedge.files import OutputLock, FileError
+    scene = write(tmp_path, _t(PLUG))
+    target = tmp_path / "target.h5"
+    link = tmp_path / "alias.h5"
+    assert main(["run", scene, "-q", "-o", str(target)]) == 0
+    os.symlink(target, link)
+    os.utime(target, (0, 0))
+    assert main(["run", scene, "-q", "-o", str(link)]) == 0
+    assert os.path.islink(link) and target.stat().st_mtime > 0 and main(["show", str(target)]) == 0
+    held = OutputLock(str(target))
+    try:
+        capsys.readouterr()
+        assert main(["run", scene, "-q", "-o", str(link)]) == 2
+        assert "target.h5" in capsys.readouterr().err
+    finally:
+        held.release()
+
+
 def test_device_output_refused():
     """-o on a device node (as root, a run would have replaced it by a regular file)."""
     import stat

@@ -235,8 +235,9 @@ class Checkpointer:
         try:
             write_checkpoint(self.path, header, self.scene_text, jobs)
         except (OSError, CheckpointError) as e:   # full disk, read-only folder...: the run goes on
-            print(f"hpcwedge: warning: checkpoint not written to {self.path} ({error_reason(e)}); the previous "
-                  f"one is kept, the next timer or signal tries again", file=sys.stderr)
+            kept = "the previous one is kept" if os.path.isfile(self.path) else "there is no earlier one"
+            print(f"hpcwedge: warning: checkpoint not written to {self.path} ({error_reason(e)}); {kept}, "
+                  "the next timer or signal tries again", file=sys.stderr)
             self.next_at = time.monotonic() + self.every_s
             return False
         self.written += 1
