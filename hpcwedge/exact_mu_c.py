@@ -21,6 +21,7 @@ import numpy as np
 from . import exact as xq
 from .feasibility import decide
 from .mu_bracket import rows_at
+from .numerics import COND_T_SUSPECT
 from .problem import Parametrization, balanced_2d
 from .rows import Status, pattern_rows
 
@@ -178,3 +179,18 @@ def certify_2d(values: dict, tasks: dict, pq: Parametrization, param: Parametriz
         value.polished = False
         notes.append(f"a mu^c ({value.mu_c:.12g}) of a run redone in exact arithmetic has no exact "
                      "certificate: its float value is kept, not polished")
+
+
+def exact_certifier(scene, m: int, param: Parametrization, exact_param, scale: float | None):
+    """For the global search without an enumeration (global_mu_c.global_mu_critical's
+    certify): in 2D on the accurate route, when the scene is exact or its coordinates
+    balanced at its first mu are as ill-conditioned as a suspect enumeration's (cond(T) >
+    numerics.COND_T_SUSPECT, m <= compute.exact_fallback_max_m: plug2d at 0.001 deg, the
+    search's value 2.3e-8 off), a function certifying the least pattern's value exactly;
+    else None."""
+    if scene.dim != 2 or scene.mu_c_method != "accurate":
+        return None
+    if not scene.exact and (m > scene.exact_fallback_max_m
+                            or balanced_2d(param, scene.mu[0], m, scale)[1] <= COND_T_SUSPECT):
+        return None
+    return lambda zero_u, zero_r, mu_c: exact_mu_c_2d(exact_param(), param, m, zero_u, zero_r, mu_c, scale)

@@ -37,7 +37,8 @@ MILP_FROM_M = 25
 def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: str = "accurate",
                        tol: float = 1e-6, stats: BnBStats | None = None,
                        symmetry: Symmetry | None = None,
-                       scale: float | None = None, route: str = "auto") -> tuple[float | None, str]:
+                       scale: float | None = None, route: str = "auto",
+                       certify=None, pattern_of: dict | None = None) -> tuple[float | None, str]:
     """Least mu with any solution (2D and 3D alike; with a symmetry, over orbit
     representatives). scale: passed to mu_critical (2D balanced coordinates).
 
@@ -57,15 +58,30 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     within ~1e-6 relative below it can go unseen). stats.extra["route"] says which route
     ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"].
 
+    certify(zero_u, zero_r, mu_c): the least pattern's value certified another way (2D: in
+    exact arithmetic, exact_mu_c), or None to keep it; pattern_of: filled with the pattern
+    of each value computed (for certify).
+
     Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
     r_t free has no solution) or "none_up_to_mu_max".
     """
+    if certify is not None:
+        pattern_of: dict = {}
+        found = global_mu_critical(param, m, mu_max, method, tol, stats, symmetry, scale, route,
+                                   certify=None, pattern_of=pattern_of)
+        if found[0] is not None and found[0] in pattern_of:
+            exact = certify(*pattern_of[found[0]], found[0])
+            if exact is not None:
+                return exact, found[1]
+        return found
     if route not in ("auto", "tree", "milp"):
         raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
     stats = stats if stats is not None else BnBStats()
     # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
     search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry, options=DEFAULT_OPTIONS)
     solve = partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale)
+    if pattern_of is not None:
+        solve = partial(_recorded, solve, pattern_of)
     best = None
     if (route == "milp" or (route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
         best = global_bracket_milp(param, m, mu_max, solve, stats, scale)
@@ -98,6 +114,14 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         if r.mu_c is not None:
             best = min(best, r.mu_c)
     return best, "found"
+
+
+def _recorded(solve, pattern_of: dict, zero_u, zero_r, **kw):
+    """solve(zero_u, zero_r, **kw), its value's pattern kept in pattern_of[value]."""
+    r = solve(zero_u, zero_r, **kw)
+    if r.mu_c is not None:
+        pattern_of.setdefault(r.mu_c, (zero_u, zero_r))
+    return r
 
 
 def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, stats: BnBStats,

@@ -30,7 +30,7 @@ import numpy as np
 
 from .build import build_model, contact_problem, stiffness_exponent, unscale_u
 from .environment import environment, single_threaded
-from .exact_mu_c import certify_2d
+from .exact_mu_c import certify_2d, exact_certifier
 from .faces import branching_nodes, run_faces
 from .global_mu_c import global_mu_critical
 from .models.record import Model
@@ -485,13 +485,13 @@ def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:
     global mu^c does not depend on the listed mu)."""
     scene = ctx.scene
     if values.first is not None:
-        found = [v for v in (values.by_key[key].mu_c for key in values.first) if v is not None]
-        if found:
-            least = min(found)
+        least = min((v for v in (values.by_key[key].mu_c for key in values.first) if v is not None), default=None)
+        if least is not None:
             return GlobalMuC(least, "found") if least <= scene.mu_max else GlobalMuC(None, "none_up_to_mu_max")
     bnb = BnBStats()
-    mu_c, status = global_mu_critical(ctx.float_param, ctx.m, scene.mu_max, method=scene.mu_c_method,
-                                      tol=scene.mu_c_tol, stats=bnb, symmetry=ctx.symmetry, scale=ctx.scale)
+    certify = exact_certifier(scene, ctx.m, ctx.float_param, ctx.exact_param, ctx.scale)
+    mu_c, status = global_mu_critical(ctx.float_param, ctx.m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol,
+                                      stats=bnb, symmetry=ctx.symmetry, scale=ctx.scale, certify=certify)
     search = GlobalRouteStats(solves=bnb.solves, skipped=bnb.skipped, undecided=bnb.undecided,
                               nodes=bnb.nodes, route=bnb.extra.get("route", "tree"),
                               milp_solves=bnb.extra.get("milp_solves", 0),

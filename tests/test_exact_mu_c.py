@@ -92,3 +92,16 @@ def test_row_labels_follow_pattern_rows():
         w = want[kind](i)
         assert np.allclose(row / np.linalg.norm(row), w / np.linalg.norm(w), atol=1e-12)
     assert len(got) == len(row_labels_2d(zu, zr))
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_the_global_search_alone_is_certified_exactly_where_the_coordinates_are_too_ill_conditioned(exact):
+    """plug2d rows 2 at a 0.001 deg taper, the global mu^c without an enumeration: its
+    coordinates' cond(T) is 6e9 (a suspect enumeration's), so the least pattern's value is
+    certified in exact arithmetic: tan(taper) to 1e-11 (before: 2.3e-8 off). At 1 deg the
+    float value stands (no exact work), within 1e-12."""
+    from hpcwedge.api import solve
+    for taper, tol in ((0.001, 1e-11), (1.0, 1e-12)):
+        r = solve(builtin_scene("plug2d", rows=2, taper_deg=taper, mu_c="global", enumerate=False, exact=exact))
+        t = math.tan(math.radians(taper))
+        assert r.mu_c_status == "found" and abs(r.mu_c - t) <= tol * t, (taper, r.mu_c / t - 1)
