@@ -13,9 +13,8 @@ import numpy as np
 
 from . import exact as xq
 from .models.record import Model
-from .parallel import ranks_on_host
 from .problem import ContactProblem, stiffness_range
-from .progress import GB, MemoryGuard, physical_bytes
+from .progress import GB, MemoryGuard, physical_bytes, ranks_on_host
 from .scene import Scene, SceneError, array
 
 SYM_RTOL = 1e-10      # symmetry of a raw K, relative to max |K|

@@ -216,7 +216,7 @@ def _run(args) -> int:
                 # target's (a second run on the link went unlocked; the link became a file)
                 args.output = os.path.realpath(args.output)
                 ckpt = checkpoint_path(args.output)
-            refuse_not_ours(ckpt)                   # the checkpoint beside it is written too
+            refuse_not_ours(ckpt, hdf5_ok=True)     # the checkpoint beside it is written too
             lock = OutputLock(args.output)
             # the temp file of a result write that a kill -9 cut short (under the lock: ours)
             remove_if_there(args.output + ".tmp")

@@ -266,11 +266,15 @@ class OutputLock:
         self.fd = None
 
 
-def refuse_not_ours(path: str) -> None:
+def refuse_not_ours(path: str, hdf5_ok: bool = False) -> None:
     """FileError when `path` is a non-empty regular file that hpcwedge did not write (not ours
     to replace): ours begin with the checksum block (a result or checkpoint, even a damaged
-    one) or, written before checksums, are HDF5 files holding a scene_text."""
+    one) or, written before checksums, are HDF5 files holding a scene_text. hdf5_ok (the
+    checkpoint beside a result): any HDF5 file passes, a damaged checkpoint among them (the
+    resume then says so)."""
     if not os.path.isfile(path) or not os.path.getsize(path) or written_by_us(path):
+        return
+    if hdf5_ok and is_hdf5(path):
         return
     kind = "an HDF5 file hpcwedge did not write" if is_hdf5(path) else "not an HDF5 file"
     raise FileError(f"{path}: exists and is {kind}; refusing to replace it (remove it first, or give "
@@ -286,7 +290,7 @@ def written_by_us(path: str) -> bool:
                 return True
         with h5py.File(path, "r") as f:
             return "scene_text" in f
-    except (OSError, ValueError):
+    except Exception:  # noqa: BLE001  (h5py raises OSError, RuntimeError... on damaged files)
         return False
 
 

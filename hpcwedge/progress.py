@@ -54,6 +54,15 @@ def available_bytes() -> float:
     return avail
 
 
+def ranks_on_host() -> int:
+    """How many ranks of this MPI job share the host (1 outside mpirun)."""
+    for key in ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS_PER_NODE"):
+        v = os.environ.get(key, "")
+        if v.isdigit() and int(v) > 0:
+            return int(v)
+    return 1
+
+
 def physical_bytes() -> float:
     """This machine's physical memory (inf where the system does not say)."""
     try:

@@ -15,7 +15,8 @@ over MPI (master / workers), and its checkpoints. One job per module:
 from .checkpoint import CheckpointError, Checkpointer, checkpoint_path, read_checkpoint, write_checkpoint
 from .engine import EXIT_INTERRUPTED, Engine, run_tasks
 from .jobs import DEFAULT_BUDGET, Patterns, SubtreeJob, TaskJob, decode_rays, encode_rays
-from .mpi import ParallelError, ranks_on_host, world
+from ..progress import ranks_on_host
+from .mpi import ParallelError, world
 from .tasks import (Interrupted, TaskCancelled, handler_for, register, registered, task_stopping, task_tick)
 from .worker import serve
 

@@ -75,15 +75,6 @@ def world():
     return comm if comm.size > 1 else None
 
 
-def ranks_on_host() -> int:
-    """How many ranks of this MPI job share the host (1 outside mpirun)."""
-    for key in ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS_PER_NODE"):
-        v = os.environ.get(key, "")
-        if v.isdigit() and int(v) > 0:
-            return int(v)
-    return 1
-
-
 def pid_alive(pid: int) -> bool:
     """False once the process is gone or a zombie."""
     try:
