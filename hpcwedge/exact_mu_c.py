@@ -94,7 +94,7 @@ def certified(pq: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarra
               eq_labels, tight, lo: float, hi: float) -> bool:
     """The pattern problem is feasible at hi and infeasible at lo, shown in exact arithmetic
     (module doc); eq_labels, tight: the equality and tight inequality rows (len d together)."""
-    every = [lab for lab, eq in zip(row_labels_2d(zero_u, zero_r), _is_eq(zero_u, zero_r)) if not eq]
+    every = row_labels_2d(zero_u, zero_r)[_n_eq(zero_u, zero_r):]
     norm = _norm(pq, m)
     d = len(norm)
     hq, lq = xq.q_scalar(hi), xq.q_scalar(lo)
@@ -120,9 +120,9 @@ def certified(pq: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.ndarra
     return all(y[k, 0] >= 0 for k in range(len(eq_labels), d))
 
 
-def _is_eq(zero_u: np.ndarray, zero_r: np.ndarray) -> list[bool]:
-    n_eq = int(np.sum(zero_u)) + 2 * int(np.sum(zero_r))
-    return [k < n_eq for k in range(len(row_labels_2d(zero_u, zero_r)))]
+def _n_eq(zero_u: np.ndarray, zero_r: np.ndarray) -> int:
+    """How many of row_labels_2d's rows, the first ones, are equalities."""
+    return int(np.sum(zero_u)) + 2 * int(np.sum(zero_r))
 
 
 def exact_mu_c_2d(pq: Parametrization, param: Parametrization, m: int, zero_u: np.ndarray,
@@ -135,8 +135,7 @@ def exact_mu_c_2d(pq: Parametrization, param: Parametrization, m: int, zero_u: n
     tight = tight_rows(param, m, zero_u, zero_r, mu_f, scale)
     if tight is None:
         return None
-    labels = row_labels_2d(zero_u, zero_r)
-    eq_labels = [lab for lab, eq in zip(labels, _is_eq(zero_u, zero_r)) if eq]
+    eq_labels = row_labels_2d(zero_u, zero_r)[:_n_eq(zero_u, zero_r)]
     d = pq.Uq.ncols()
     k = d - len(eq_labels)
     for chosen in itertools.combinations(tight[:k + SPARE_ROWS], k) if 0 < k <= len(tight) else ():
