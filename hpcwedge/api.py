@@ -34,7 +34,7 @@ from typing import Any
 from .files import FileError
 from .pipeline import run_scene
 from .results import Result, Run
-from .scene import COMPUTE_DEFAULTS, RUN_DEFAULTS, Scene, SceneError, array, load_scene, parse_scene
+from .scene import COMPUTE_DEFAULTS, NUMBER_TYPES, RUN_DEFAULTS, Scene, SceneError, array, load_scene, parse_scene
 
 __all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
            "plot", "export_vtu", "DEFAULT_MU"]
@@ -230,11 +230,12 @@ def _plain(value: Any, key: str) -> Any:
     if hasattr(value, "toarray") and hasattr(value, "nnz"):               # scipy sparse
         value = value.toarray()
     if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):    # numpy array or scalar
-        if getattr(value, "dtype", None) is not None and value.dtype.kind in "fiu":
-            return value.tolist()                  # nested lists of Python floats / ints
+        numeric = getattr(value, "dtype", None) is not None and value.dtype.kind in "fiu"
         value = value.tolist()
+        if numeric:
+            return value                           # nested lists of Python floats / ints
     if isinstance(value, (list, tuple)):
-        if set(map(type, value)) <= _NUMBERS:      # a row of numbers: nothing to convert
+        if set(map(type, value)) <= NUMBER_TYPES:      # a row of numbers: nothing to convert
             return list(value)
         return [_plain(v, key) for v in value]
     if isinstance(value, (bool, int, float, str)):
@@ -244,8 +245,6 @@ def _plain(value: Any, key: str) -> Any:
 
 
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
-#: the types of the numbers a table holds as they are (bool, a subclass of int, is not one)
-_NUMBERS = frozenset({int, float})
 
 
 def _toml(table: dict) -> str:
@@ -276,7 +275,7 @@ def _value(v: Any) -> str:
     if isinstance(v, str):
         return _string(v)
     if isinstance(v, list):
-        if set(map(type, v)) <= _NUMBERS:          # repr of a float is TOML's (nan, inf, -inf too)
+        if set(map(type, v)) <= NUMBER_TYPES:          # repr of a float is TOML's (nan, inf, -inf too)
             return "[" + ", ".join(map(repr, v)) + "]"
         return "[" + ", ".join(_value(x) for x in v) + "]"
     return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"

@@ -38,7 +38,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
                        tol: float = 1e-6, stats: BnBStats | None = None,
                        symmetry: Symmetry | None = None,
                        scale: float | None = None, route: str = "auto",
-                       certify=None, pattern_of: dict | None = None) -> tuple[float | None, str]:
+                       certify=None) -> tuple[float | None, str]:
     """Least mu with any solution (2D and 3D alike; with a symmetry, over orbit
     representatives). scale: passed to mu_critical (2D balanced coordinates).
 
@@ -59,29 +59,29 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"].
 
     certify(zero_u, zero_r, mu_c): the least pattern's value certified another way (2D: in
-    exact arithmetic, exact_mu_c), or None to keep it; pattern_of: filled with the pattern
-    of each value computed (for certify).
+    exact arithmetic, exact_mu_c), or None to keep it.
 
     Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
     r_t free has no solution) or "none_up_to_mu_max".
     """
-    if certify is not None:
-        pattern_of: dict = {}
-        found = global_mu_critical(param, m, mu_max, method, tol, stats, symmetry, scale, route,
-                                   certify=None, pattern_of=pattern_of)
-        if found[0] is not None and found[0] in pattern_of:
-            exact = certify(*pattern_of[found[0]], found[0])
-            if exact is not None:
-                return exact, found[1]
-        return found
+    pattern_of: dict = {}           # each value computed -> its pattern (for certify)
+    mu_c, status = _search(param, m, mu_max, method, tol, stats, symmetry, scale, route, pattern_of)
+    if certify is not None and mu_c in pattern_of:
+        exact = certify(*pattern_of[mu_c], mu_c)
+        if exact is not None:
+            mu_c = exact
+    return mu_c, status
+
+
+def _search(param, m, mu_max, method, tol, stats, symmetry, scale, route, pattern_of: dict):
+    """global_mu_critical without its certify step; pattern_of[value] = that value's pattern."""
     if route not in ("auto", "tree", "milp"):
         raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
     stats = stats if stats is not None else BnBStats()
     # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
     search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry, options=DEFAULT_OPTIONS)
-    solve = partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale)
-    if pattern_of is not None:
-        solve = partial(_recorded, solve, pattern_of)
+    solve = partial(_recorded, partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale),
+                    pattern_of)
     best = None
     if (route == "milp" or (route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
         best = global_bracket_milp(param, m, mu_max, solve, stats, scale)

@@ -334,8 +334,8 @@ def _unknown(table, allowed, prefix):
                              else f"{prefix}{k}: unknown key (this table takes no keys here)")
 
 
-#: the types of plain numbers in a parsed table (bool, a subclass of int, is not one)
-_NUMBERS = frozenset({int, float})
+#: the types of plain numbers in a table (bool, a subclass of int, is not one)
+NUMBER_TYPES = frozenset({int, float})
 
 
 def _no_booleans(value, key: str) -> None:
@@ -346,7 +346,7 @@ def _no_booleans(value, key: str) -> None:
     if isinstance(value, dict):
         for k, v in value.items():
             _no_booleans(v, f"{key}{k}" if key.endswith(".") else f"{key}.{k}")
-    elif isinstance(value, list) and not set(map(type, value)) <= _NUMBERS:     # else: a row of numbers
+    elif isinstance(value, list) and not set(map(type, value)) <= NUMBER_TYPES:     # else: a row of numbers
         for i, v in enumerate(value):
             _no_booleans(v, f"{key}[{i}]")
 
