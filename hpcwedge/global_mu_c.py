@@ -4,16 +4,18 @@ without enumerating the patterns: a bracket by the pattern tree with an incumben
 its certified mu^c (mu_critical.py)."""
 from __future__ import annotations
 
+import json
 import math
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
 from .feasibility import DEFAULT_OPTIONS, decide
 from .milp import WedgeMilp, wedge_milp
-from .mu_critical import MuC, add_counts, mu_critical
-from .parallel import task_tick
-from .patterns import BnBStats, PatternTree, Subtree, sign_patterns
+from .mu_critical import MuC, add_counts, mu_critical, run_mu_c
+from .parallel import DEFAULT_BUDGET, Engine, TaskCancelled, run_tasks, task_tick
+from .patterns import STAT_KEYS, BnBStats, PatternTree, Subtree, run_patterns, solver_statuses
 from .problem import Parametrization
 from .rows import Status, count, pattern_rows, problem_dim
 from .symmetry import Symmetry
@@ -38,7 +40,8 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
                        tol: float = 1e-6, stats: BnBStats | None = None,
                        symmetry: Symmetry | None = None,
                        scale: float | None = None, route: str = "auto",
-                       certify=None) -> tuple[float | None, str]:
+                       certify=None, engine: Engine | None = None,
+                       budget: int = DEFAULT_BUDGET) -> tuple[float | None, str]:
     """Least mu with any solution (2D and 3D alike; with a symmetry, over orbit
     representatives). scale: passed to mu_critical (2D balanced coordinates).
 
@@ -58,62 +61,131 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     within ~1e-6 relative below it can go unseen). stats.extra["route"] says which route
     ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"].
 
+    The stages run as three jobs of `engine` (in-process by default; the master under
+    mpirun): "global_bracket" (one task: the bracket), "global_patterns" (the settling tree
+    as budgeted subtree tasks of `budget` nodes, shared by the workers) and "global_mu_c"
+    (one mu^c task per pattern it found). A stop keeps the finished jobs and the tree's
+    open subtrees in the checkpoint; the answer and every count are the same for every
+    budget, rank count or resume.
+
     certify(zero_u, zero_r, mu_c): the least pattern's value certified another way (2D: in
     exact arithmetic, exact_mu_c), or None to keep it.
 
     Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
     r_t free has no solution) or "none_up_to_mu_max".
     """
-    pattern_of: dict = {}           # each value computed -> its pattern (for certify)
-    mu_c, status = _search(param, m, mu_max, method, tol, stats, symmetry, scale, route, pattern_of)
-    if certify is not None and mu_c in pattern_of:
-        exact = certify(*pattern_of[mu_c], mu_c)
-        if exact is not None:
-            mu_c = exact
-    return mu_c, status
-
-
-def _search(param, m, mu_max, method, tol, stats, symmetry, scale, route, pattern_of: dict):
-    """global_mu_critical without its certify step; pattern_of[value] = that value's pattern."""
     if route not in ("auto", "tree", "milp"):
         raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
     stats = stats if stats is not None else BnBStats()
-    # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
-    search = partial(sign_patterns, param, m, stats=stats, symmetry=symmetry, options=DEFAULT_OPTIONS)
-    solve = partial(_recorded, partial(mu_critical, param, m, mu_max=mu_max, method=method, tol=tol, scale=scale),
-                    pattern_of)
-    best = None
-    if (route == "milp" or (route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
-        best = global_bracket_milp(param, m, mu_max, solve, stats, scale)
-        if best is not None:
-            return best, "found"
-    if best is None:
+    engine = engine or Engine()
+    search = GlobalSearch(param, m, mu_max, method, tol, symmetry, scale, route)
+    got = run_tasks("global_bracket", search, [0], engine=engine)[0]
+    best = None if math.isnan(got["best"]) else float(got["best"])
+    status = BRACKET_STATUS[int(got["status"])]
+    _absorb_json(stats, got["stats"])
+    pattern_of: dict = {}           # each value computed -> its pattern (for certify)
+    if best is not None:
+        pattern_of[best] = (np.asarray(got["zero_u"], dtype=bool), np.asarray(got["zero_r"], dtype=bool))
+    if status == "settle":
+        # patterns whose mu^c lies within the last step below `best`: settle them all
+        # (one per orbit: mu^c is invariant under the symmetry)
+        top = best * (1 + 1e-9)
+        make_tree = partial(PatternTree, param, m, symmetry=symmetry, options=DEFAULT_OPTIONS)
+        pats = run_patterns(make_tree, [top], engine=engine, budget=budget, name="global_patterns")
+        c = pats.counters
+        for k in STAT_KEYS:
+            setattr(stats, k, getattr(stats, k) + c.get(k, 0))
+        for k, v in solver_statuses(c).items():
+            stats.statuses[k] = stats.statuses.get(k, 0) + v
+        stats.lps = stats.statuses.get("lp_calls", 0)
+        items = [(*s.masks(m), top) for s in pats.found[0]]
+        for (zu, zr, _), r in zip(items, run_mu_c(search.solve, items, engine=engine, name="global_mu_c")):
+            _absorb(stats, r)
+            if r.mu_c is not None:
+                pattern_of.setdefault(r.mu_c, (zu, zr))
+                best = min(best, r.mu_c)
+        status = "found"
+    if certify is not None and best in pattern_of:
+        exact = certify(*pattern_of[best], best)
+        if exact is not None:
+            best = exact
+    return best, status
+
+
+#: the bracket task's outcome: "settle" (tree route: best is an upper value, the settling
+#: tree follows), "found" (MILP route: best is the answer), or no wedge
+BRACKET_STATUS = ("settle", "found", "none_at_any_mu", "none_up_to_mu_max")
+
+
+@dataclass(frozen=True)
+class GlobalSearch:
+    """The global search's problem and settings (global_mu_critical's arguments): the
+    context of its "global_bracket" task, sent once to a worker."""
+
+    param: Parametrization
+    m: int
+    mu_max: float
+    method: str
+    tol: float
+    symmetry: Symmetry | None
+    scale: float | None
+    route: str
+
+    @property
+    def solve(self):
+        """solve(zero_u, zero_r, mu_hi=...) -> MuC: the certified mu^c of one pattern."""
+        return partial(mu_critical, self.param, self.m, mu_max=self.mu_max, method=self.method, tol=self.tol,
+                       scale=self.scale)
+
+    def bracket(self, stats: BnBStats, pattern_of: dict) -> tuple[float | None, str]:
+        """(best, BRACKET_STATUS entry): the bracket stage (global_mu_critical's doc);
+        pattern_of[value] = the pattern of every value computed."""
+        param, m, mu_max = self.param, self.m, self.mu_max
+        solve = partial(_recorded, self.solve, pattern_of)
+        if (self.route == "milp" or (self.route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
+            best = global_bracket_milp(param, m, mu_max, solve, stats, self.scale)
+            if best is not None:
+                return best, "found"
         stats.extra["route"] = "tree"
-        if not search(np.inf, friction=False, first_only=True):
+
+        def first_leaf(mu: float, friction: bool = True):
+            # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
+            tree = PatternTree(param, m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS)
+            out = tree.explore(Subtree(0), first_only=True)
+            stats.add(out.stats)
+            if out.stopped:               # the engine is stopping: no answer from this dive
+                raise TaskCancelled()
+            return out.found[0].masks(m) if out.found else None
+
+        if first_leaf(np.inf, friction=False) is None:
             return None, "none_at_any_mu"
-        bound = mu_max
+        best, bound = None, mu_max
         while True:
-            leaf = search(bound, first_only=True)
-            if not leaf:
+            leaf = first_leaf(bound)
+            if leaf is None:
                 break
-            zu, zr = leaf[0]
-            r = solve(zu, zr, mu_hi=bound)
+            r = solve(*leaf, mu_hi=bound)
             _absorb(stats, r)
             if r.mu_c is None or (best is not None and r.mu_c >= best):
                 break
             best = r.mu_c
             bound = best * (1 - TREE_STEP)
-        if best is None:
-            return None, "none_up_to_mu_max"
-    # patterns whose mu^c lies within the last step below `best`: settle them all
-    # (one per orbit: mu^c is invariant under the symmetry)
-    top = best * (1 + 1e-9)
-    for zu, zr in search(top, representatives=True):
-        r = solve(zu, zr, mu_hi=top)
-        _absorb(stats, r)
-        if r.mu_c is not None:
-            best = min(best, r.mu_c)
-    return best, "found"
+        return (None, "none_up_to_mu_max") if best is None else (best, "settle")
+
+
+def bracket_task(search: GlobalSearch, payload) -> dict:
+    """Task "global_bracket": the bracket of `search` (GlobalSearch.bracket) -> best (NaN:
+    none), status (index into BRACKET_STATUS), the pattern of best (zero_u, zero_r masks;
+    all False without one) and the search's counts (stats: JSON of a BnBStats)."""
+    stats, pattern_of = BnBStats(), {}
+    best, status = search.bracket(stats, pattern_of)
+    none = np.zeros(search.m, dtype=bool)
+    zu, zr = pattern_of.get(best, (none, none))
+    counts = {**{k: getattr(stats, k) for k in ("solves", "skipped", "pruned", "undecided", "nodes", "lps")},
+              "extra": stats.extra, "statuses": stats.statuses}
+    return {"best": math.nan if best is None else float(best), "status": BRACKET_STATUS.index(status),
+            "zero_u": np.asarray(zu, dtype=bool), "zero_r": np.asarray(zr, dtype=bool),
+            "stats": json.dumps(counts, sort_keys=True).encode()}
 
 
 def _recorded(solve, pattern_of: dict, zero_u, zero_r, **kw):
@@ -122,6 +194,17 @@ def _recorded(solve, pattern_of: dict, zero_u, zero_r, **kw):
     if r.mu_c is not None:
         pattern_of.setdefault(r.mu_c, (zero_u, zero_r))
     return r
+
+
+def _absorb_json(stats: BnBStats, text) -> None:
+    """Add the counts of bracket_task's JSON `text` (bytes or str) to stats."""
+    counts = json.loads(text.decode() if isinstance(text, bytes) else text)
+    for k in ("solves", "skipped", "pruned", "undecided", "nodes", "lps"):
+        setattr(stats, k, getattr(stats, k) + int(counts[k]))
+    for k, v in counts["statuses"].items():
+        stats.statuses[k] = stats.statuses.get(k, 0) + v
+    for k, v in counts["extra"].items():
+        stats.extra[k] = v if isinstance(v, str) else stats.extra.get(k, 0) + v
 
 
 def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, stats: BnBStats,

@@ -490,11 +490,10 @@ def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:
             return GlobalMuC(least, "found") if least <= scene.mu_max else GlobalMuC(None, "none_up_to_mu_max")
     bnb = BnBStats()
     certify = exact_certifier(scene, ctx.m, ctx.float_param, ctx.exact_param, ctx.scale)
-    mu_c, status = global_mu_critical(ctx.float_param, ctx.m, scene.mu_max, method=scene.mu_c_method, tol=scene.mu_c_tol,
-                                      stats=bnb, symmetry=ctx.symmetry, scale=ctx.scale, certify=certify)
-    search = GlobalRouteStats(solves=bnb.solves, skipped=bnb.skipped, undecided=bnb.undecided,
-                              nodes=bnb.nodes, route=bnb.extra.get("route", "tree"),
-                              milp_solves=bnb.extra.get("milp_solves", 0),
-                              milp_nodes=bnb.extra.get("milp_nodes", 0))
+    mu_c, status = global_mu_critical(ctx.float_param, ctx.m, scene.mu_max, scene.mu_c_method, scene.mu_c_tol, bnb,
+                                      ctx.symmetry, ctx.scale, certify=certify, engine=ctx.engine,
+                                      budget=scene.task_budget)
+    search = GlobalRouteStats(bnb.solves, bnb.skipped, bnb.undecided, bnb.nodes, bnb.extra.get("route", "tree"),
+                              bnb.extra.get("milp_solves", 0), bnb.extra.get("milp_nodes", 0))
     return GlobalMuC(mu_c, status, search, polished=bnb.extra.get("mu_c_polished", 0),
                      unpolished=bnb.extra.get("mu_c_unpolished", 0))

@@ -22,6 +22,9 @@ copied into the JSON here when present.
 Issue 13's target (plug3d 4 x 6 without symmetry, patterns only, 2 workers >= 1.8x 1 worker):
     .venv/bin/python scripts/bench_parallel.py --levels 4 --ring 6 --mu 0.65 --mu-c none \
         --no-symmetry --workers 1 2 --repeat 1 --out results/bench_parallel_4x6
+The global mu^c search alone (plug3d 4 x 8 without symmetry, m = 32; stats.bnb compared too):
+    .venv/bin/python scripts/bench_parallel.py --levels 4 --ring 8 --mu 1.0 --mu-c global \
+        --no-symmetry --workers 0 1 2 --repeat 2 --out results/bench_parallel_global
 """
 from __future__ import annotations
 
@@ -40,8 +43,10 @@ OUT = os.path.join(ROOT, "results")
 
 
 def scene_text(levels: int, ring: int, mu: float, mu_c: str = "cones", symmetry: bool = True) -> str:
+    """mu_c "global": the global mu^c alone (no enumeration), else the patterns and mu_c."""
+    enumerate_ = str(mu_c != "global").lower()
     return (f'name = "plug3d-{levels}x{ring}"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = {levels}\n'
-            f'ring = {ring}\n[friction]\nmu = [{mu}]\n[compute]\nenumerate = true\nmu_c = "{mu_c}"\n'
+            f'ring = {ring}\n[friction]\nmu = [{mu}]\n[compute]\nenumerate = {enumerate_}\nmu_c = "{mu_c}"\n'
             f'[run]\ncheckpoint_every_s = 600\nsymmetry = {str(symmetry).lower()}\n')
 
 
@@ -73,7 +78,9 @@ def main() -> None:
     ap.add_argument("--ring", type=int, default=6)
     ap.add_argument("--mu", type=float, default=1.0)
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--mu-c", default="cones", choices=["cones", "none"])
+    ap.add_argument("--mu-c", default="cones", choices=["cones", "none", "global"],
+                    help="global: the global mu^c search alone (its jobs global_bracket, global_patterns, "
+                         "global_mu_c), no enumeration")
     ap.add_argument("--no-symmetry", action="store_true", help="run.symmetry = false (a generic body)")
     ap.add_argument("--workers", type=int, nargs="*", default=[0, 1, 2, 3],
                     help="configurations: 0 = serial, k = mpirun with k workers (1 must be among them)")
@@ -107,7 +114,8 @@ def main() -> None:
     rows, ref = [], got[configs[0][0]]
     for label, ranks, workers in configs:
         g = got[label]
-        same = g["mu_c"] == ref["mu_c"] and [p[0] for p in g["patterns"]] == [p[0] for p in ref["patterns"]] \
+        same = g["mu_c"] == ref["mu_c"] and g["stats"].get("bnb") == ref["stats"].get("bnb") \
+            and [p[0] for p in g["patterns"]] == [p[0] for p in ref["patterns"]] \
             and all(a[1] == b[1] or (a[1] is not None and b[1] is not None and abs(a[1] - b[1]) <= 1e-12 * abs(b[1]))
                     for a, b in zip(g["patterns"], ref["patterns"]))
         rows.append({"config": label, "ranks": ranks or 1, "workers": workers, "seconds": min(walls[label]),

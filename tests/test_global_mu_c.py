@@ -136,3 +136,29 @@ def test_exact_scene_with_no_listed_mu_above_mu_c_runs_the_float_search():
     flt = run_scene(parse_scene(d, base_dir=data))
     assert abs(exact.mu_c - flt.mu_c) <= 1e-12 * flt.mu_c and exact.mu_c_status == "found"
     assert exact.mu_c > max(d["friction"]["mu"])
+
+
+@pytest.mark.parametrize("body", ["plug2d", "plug3d"])
+def test_global_search_is_the_same_for_every_split_into_tasks(body):
+    """The global search's settling runs as subtree tasks of `budget` tree nodes, then one
+    mu^c task per pattern found (engine jobs global_patterns, global_mu_c): its value and every
+    count (tree nodes, solves, statuses, mu^c polished) are the same in tasks of 1 node, 5
+    nodes and one task for the whole tree, and the tasks really split the tree (handed back)."""
+    from hpcwedge.parallel import Engine
+    if body == "plug2d":
+        data = {"name": "p", "dim": 2, "friction": {"mu": [0.65]},
+                "model": {"kind": "plug2d", "rows": 4}}
+        param, m = parametrize(run_scene(parse_scene({**data, "compute": {"mu_c": "none"}})).problem), 8
+    else:
+        param, m = plug3d_param(2, 5)
+    seen = []
+    for budget in (1, 5, 10**9):
+        st, engine = BnBStats(), Engine()
+        mu, status = global_mu_critical(param, m, 100.0, stats=st, engine=engine, budget=budget)
+        jobs = engine.summary()["jobs"]
+        assert list(jobs) == ["global_bracket", "global_patterns", "global_mu_c"]
+        assert (jobs["global_patterns"]["handed_back"] > 0) == (budget < 10**9)
+        seen.append((mu, status, st.nodes, st.solves, st.skipped, st.undecided, st.statuses, st.extra))
+    assert seen[0][1] == "found"
+    assert abs(seen[0][0] - math.tan(math.radians(10))) <= 1e-12
+    assert seen[0] == seen[1] == seen[2]

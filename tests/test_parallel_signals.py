@@ -210,3 +210,80 @@ def test_sigterm_to_the_master_before_the_workers_serve_ends_the_job(tmp_path):
     assert all_gone(pids.values())
     assert not (tmp_path / "b.h5").exists()
 
+
+
+#: plug3d 3 x 8 (m = 24) without its symmetry, the global mu^c only: a search of ~9 s,
+#: most of it in the settling tree (job global_patterns)
+GLOBAL = """name = "plug3d-global"
+dim = 3
+[model]
+kind = "plug3d"
+levels = 3
+ring = 8
+[friction]
+mu = [1.0]
+[compute]
+enumerate = false
+mu_c = "global"
+[run]
+symmetry = false
+checkpoint_every_s = 0.3
+task_budget = 16
+"""
+
+
+@pytest.fixture(scope="module")
+def global_plain(tmp_path_factory):
+    """(scene, show JSON of a plain serial run) of GLOBAL."""
+    tmp = tmp_path_factory.mktemp("global")
+    scene = tmp / "global.toml"
+    scene.write_text(GLOBAL)
+    out = str(tmp / "plain.h5")
+    run(None, "run", str(scene), "-o", out, "-q")
+    return str(scene), show_json(out)
+
+
+def sigterm_in_global_patterns(proc, ckpt: str, pids=()) -> float:
+    """Wait until the checkpoint holds the global search's settling tree with tree nodes done
+    (job global_patterns), then SIGTERM to `pids` (default: proc); the seconds to proc's exit."""
+    end = time.monotonic() + 120
+    while time.monotonic() < end:
+        assert proc.poll() is None, "the run ended before the signal"
+        try:
+            job = read_checkpoint(ckpt)["jobs"].get("global_patterns")
+        except Exception:                        # not written yet, or being replaced
+            job = None
+        if job is not None and json.loads(job["attrs"]["counters"]).get("nodes", 0) > 0:
+            break
+        time.sleep(0.05)
+    t = time.monotonic()
+    for pid in pids or [proc.pid]:
+        os.kill(pid, signal.SIGTERM)
+    proc.wait(timeout=120)
+    return time.monotonic() - t
+
+
+@pytest.mark.parametrize("ranks", [None, pytest.param(3, marks=[pytest.mark.mpi, needs_mpirun])])
+def test_sigterm_inside_the_global_search_then_resume(tmp_path, global_plain, ranks):
+    """mu_c = "global" without an enumeration: a SIGTERM (to every rank, as SLURM sends it)
+    while the global search settles its bracket stops the run within seconds with exit 75
+    (before: the search ran on the master alone, deaf to signals, to its end), the
+    checkpoint keeps the search's bracket and its settling tree's progress, and --resume
+    (on as many ranks) ends with the plain serial run's answers and stats."""
+    scene, want = global_plain
+    out = str(tmp_path / "r.h5")
+    p = launch(ranks, "run", scene, "-o", out, "-q")
+    pids = list(rank_pids(p.pid, ranks).values()) if ranks else []
+    latency = sigterm_in_global_patterns(p, out + ".ckpt", pids)
+    err = p.stderr.read()
+    assert p.returncode == 75, err
+    assert latency < 5.0 and "Traceback" not in err
+    jobs = read_checkpoint(out + ".ckpt")["jobs"]
+    assert json.loads(jobs["global_bracket"]["attrs"]["counters"])["tasks"] == 1
+    if ranks:
+        assert all_gone(pids)
+    run(ranks, "run", scene, "-o", out, "-q", "--resume")
+    got = show_json(out)
+    par = got["stats"]["parallel"]
+    assert par["resumes"] == 1 and par["ranks"] == (ranks or 1)
+    assert same_part(got) == same_part(want)

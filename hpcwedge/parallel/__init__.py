@@ -3,7 +3,8 @@ over MPI (master / workers), and its checkpoints. One job per module:
 
 - tasks.py: the registry kind -> "module:function" and task cancellation
   (task_stopping, task_tick; no MPI: the engines import it). Kinds: "subtree"
-  (patterns.explore_task), "mu_c" (mu_critical.mu_c_task), "face" (faces.face_task).
+  (patterns.explore_task), "mu_c" (mu_critical.mu_c_task), "face" (faces.face_task),
+  "global_bracket" (global_mu_c.bracket_task).
 - jobs.py: SubtreeJob (budgeted branch and bound), TaskJob (independent tasks),
   their checkpoint encoding.
 - engine.py: Engine.run(job) — in-process, or the master under mpirun — with

@@ -18,10 +18,11 @@ _KINDS: dict = {
     "subtree": "hpcwedge.patterns:explore_task",    # sign-pattern subtrees (budgeted)
     "mu_c": "hpcwedge.mu_critical:mu_c_task",       # mu^c of one cone or pattern
     "face": "hpcwedge.faces:face_task",             # the 2D double description split over faces (SPEC §5)
+    "global_bracket": "hpcwedge.global_mu_c:bracket_task",   # the global mu^c search's bracket
 }
 
 #: modules a worker imports before its first task (the task handlers' heavy imports)
-WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical", "hpcwedge.faces"]
+WARM_UP = ["hpcwedge.patterns", "hpcwedge.mu_critical", "hpcwedge.faces", "hpcwedge.global_mu_c"]
 
 #: how often task_stopping() asks the engine, at most (seconds)
 TICK_EVERY_S = 0.05
