@@ -67,7 +67,7 @@ def answers(path: str) -> dict:
     js = json.loads(subprocess.run([sys.executable, "-m", "hpcwedge", "show", path, "--json"],
                                    check=True, capture_output=True, text=True, env=env).stdout)
     return {"mu_c": js["mu_c"], "patterns": [[p["contact"], p["mu_c"]] for r in js["runs"]
-                                             for p in r["patterns"]],
+                                             for p in r["patterns"] or []],
             "stats": dict(js["stats"], timings_total=js["timings"]["total"]),
             "stages": {k: js["timings"].get(k) for k in ("condense", "enumerate", "mu_c")}}
 
