@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import signal
 import time
 
@@ -286,4 +287,29 @@ def test_sigterm_inside_the_global_search_then_resume(tmp_path, global_plain, ra
     got = show_json(out)
     par = got["stats"]["parallel"]
     assert par["resumes"] == 1 and par["ranks"] == (ranks or 1)
+    assert same_part(got) == same_part(want)
+
+
+def test_kill9_inside_the_global_search_then_resume(tmp_path, global_plain):
+    """kill -9 of a serial run at random moments after one of its checkpoints (in the global
+    search's bracket task or its settling tree, possibly mid-write), three times, each
+    followed by --resume: the answers and stats.bnb are the plain run's, and the work of
+    the killed runs was kept (at least one resume with the bracket restored)."""
+    scene, want = global_plain
+    out = str(tmp_path / "r.h5")
+    ckpt = out + ".ckpt"
+    rng = random.Random(7)
+    for _ in range(3):
+        since = time.time()
+        p = launch(None, "run", scene, "-o", out, "-q", "--resume")
+        assert wait_for_checkpoint(ckpt, since, p), p.stderr.read()
+        time.sleep(rng.uniform(0.0, 1.5))
+        p.kill()
+        assert p.wait(timeout=60) == -signal.SIGKILL
+        p.stdout.close()
+        p.stderr.close()
+    assert "global_bracket" in read_checkpoint(ckpt)["jobs"]
+    run(None, "run", scene, "-o", out, "-q", "--resume")
+    got = show_json(out)
+    assert got["stats"]["parallel"]["resumes"] >= 1 and not os.path.exists(ckpt)
     assert same_part(got) == same_part(want)
