@@ -70,13 +70,16 @@ class Result:
 @dataclass
 class TreeStats:
     """stats.bnb of the patterns stage: a sign-pattern tree's counters summed over every mu
-    (the same for every split of the work) and partitions (2^m per mu: a brute force's solves)."""
+    (the same for every split of the work) and partitions (2^m per mu: a brute force's solves).
+    solves: the tree's feasibility problems (2D: LPs, 3D: SOCPs); lps: linear programs besides
+    them (3D: the pyramid LPs of SOCPs no attempt decided; 2D: 0)."""
 
     nodes: int
     solves: int
     skipped: int
     pruned: int
     undecided: int
+    lps: int
     partitions: int
 
     @classmethod
@@ -88,7 +91,8 @@ class TreeStats:
 @dataclass
 class GlobalRouteStats:
     """stats.bnb after a global mu^c search (global_mu_c.global_mu_critical's BnBStats, its route
-    "tree" or "milp" and MILP counts); it replaces the patterns stage's TreeStats."""
+    "tree" or "milp" and MILP counts; pruned and lps as in TreeStats); it replaces the patterns
+    stage's TreeStats."""
 
     solves: int = 0
     skipped: int = 0
@@ -97,6 +101,8 @@ class GlobalRouteStats:
     route: str = "tree"
     milp_solves: int = 0
     milp_nodes: int = 0
+    pruned: int = 0
+    lps: int = 0
 
 
 @dataclass

@@ -19,10 +19,11 @@ def test_solve_stats_as_dict_is_the_file_object():
                        "numerics"]
     assert (d["lp_solves"], d["lp_undecided"], d["mu_c_polished"], d["mu_c_unpolished"]) == (3, 1, 1, 2)
     assert d["symmetry"] == {"order": 2}
-    assert d["bnb"] == {"nodes": 0, "solves": 4, "skipped": 0, "pruned": 0, "undecided": 0, "partitions": 8}
+    assert d["bnb"] == {"nodes": 0, "solves": 4, "skipped": 0, "pruned": 0, "undecided": 0, "lps": 0,
+                        "partitions": 8}
     s.bnb = GlobalRouteStats(solves=1, nodes=2, route="milp")
     assert list(s.as_dict()["bnb"]) == ["solves", "skipped", "undecided", "nodes", "route", "milp_solves",
-                                        "milp_nodes"]
+                                        "milp_nodes", "pruned", "lps"]
 
 
 def test_run_counts_are_none_until_asked():
@@ -36,4 +37,4 @@ def test_run_counts_are_none_until_asked():
 def test_tree_stats_of_counters():
     """TreeStats.of: a patterns job's counters, absent ones 0, and the partitions given."""
     t = TreeStats.of({"nodes": 5, "pruned": 2, "status_optimal": 7}, partitions=16)
-    assert t == TreeStats(nodes=5, solves=0, skipped=0, pruned=2, undecided=0, partitions=16)
+    assert t == TreeStats(nodes=5, solves=0, skipped=0, pruned=2, undecided=0, lps=0, partitions=16)
