@@ -44,6 +44,9 @@ def test_plug2d_global_mu_c_is_tan_taper_by_either_route(rows):
     assert res.mu_c_status == "found"
     assert abs(res.mu_c - want) <= 1e-9 * want
     assert res.stats["bnb"]["route"] == route_for(2 * rows)
+    # the engine's jobs: the MILP route's answer needs no settling tree
+    settled = ["global_patterns", "global_mu_c"] if route_for(2 * rows) == "tree" else []
+    assert [j for j in res.stats["parallel"]["jobs"] if j.startswith("global")] == ["global_bracket", *settled]
     if rows < 20:
         assert abs(by_milp(res) - want) <= 1e-9 * want
 
