@@ -97,7 +97,6 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
             setattr(stats, k, getattr(stats, k) + c.get(k, 0))
         for k, v in solver_statuses(c).items():
             stats.statuses[k] = stats.statuses.get(k, 0) + v
-        stats.lps = stats.statuses.get("lp_calls", 0)
         items = [(*s.masks(m), top) for s in pats.found[0]]
         for (zu, zr, _), r in zip(items, run_mu_c(search.solve, items, engine=engine, name="global_mu_c")):
             _absorb(stats, r)
@@ -291,7 +290,9 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
 
 
 def _absorb(stats: BnBStats, r: MuC) -> None:
-    """Count a mu^c computation (mu_critical.MuC) into the search statistics."""
+    """Count a mu^c computation (mu_critical.MuC) into the search statistics (its pyramid
+    LPs into stats.lps: the search's LPs are its trees' and its mu^c computations')."""
     add_counts(stats, r)
+    stats.lps += r.statuses.get("lp_calls", 0)
     key = "mu_c_polished" if r.polished else "mu_c_unpolished"
     stats.extra[key] = stats.extra.get(key, 0) + 1

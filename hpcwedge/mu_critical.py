@@ -116,11 +116,13 @@ def _result(probe: Probe, mu_c: float | None, polished: bool, x: np.ndarray | No
 
 
 def mu_c_task(solve, payload) -> dict:
-    """Task "mu_c": payload (zero_u, zero_r, mu_hi) -> MuC fields (mu_c NaN = None)."""
+    """Task "mu_c": payload (zero_u, zero_r, mu_hi) -> MuC fields (mu_c NaN = None; lps: its
+    solves; pyramid_lps: the pyramid LPs among its statuses, "lp_calls")."""
     zero_u, zero_r, mu_hi = payload
     r = solve(np.asarray(zero_u, dtype=bool), np.asarray(zero_r, dtype=bool), mu_hi=mu_hi)
     return {"mu_c": np.nan if r.mu_c is None else float(r.mu_c), "polished": bool(r.polished),
-            "lps": int(r.solves), "undecided": int(r.undecided)}
+            "lps": int(r.solves), "undecided": int(r.undecided),
+            "pyramid_lps": int(r.statuses.get("lp_calls", 0))}
 
 
 def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> list:
@@ -128,10 +130,12 @@ def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> 
 
     solve: a picklable callable solve(zero_u, zero_r, mu_hi=...) -> MuC,
     e.g. functools.partial(mu_critical, param, m, mu_max=..., method=..., tol=...).
-    Returns the MuC list in the order of items."""
+    Returns the MuC list in the order of items; of their statuses only "lp_calls" (the
+    pyramid LPs) travels back from a task (a checkpoint of an older version has none)."""
     engine = engine or Engine()
     payloads = [(np.asarray(zu, dtype=bool), np.asarray(zr, dtype=bool), float(mu_hi))
                 for zu, zr, mu_hi in items]
     out = engine.run(TaskJob(name, "mu_c", solve, payloads)).output()
     return [MuC(mu_c=None if math.isnan(r["mu_c"]) else float(r["mu_c"]), polished=bool(r["polished"]),
-                solves=int(r["lps"]), undecided=int(r["undecided"])) for r in out]
+                solves=int(r["lps"]), undecided=int(r["undecided"]),
+                statuses={"lp_calls": int(r["pyramid_lps"])} if r.get("pyramid_lps") else {}) for r in out]

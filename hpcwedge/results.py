@@ -91,8 +91,9 @@ class TreeStats:
 @dataclass
 class GlobalRouteStats:
     """stats.bnb after a global mu^c search (global_mu_c.global_mu_critical's BnBStats, its route
-    "tree" or "milp" and MILP counts; pruned and lps as in TreeStats); it replaces the patterns
-    stage's TreeStats."""
+    "tree" or "milp" and MILP counts); it replaces the patterns stage's TreeStats. solves and
+    lps count the trees' and the mu^c computations' (lps: the pyramid LPs of SOCPs no attempt
+    decided; the 2D MILP route adds the LP check of each pattern a MILP returns)."""
 
     solves: int = 0
     skipped: int = 0
