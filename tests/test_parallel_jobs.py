@@ -42,3 +42,17 @@ def test_task_job_state_round_trip_with_arrays():
     assert again.pending() == 2 and [again.take(1)[0], again.take(1)[0]] == [1, 2]
     assert again.results[0]["a"] == 1.5 and again.results[0]["v"].tolist() == [0, 1, 2]
     assert again.results[3]["v"].tolist() == [] and again.results[4]["v"].tolist() == [1, 1]
+
+
+def test_task_job_resumed_from_results_with_fewer_keys_saves_the_common_ones():
+    """A task job resumed from an older version's checkpoint (its mu_c results lack
+    "pyramid_lps") whose first done task is a new one: the next save keeps the keys every
+    result has, where it raised KeyError on the old result."""
+    old = parallel.TaskJob("t", "x", None, list(range(3)))
+    old.merge(2, {"mu_c": 0.5, "lps": 3})
+    resumed = parallel.TaskJob("t", "x", None, list(range(3)))
+    resumed.load(old.save([]))
+    resumed.merge(0, {"mu_c": 0.25, "lps": 4, "pyramid_lps": 2})
+    again = parallel.TaskJob("t", "x", None, list(range(3)))
+    again.load(resumed.save([]))
+    assert again.results[0] == {"mu_c": 0.25, "lps": 4} and again.results[2] == {"mu_c": 0.5, "lps": 3}

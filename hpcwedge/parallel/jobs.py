@@ -224,7 +224,9 @@ class TaskJob:
     def save(self, in_flight) -> dict:
         done = [k for k, r in enumerate(self.results) if r is not None]
         data = {"done": np.array(done, dtype=np.int64)}
-        keys = sorted(self.results[done[0]]) if done else []
+        # the keys every result has (a job resumed from an older version's checkpoint mixes its
+        # results with this version's, which may carry more)
+        keys = sorted(set.intersection(*(set(self.results[k]) for k in done))) if done else []
         for key in keys:
             vals = [self.results[k][key] for k in done]
             if all(np.ndim(v) == 0 for v in vals):
