@@ -22,7 +22,7 @@ from . import exact as xq
 from .feasibility import decide
 from .mu_bracket import rows_at
 from .numerics import COND_T_SUSPECT
-from .problem import Parametrization, balanced_2d
+from .problem import Parametrization, balanced
 from .rows import Status, pattern_rows
 
 #: width of the certified bracket, relative
@@ -49,7 +49,7 @@ def tight_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.nd
     """The labels of the inequality rows by increasing relative slack at the float LP's
     vertex at mu_f (1 + SEARCH_RTOL), in coordinates balanced there; None: no vertex."""
     mu = mu_f * (1 + SEARCH_RTOL)
-    rows = pattern_rows(balanced_2d(param, mu, m, scale)[0], m, zero_u, zero_r)
+    rows = pattern_rows(balanced(param, mu, m, scale)[0], m, zero_u, zero_r)
     d = decide(rows, mu)
     if d.status != Status.FEASIBLE:
         return None
@@ -190,6 +190,6 @@ def exact_certifier(scene, m: int, param: Parametrization, exact_param, scale: f
     if scene.dim != 2 or scene.mu_c_method != "accurate":
         return None
     if not scene.exact and (m > scene.exact_fallback_max_m
-                            or balanced_2d(param, scene.mu[0], m, scale)[1] <= COND_T_SUSPECT):
+                            or balanced(param, scene.mu[0], m, scale)[1] <= COND_T_SUSPECT):
         return None
     return lambda zero_u, zero_r, mu_c: exact_mu_c_2d(exact_param(), param, m, zero_u, zero_r, mu_c, scale)

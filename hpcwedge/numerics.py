@@ -8,7 +8,7 @@ A float enumeration can differ from exact arithmetic where rounding decides a si
     dd.CANCELLATION_MIN): its rounding error reaches the zero tolerance;
   - an ill-conditioned stiffness: the parametrisation u = F r carries relative errors of
     about cond(K) eps, which reach the zero tolerance above COND_SUSPECT;
-  - ill-conditioned balanced coordinates at the mu (problem.balanced_2d's cond(T), ~ 70 /
+  - ill-conditioned balanced coordinates at the mu (problem.balanced's cond(T), ~ 70 /
     taper^2 on plug2d, taper in units of 10 deg) above COND_T_SUSPECT: at 0.005, 0.003 and
     0.001 deg (cond(T) 2.4e8, 6.6e8, 6e9) the float DD of plug2d rows 2 found 14 wedged rays
     and no lift-off where exact arithmetic has 12 and 4 (two of them lift-offs with r_n ~
@@ -32,7 +32,7 @@ import numpy as np
 
 from .cones import implied_patterns
 from .dd import CANCELLATION_MIN, FLOAT_ZERO_TOL, DDResult, complementary_rays
-from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d, stiffness_range
+from .problem import ContactProblem, Parametrization, balanced, friction_rows_2d, stiffness_range
 
 #: cond(K on range K) above this makes a float enumeration suspect: relative errors of
 #: cond * eps in u reach the DD's zero tolerance
@@ -47,7 +47,7 @@ class NumericsReport:
 
     lam_min, lam_max: problem.stiffness_range(problem); runs: one record per enumerated mu
     ({"mu", "exact", "suspect", and for a float DD "close_calls", "closest",
-    "cancellation" (dd stats), "cond_T" (problem.balanced_2d)}); exact_fallback /
+    "cancellation" (dd stats), "cond_T" (problem.balanced)}); exact_fallback /
     unresolved: the mu values redone exactly / left suspect; patterns: the 2D sign
     patterns' check (recheck_patterns_2d); notes: other findings (mu^c not polished,
     undecided solves, suspect patterns left as they are), each one line; cond_suspect:
@@ -75,7 +75,7 @@ class NumericsReport:
 
     @property
     def scale(self) -> float:
-        """The stiffness that weighs u_n against r in the float DD (problem.balanced_2d)."""
+        """The stiffness that weighs u_n against r in the float DD (problem.balanced)."""
         return float(np.sqrt(self.lam_min * self.lam_max)) if self.lam_min > 0 else self.lam_max
 
     def as_dict(self) -> dict:
@@ -106,11 +106,11 @@ def checked_rays_2d(param: Parametrization, m: int, mu: float, numerics: Numeric
     """Complementary rays of P(mu) and the parametrisation they are expressed in.
 
     param exact (param.exact): the exact DD. Otherwise the float DD in balanced
-    coordinates (problem.balanced_2d), judged by `settle_rays_2d`. Appends the mu's
+    coordinates (problem.balanced), judged by `settle_rays_2d`. Appends the mu's
     record to numerics."""
     if param.exact:
         return settle_rays_2d(exact_rays(param, m, mu, progress), param, None, m, mu, numerics, exact_param)
-    p_mu, cond_T = balanced_2d(param, mu, m, numerics.scale)
+    p_mu, cond_T, _ = balanced(param, mu, m, numerics.scale)
     dd = complementary_rays(friction_rows_2d(p_mu, mu, m), m, progress=progress)
     return settle_rays_2d(dd, p_mu, cond_T, m, mu, numerics, exact_param, progress)
 

@@ -40,7 +40,7 @@ from .numerics import (NumericsReport, checked_rays_2d, drop_below_mu_c, note_mu
                        recheck_patterns_2d, settle_rays_2d)
 from .parallel import Engine, ranks_on_host
 from .patterns import BnBStats, PatternTree, expand_orbits, run_patterns, solver_statuses
-from .problem import ContactProblem, Parametrization, balanced_2d, friction_rows_2d, parametrize, ray_vectors
+from .problem import ContactProblem, Parametrization, balanced, friction_rows_2d, parametrize, ray_vectors
 from .progress import MemoryGuard, Progress, out_of_memory
 from .results import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
 from .scene import Plan, Scene, SceneError
@@ -89,8 +89,8 @@ class Context:
 
     @property
     def scale(self) -> float | None:
-        """mu^c's coordinates: 2D the balanced scale (numerics.NumericsReport.scale), 3D None."""
-        return self.numerics.scale if self.scene.dim == 2 else None
+        """mu^c's coordinates: the balanced scale (numerics.NumericsReport.scale)."""
+        return self.numerics.scale
 
 
 @dataclass
@@ -328,7 +328,7 @@ def rays(ctx: Context) -> list[Rays]:
     e = stiffness_exponent(scene)
     nodes = branching_nodes(m, scene.face_split)
     if nodes or ctx.engine.restored(RAYS_JOB):
-        coords = [(param, None) if scene.exact else balanced_2d(param, mu, m, numerics.scale)
+        coords = [(param, None) if scene.exact else balanced(param, mu, m, numerics.scale)[:2]
                   for mu in scene.mu]
         rows = [friction_rows_2d(p, mu, m, exact=scene.exact) for (p, _), mu in zip(coords, scene.mu)]
         dds = run_faces(rows, m, exact=scene.exact, engine=ctx.engine, nodes=nodes, name=RAYS_JOB,

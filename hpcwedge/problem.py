@@ -103,15 +103,22 @@ class ReactionCoordinates:
     """A parametrisation in x' = (r, beta) (r the n reactions, beta the rigid amplitudes):
     u = U x', with E r = 0 (E (n - rank B, n), orthonormal rows: equilibrium N^T r = 0),
     and x = (B^T r, beta). A friction cone in x' is a coordinate cone (mu r_n, r_t1, r_t2),
-    which keeps the 3D pattern SOCP sparse (socp.reaction_socp)."""
+    which keeps the 3D pattern SOCP sparse (socp.reaction_socp). T: the parametrisation's x is
+    T (B^T r, beta) (problem.balanced; None: the identity)."""
 
     U: np.ndarray
     E: np.ndarray
     B: np.ndarray
+    T: np.ndarray | None = None
 
     def to_x(self, r: np.ndarray, beta: np.ndarray) -> np.ndarray:
-        """x = (B^T r, beta) for r (n,) on range(B)."""
-        return np.concatenate([self.B.T @ r, beta])
+        """x = (B^T r, beta) for r (n,) on range(B), times T when given."""
+        x = np.concatenate([self.B.T @ r, beta])
+        return x if self.T is None else self.T @ x
+
+    def pullback(self, c: np.ndarray) -> np.ndarray:
+        """Weights c on x as weights on (B^T r, beta): c . x = pullback(c) . (B^T r, beta)."""
+        return c if self.T is None else self.T.T @ c
 
 
 def kept_on(obj, key: str, build):
@@ -216,30 +223,40 @@ def _bordered(K: np.ndarray, N: np.ndarray) -> np.ndarray:
     return np.block([[K, N], [N.T, np.zeros((k, k))]])
 
 
-def balanced_2d(param: Parametrization, mu: float, m: int, s: float) -> tuple[Parametrization, float]:
-    """The same cone P(mu) in coordinates x' = T x chosen for the float DD at mu.
+def balanced(param: Parametrization, mu: float, m: int, s: float) -> tuple[Parametrization, float, np.ndarray]:
+    """The same cone P(mu) in coordinates x' = T x balanced at mu (2D and 3D; the dimension
+    from R's rows).
 
-    With M = [s U_n; R_n; R_t / mu] (3m x d) and M = Q T its QR factorisation, x' = T x
-    makes x' -> (s u_n, r_n, r_t / mu) an isometry: a unit ray is a unit state and the
-    constraint rows are rows of Q. s > 0 is a stiffness that weighs u_n against r
-    (pipeline: sqrt(lambda_min lambda_max) of K on range(K), so that the coordinates do
-    not depend on the units of K). Without it the DD's zero tests see the friction slack
+    With M = [s U_n; R_n; R_t / mu] (2D: 3m x d; 3D, both tangents: 4m x d) and M = Q T its QR
+    factorisation, x' = T x makes x' -> (s u_n, r_n, r_t / mu) an isometry: a unit ray is a
+    unit state and the constraint rows are rows of Q. s > 0 is a stiffness that weighs u_n
+    against r (pipeline: sqrt(lambda_min lambda_max) of K on range(K), so that the coordinates
+    do not depend on the units of K). Without it the 2D DD's zero tests see the friction slack
     mu r_n - r_t relative to |r_t| + |r_n|, which near mu^c on a small taper is ~ delta
     tan(taper) (2e-12 at 0.1 deg and mu = mu^c (1 + 1e-9)); scaling r_t by 1/mu makes it
-    ~ delta (scripts/stress.py, family near_mu_c).
-    Returns (float Parametrization with U' = U T^-1, R' = R T^-1 — the rows the DD tests
-    taken from Q itself, not from a solve with T — and n_alpha = 0 since the rigid
-    amplitudes are mixed in; cond(T)).
+    ~ delta (scripts/stress.py, family near_mu_c). 3D: the SOCPs of a small mu^c (plug3d 2 x 4
+    at a 0.1 deg taper: the all-contact pattern's mu^c in 4 SOCPs, polished to 8e-14, against
+    136 SOCPs, 24 undecided and an unpolished 5e-10 in the plain coordinates).
+    Returns (float Parametrization with U' = U T^-1, R' = R T^-1 — the rows taken from Q
+    itself, not from a solve with T — and n_alpha = 0 since the rigid amplitudes are mixed
+    in; cond(T); T, to map a point back: x = T^-1 x').
     """
     U, R = param.U, param.R
-    (Un, _), (Rn, Rt) = blocks(U, m, 2), blocks(R, m, 2)
-    Q, T = np.linalg.qr(np.vstack([s * Un, Rn, Rt / mu]))
+    dim = R.shape[0] // m
+    Un, Rb = blocks(U, m, dim)[0], blocks(R, m, dim)
+    Q, T = np.linalg.qr(np.vstack([s * Un, Rb[0], *(Rt / mu for Rt in Rb[1:])]))
     Up = sla.solve_triangular(T, U.T, trans="T").T
     Rp = sla.solve_triangular(T, R.T, trans="T").T
-    Qu, Qn, Qt = blocks(Q, m, 3)
-    (Upn, _), (Rpn, Rpt) = blocks(Up, m, 2), blocks(Rp, m, 2)
-    Upn[...], Rpn[...], Rpt[...] = Qu / s, Qn, mu * Qt
-    return Parametrization(U=Up, R=Rp, n_alpha=0), float(np.linalg.cond(T))
+    Qb = blocks(Q, m, dim + 1)
+    Upn, Rpb = blocks(Up, m, dim)[0], blocks(Rp, m, dim)
+    Upn[...], Rpb[0][...] = Qb[0] / s, Qb[1]
+    for Rpt, Qt in zip(Rpb[1:], Qb[2:]):
+        Rpt[...] = mu * Qt
+    out = Parametrization(U=Up, R=Rp, n_alpha=0)
+    # the reaction form (r, beta) is the same states', reached through T: param's, composed
+    rc = param.reactions
+    out.__dict__["reactions"] = ReactionCoordinates(rc.U, rc.E, rc.B, T if rc.T is None else T @ rc.T)
+    return out, float(np.linalg.cond(T)), T
 
 
 def friction_rows_2d(param: Parametrization, mu: float, m: int, exact: bool = False):

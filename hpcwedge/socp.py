@@ -105,6 +105,7 @@ class ReactionSOCP:
     def objective(self, c: np.ndarray) -> np.ndarray:
         """q with q . w = c . x (c x-space)."""
         B = self.rows.reactions.B
+        c = self.rows.reactions.pullback(c)
         return np.concatenate([(B @ c[:B.shape[1]])[self.cols], c[B.shape[1]:]])
 
     def farkas(self, z: np.ndarray) -> np.ndarray | None:

@@ -39,3 +39,29 @@ def test_plug3d_lineality_is_the_spin_about_the_axis():
     p = parametrize(prob)
     assert prob.N.shape[1] == 6 and p.n_alpha == 5 and p.d == 30 - 6 + 5
     assert np.abs(prob.K @ p.U - p.R).max() <= 1e-10 * np.abs(prob.K).max() * np.abs(p.U).max()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_balanced_coordinates_are_the_same_states(dim):
+    """problem.balanced: x' = T x gives the same u and r (U' T x = U x, R' T x = R x), the
+    balanced blocks (s u_n, r_n, r_t / mu) are an isometry of x', and (3D) the reaction form
+    (r, beta) reaches the same x' through T (before, the reaction form of a balanced
+    parametrisation read x' as if it were x: a feasible plug3d pattern came out infeasible)."""
+    from hpcwedge.problem import balanced, blocks
+    data = {"name": "p", "dim": dim, "friction": {"mu": [1.0]},
+            "model": {"kind": "plug3d", "levels": 2, "ring": 5} if dim == 3 else {"kind": "plug2d", "rows": 3}}
+    prob = contact_problem(parse_scene(data))
+    param, m, mu, s = parametrize(prob), prob.m, 0.01, 0.7
+    pb, cond, T = balanced(param, mu, m, s)
+    x = np.random.default_rng(dim).standard_normal(param.d)
+    assert np.allclose(pb.U @ (T @ x), param.U @ x, atol=1e-10) and np.allclose(pb.R @ (T @ x), param.R @ x, atol=1e-10)
+    M = np.vstack([s * blocks(pb.U, m, dim)[0], blocks(pb.R, m, dim)[0], *(Rt / mu for Rt in blocks(pb.R, m, dim)[1:])])
+    assert np.allclose(M.T @ M, np.eye(param.d), atol=1e-10) and cond >= 1.0
+    if dim == 3:
+        rc, rb = param.reactions, pb.reactions
+        r, beta = param.R @ x, x[param.d - param.n_alpha:]
+        assert np.allclose(rc.to_x(r, beta), x, atol=1e-10)
+        assert np.allclose(rb.to_x(r, beta), T @ x, atol=1e-10)
+        c = np.random.default_rng(5).standard_normal(param.d)
+        x0 = np.concatenate([rc.B.T @ r, beta])
+        assert np.isclose(rb.pullback(c) @ x0, c @ (T @ x))

@@ -22,7 +22,7 @@ import pytest
 from hpcwedge.cones import implied_patterns
 from hpcwedge.dd import complementary_rays
 from hpcwedge.pipeline import run_scene
-from hpcwedge.problem import balanced_2d, friction_rows_2d, parametrize, ray_vectors
+from hpcwedge.problem import balanced, friction_rows_2d, parametrize, ray_vectors
 from hpcwedge.progress import Progress
 from hpcwedge.scene import SceneError
 from instances import random_problem
@@ -147,14 +147,14 @@ def test_implied_patterns_match_an_independent_enumeration():
 
 
 def test_balanced_coordinates_are_the_same_cone():
-    """balanced_2d: the float DD in the new coordinates has the exact zero sets, and its
+    """balanced: the float DD in the new coordinates has the exact zero sets, and its
     rays map to the same (u, r) as the exact ones."""
     for seed in range(8):
         rng = np.random.default_rng(100 + seed)
         m, free = 4, bool(seed % 2)
         prob = random_problem(rng, m, free)
         mu = float(rng.uniform(0.2, 1.5))
-        pb, _ = balanced_2d(parametrize(prob), mu, m, 1.0)
+        pb = balanced(parametrize(prob), mu, m, 1.0)[0]
         fl = complementary_rays(friction_rows_2d(pb, mu, m), m)
         pe = parametrize(prob, exact=True)
         ex = complementary_rays(friction_rows_2d(pe, mu, m, exact=True), m, exact=True)
@@ -247,7 +247,7 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
     scene = grid._scene(SMALL_TAPER, mu, {})
     problem = contact_problem(scene, build_model(scene))
     m = problem.m
-    p_mu, _ = balanced_2d(parametrize(problem), mu, m, NumericsReport.of(problem, 10).scale)
+    p_mu = balanced(parametrize(problem), mu, m, NumericsReport.of(problem, 10).scale)[0]
     A = friction_rows_2d(p_mu, mu, m)
     for face in split_faces(m, [5, 6, 7]):
         basis, _ = initial_basis(A, m, list(range(m)), False, face_rows(face, m))
