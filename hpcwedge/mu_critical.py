@@ -93,7 +93,7 @@ def _mu_critical_3d(param: Parametrization, m: int, zero_u, zero_r, mu_hi: float
     mu_hi (problem.balanced), and once more at the mu^c found when it lies below mu_hi /
     REBALANCE (as 2D). The point x is returned in param's coordinates."""
     def solve(ref: float | None, hi: float | None) -> MuC:
-        p, T = (param, None) if ref is None else balanced(param, ref, m, scale)[::2]
+        p, _, T = (param, None, None) if ref is None else balanced(param, ref, m, scale)
         probe = Probe(options)
         out = _result(probe, *mu_critical_3d(p, m, zero_u, zero_r, pattern_rows(p, m, zero_u, zero_r), probe,
                                              hi, mu_max, method, tol))
