@@ -19,7 +19,7 @@ import numpy as np
 
 from .conic import ATTEMPTS, LEAST_NORM_ATTEMPT, ConicProblem, DenseDiag, Solution, rmatvec, solve
 from .problem import ReactionCoordinates, kept_on
-from .rows import ConeRows, kept_sizes
+from .rows import ZERO_ROW_RTOL, ConeRows, kept_sizes
 
 #: a returned x is feasible when every row holds to VERIFY_TOL * ||x|| (the order of
 #: Clarabel's own feasibility tolerance: an optimum on the boundary misses by 1e-9..3e-9;
@@ -86,27 +86,36 @@ def pattern_socp(rows: ConeRows, mu: float) -> ConicProblem:
 class ReactionSOCP:
     """The pattern SOCP in x' = (r, beta) (`reaction_socp`): problem, rows laid out
     [sum r_n = 1 | equilibrium E r = 0 | contact u_n = 0 (zero cone) | lin (u_n >= 0) |
-    cones]; w = (r on `cols`, beta). lin_nodes / lin_scale: the node of each lin row and
-    the norm it was scaled by."""
+    cones]; w = (the cone nodes' (r_n, r_t1 / g, r_t2 / g) on `cols`, beta' with beta =
+    beta_map beta'). lin_nodes / lin_scale: the node of each lin row and the norm it was
+    scaled by."""
 
     problem: ConicProblem
     rows: ConeRows
     cols: np.ndarray
     lin_nodes: np.ndarray
     lin_scale: np.ndarray
+    g: float
+    beta_map: np.ndarray
+
+    def _unscaled(self, v: np.ndarray) -> np.ndarray:
+        """v (one entry per column of `cols`) with its tangential entries times g."""
+        v = v.copy()
+        v.reshape(-1, 3)[:, 1:] *= self.g
+        return v
 
     def to_x(self, w: np.ndarray) -> np.ndarray:
         """The x-space point of w."""
-        form = self.rows.reactions
+        form, k = self.rows.reactions, len(self.cols)
         r = np.zeros(form.B.shape[0])
-        r[self.cols] = w[:len(self.cols)]
-        return form.to_x(r, w[len(self.cols):])
+        r[self.cols] = self._unscaled(w[:k])
+        return form.to_x(r, self.beta_map @ w[k:])
 
     def objective(self, c: np.ndarray) -> np.ndarray:
         """q with q . w = c . x (c x-space)."""
         B = self.rows.reactions.B
         c = self.rows.reactions.pullback(c)
-        return np.concatenate([(B @ c[:B.shape[1]])[self.cols], c[B.shape[1]:]])
+        return np.concatenate([self._unscaled((B @ c[:B.shape[1]])[self.cols]), self.beta_map.T @ c[B.shape[1]:]])
 
     def farkas(self, z: np.ndarray) -> np.ndarray | None:
         """A certificate z of this problem in the layout of `pattern_socp` (the same
@@ -115,7 +124,8 @@ class ReactionSOCP:
         if not np.array_equal(self.lin_nodes, rows.lin_nodes):
             return None
         lin = z[p.n_zero:p.n_zero + p.n_lin] * rows.lin_scale / self.lin_scale
-        cones = (z[p.n_zero + p.n_lin:].reshape(-1, 3) * rows.scale[:, None]).ravel()
+        # this problem's cone rows are (mu r_n, r_t) / g
+        cones = (z[p.n_zero + p.n_lin:].reshape(-1, 3) * (rows.scale[:, None] / self.g)).ravel()
         return np.concatenate([z[:1], lin, cones])
 
 
@@ -125,32 +135,43 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     u_n rows and equilibrium dense: a KKT system a third the work of `pattern_socp`'s
     dense null-space form (plug3d 3 x 6: Clarabel 0.64 against 1.13 ms per SOCP, the same
     answers on all 6,791 of the enumeration's SOCPs), and no SVD. Dense rows unit-scaled,
-    rows that vanish on the kept columns dropped (as rows.kept_rows does)."""
+    rows that vanish on the kept columns dropped (as rows.kept_rows does).
+
+    Balanced at mu, like problem.balanced for x: the tangential reactions enter as r_t / mu
+    (each cone (r_n, r_t / mu), of the size of r_n) and the rigid amplitudes through the
+    orthonormal columns of their u_n block (_reaction_layout). A small taper makes both
+    scales tiny: plug3d's axial translation moves u_n by ~taper^2 (singular values of the
+    u_n block 0.30 .. 0.012 at 10 deg, .. 1.2e-6 at 0.1 deg), and r_t ~ mu r_n; there the
+    unbalanced form left first attempts non-definitive (plug3d 3 x 6 at 0.1 deg, mu = 1.5
+    tan(taper): 339 of 719 tree SOCPs, 593 pyramid LPs, 21 s; balanced: none, 0.4 s)."""
     lay = _reaction_layout(rows.reactions, rows.zero_u.shape[0])
     nodes = rows.nodes
-    cols, rest, size, kept = _gap_columns(lay, rows.zero_r.tobytes())
+    g = float(mu) if 0.0 < mu < math.inf else 1.0
+    cols, rest, size, kept = _gap_columns(lay, rows.zero_r.tobytes(), g)
     is_eq = np.concatenate([lay.equilibrium, rows.zero_u])
     eq = (kept & is_eq).nonzero()[0]
     lin = (kept & ~is_eq).nonzero()[0]
     order = np.concatenate([eq, lin])
     scale = size[order]
     scale[len(eq):] *= -1.0                     # a lin row is -u_n: s = -A w = u_n >= 0
-    A = DenseDiag.of(rest.T[:, order] / scale, 3 * len(nodes), mu)
+    A = DenseDiag.of(rest.T[:, order] / scale, 3 * len(nodes), mu / g)
     b = np.zeros(A.shape[0])
     b[0] = 1.0
     problem = ConicProblem(A, b, 1 + len(eq), len(lin), len(nodes))
-    return ReactionSOCP(problem, rows, cols, lin - lay.equilibrium.size, size[lin])
+    return ReactionSOCP(problem, rows, cols, lin - lay.equilibrium.size, size[lin], g, lay.beta_map)
 
 
 @functools.lru_cache(maxsize=64)
-def _gap_columns(lay: _ReactionLayout, zero_r: bytes) -> tuple[np.ndarray, ...]:
+def _gap_columns(lay: _ReactionLayout, zero_r: bytes, g: float) -> tuple[np.ndarray, ...]:
     """What `reaction_socp` cuts from `lay` for the gap set zero_r (the bytes of its mask;
-    shared by a node and its contact children, kept for the next few nodes): the columns
-    of the cone nodes' reactions, the rows [equilibrium; u_n of every node] on those and the
-    rigid amplitudes' columns (`rest`), each row's norm and whether it is kept (read-only)."""
+    shared by a node and its contact children, kept for the next few nodes) at the
+    tangential scale g: the columns of the cone nodes' reactions, the rows [equilibrium;
+    u_n of every node] on those (tangential columns times g) and the rigid amplitudes'
+    columns (`rest`), each row's norm and whether it is kept (read-only)."""
     nodes = (~np.frombuffer(zero_r, bool)).nonzero()[0]
     cols = lay.cols[nodes].ravel()
     rest = lay.rest.take(np.concatenate([cols, lay.beta]), axis=1)
+    rest[:, 3 * np.arange(len(nodes))[:, None] + np.array([1, 2])] *= g
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
     out = (cols, rest, size, kept_sizes(size))
     for a in out:
@@ -162,12 +183,14 @@ def _gap_columns(lay: _ReactionLayout, zero_r: bytes) -> tuple[np.ndarray, ...]:
 class _ReactionLayout:
     """What `reaction_socp` cuts every pattern's problem from (one per parametrisation and
     m): rest [E 0; U_n] (E rows + m, n + n_beta); cols (m, 3) the columns of each node's
-    (r_n, r_t1, r_t2); beta the rigid amplitudes' columns; equilibrium: True per E row."""
+    (r_n, r_t1, r_t2); beta the rigid amplitudes' columns, whose U_n block is orthonormal:
+    beta' = the amplitudes in the basis beta = beta_map beta'; equilibrium: True per E row."""
 
     rest: np.ndarray
     cols: np.ndarray
     beta: np.ndarray
     equilibrium: np.ndarray
+    beta_map: np.ndarray
 
 
 def _reaction_layout(form: ReactionCoordinates, m: int) -> _ReactionLayout:
@@ -177,8 +200,16 @@ def _reaction_layout(form: ReactionCoordinates, m: int) -> _ReactionLayout:
         rest = np.zeros((k + m, form.U.shape[1]))
         rest[:k, :n] = form.E
         rest[k:] = form.U[:m]
+        beta_map = np.eye(form.U.shape[1] - n)
+        if n < form.U.shape[1]:
+            # E has no beta entries: the U_n block V diag(sv) W^T -> V (sv clipped, so that
+            # an amplitude that moves no u_n keeps its small column instead of a huge map)
+            _, sv, Wt = np.linalg.svd(rest[k:, n:])
+            sv = np.concatenate([sv, np.zeros(Wt.shape[0] - sv.size)])
+            beta_map = Wt.T / np.maximum(sv, ZERO_ROW_RTOL * max(sv[0], 1e-300))
+            rest[k:, n:] = rest[k:, n:] @ beta_map
         return _ReactionLayout(rest, np.arange(3 * m).reshape(3, m).T.copy(),
-                               np.arange(n, form.U.shape[1]), np.ones(k, bool))
+                               np.arange(n, form.U.shape[1]), np.ones(k, bool), beta_map)
     return kept_on(form, f"_reaction_layout_{m}", build)
 
 

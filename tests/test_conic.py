@@ -21,7 +21,8 @@ def test_settings_are_values():
 
 def test_reaction_matrix_is_stored_as_clarabel_reads_it():
     """reaction_socp's DenseDiag: its dense form has the sum-r_n row on the r_n columns and
-    (-mu, -1, -1) below the reactions; A^T z agrees with the dense product; the CSC handed
+    -1 below the reactions (balanced: a cone's slack is (r_n, r_t / mu) of the point, read
+    from the parametrisation's own rows); A^T z agrees with the dense product; the CSC handed
     to Clarabel, rebuilt by scipy, is the same matrix entry for entry (sorted indices, no
     duplicates), as is a dense matrix's."""
     import scipy.sparse as sp
@@ -40,7 +41,7 @@ def test_reaction_matrix_is_stored_as_clarabel_reads_it():
         dense = A.toarray()
         c = len(rows.nodes)
         assert np.array_equal(dense[0, :3 * c], np.tile([1.0, 0.0, 0.0], c)) and not dense[0, 3 * c:].any()
-        assert np.array_equal(dense[A.k:, :3 * c], np.diag(np.tile([-mu, -1.0, -1.0], c)))
+        assert np.array_equal(dense[A.k:, :3 * c], -np.eye(3 * c))
         assert not dense[A.k:, 3 * c:].any()
         z = rng.standard_normal(A.shape[0])
         assert np.allclose(A.rmatvec(z), dense.T @ z, rtol=0, atol=1e-13)
@@ -53,6 +54,13 @@ def test_reaction_matrix_is_stored_as_clarabel_reads_it():
         u_n = p.U[:m] @ socp.to_x(w)
         assert np.allclose(-(dense @ w)[lin] * socp.lin_scale, u_n[socp.lin_nodes], rtol=0,
                            atol=1e-13 * np.abs(u_n).max())
+        # on the equalities (equilibrium among them) r is the point's own reactions
+        from scipy.linalg import null_space
+        N = null_space(dense[1:socp.problem.n_zero])
+        w = N @ rng.standard_normal(N.shape[1])
+        r = p.R @ socp.to_x(w)
+        cone = np.stack([r[rows.nodes], r[m + rows.nodes] / mu, r[2 * m + rows.nodes] / mu], axis=1).ravel()
+        assert np.allclose(-(dense @ w)[A.k:], cone, rtol=0, atol=1e-12 * np.abs(cone).max())
         for M, ref in ((A, dense), (dense, dense)):
             h = _clarabel_csc(M)
             assert h.has_canonical_format and h.nnz == len(h.data) and h.shape == ref.shape

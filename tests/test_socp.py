@@ -88,3 +88,30 @@ def test_reaction_form_agrees_with_the_null_space_form():
             z = first.farkas(sol.z)
             assert z is not None and certificate_ok(plain.A, plain.b, z, 1, plain.n_lin)
     assert min(kinds.values()) >= 10
+
+
+def test_small_taper_tree_is_decided_by_first_attempts():
+    """plug3d 2 x 5 at a 0.1 deg taper (the smallest of SPEC's stress range) and 0.01 deg:
+    the reaction form balanced at mu (r_t / mu, the rigid amplitudes' u_n block
+    orthonormal) decides every SOCP of the tree on its first attempt, with no pyramid LP,
+    at mu = 1.5 tan(taper) and at mu = 0.65; the patterns are brute force's (every one of
+    the 1,024 full patterns decided on its own: 1 and 41). Unbalanced, 28 of the 103 SOCPs
+    at 0.1 deg and 1.5 tan(taper) went down the ladder and 47 LPs ran."""
+    import itertools
+    import math
+    from hpcwedge.patterns import BnBStats, sign_patterns
+    for taper in (0.1, 0.01):
+        p, m = plug3d_param(2, 5, taper_deg=taper)
+        for mu, n in ((1.5 * math.tan(math.radians(taper)), 1), (0.65, 41)):
+            stats = BnBStats()
+            tree = {zu.tobytes() for zu, _ in sign_patterns(p, m, mu, stats=stats)}
+            first = stats.statuses.get("Solved", 0) + stats.statuses.get("PrimalInfeasible", 0)
+            assert first == stats.solves and stats.lps == 0 and not stats.undecided, stats.statuses
+            brute = set()
+            for bits in itertools.product([False, True], repeat=m):
+                zu = np.array(bits)
+                d = decide(pattern_rows(p, m, zu, ~zu), mu)
+                assert d.status != Status.UNDECIDED
+                if d.status == Status.FEASIBLE:
+                    brute.add(zu.tobytes())
+            assert tree == brute and len(tree) == n
