@@ -7,6 +7,7 @@ import os
 import numpy as np
 import pytest
 
+from hpcwedge.feasibility import SolverOptions
 from hpcwedge.global_mu_c import global_mu_critical
 from hpcwedge.mu_critical import mu_critical
 from hpcwedge.patterns import sign_patterns
@@ -206,9 +207,11 @@ def test_a_mu_c_reached_with_a_cone_at_its_apex_is_polished_from_the_sub_pattern
 
 
 def test_an_apex_point_settled_by_its_sub_pattern_is_an_upper_bound_only():
-    """The default route alone on the 4 x 6 pattern above ends at the apex point whose
-    sub-pattern has the same value: reported unpolished (an upper bound, 3.9e-7 above
-    the mu^c that the tight route certifies), where it used to be taken as certified."""
+    """The default route alone on a pattern of plug3d 4 x 6 ends at an apex point whose
+    sub-pattern has the same value: reported unpolished (an upper bound, 5.3e-6 above the
+    mu^c that the tight route certifies), where it used to be taken as certified. (The
+    pattern of this test before the reaction form was balanced, contact 0 1 2 6 8 10 11 12
+    15 16 17 18 21 22 23, is now certified by the default route: its first point differs.)"""
     from hpcwedge.dinkelbach import _accurate_3d
     from hpcwedge.mu_bracket import Probe
     from hpcwedge.rows import Status, pattern_rows
@@ -216,7 +219,7 @@ def test_an_apex_point_settled_by_its_sub_pattern_is_an_upper_bound_only():
     from instances import plug3d_param
     param, m = plug3d_param(levels=4, ring=6)
     zu = np.zeros(m, bool)
-    zu[[0, 1, 2, 6, 8, 10, 11, 12, 15, 16, 17, 18, 21, 22, 23]] = True
+    zu[[0, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 17, 18, 19, 20]] = True
     rows = pattern_rows(param, m, zu, ~zu)
     probe = Probe()
     first = probe.decide(rows, 1.0)
@@ -224,7 +227,9 @@ def test_an_apex_point_settled_by_its_sub_pattern_is_an_upper_bound_only():
     mu, polished, x = _accurate_3d(param, m, zu, ~zu, rows, 1.0, first, probe, depth=0, seek=False)
     assert probe.statuses["polish_apex_by_subpattern"] == 1
     assert not polished and violation(rows, mu, x) <= 1e-12
-    assert mu - 0.9904583171237 > 1e-7
+    tight = mu_critical(param, m, zu, ~zu, mu_hi=1.0, options=SolverOptions(tolerances="tight"))
+    assert tight.polished and abs(tight.mu_c - 0.81239947088165) <= 1e-12
+    assert mu - tight.mu_c > 1e-7
 
 
 @pytest.mark.parametrize("levels,ring,mu,contact", [
