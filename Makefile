@@ -36,6 +36,7 @@ bench: setup-bench
 	PYTHONPATH=. $(PY) scripts/bench_condense.py
 	PYTHONPATH=. $(PY) scripts/bench_growth.py
 	$(PY) scripts/stress.py
+	PYTHONPATH=. $(PY) scripts/stress_3d.py
 	PYTHONPATH=. $(PY) scripts/bench_peers.py
 	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py
 	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py --rows 40 80 --engines ours scip_bisect --out results/bench_global_mu_c_large
@@ -49,6 +50,7 @@ bench-quick: setup-bench
 	$(PY) scripts/bench_2d.py --quick --out results/quick
 	$(PY) scripts/bench_mu_c.py --quick --out results/quick
 	$(PY) scripts/stress.py --quick --out results/quick
+	PYTHONPATH=. $(PY) scripts/stress_3d.py --quick --out results/quick/stress_3d
 	PYTHONPATH=. $(PY) scripts/bench_growth.py --quick --out results/quick/bench_growth
 	PYTHONPATH=. $(PY) scripts/bench_peers.py --quick --out results/quick/bench_peers
 	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py --quick --out results/quick/bench_global_mu_c

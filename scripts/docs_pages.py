@@ -551,6 +551,31 @@ def bench_search_3d_kinds() -> str:
                   "patterns (hash) or mu^c (to 1e-14)", f"CPU s ({arch[0]})", f"CPU s ({arch[1]})"], rows)
 
 
+def stress_3d() -> str:
+    """results/stress_3d.json (scripts/stress_3d.py) beside results/stress_3d_before.json (the
+    same script on the code before the balanced reaction form): per case the patterns, SOCPs,
+    the tree's first-attempt share, pyramid LPs, undecided nodes, mu^c error and seconds."""
+    now, was = (_load(f) for f in ("stress_3d.json", "stress_3d_before.json"))
+    before = {(r["kind"], r["taper_deg"]): r for r in was["records"]}
+    label = {"enumerate": "patterns at 1.5 tan(taper)", "enumerate65": "patterns at 0.65", "global": "global mu^c"}
+
+    def cells(x: dict | None) -> list[str]:
+        if x is None or x.get("status") != "ok":
+            cut = x is not None and x.get("status") == "timeout"
+            return [f"> {was.get('limit_s', 0):g} s (cut)" if cut else "–"] + ["–"] * 5
+        share = x.get("first_attempt_share")
+        err = x.get("rel_error")
+        return [f"{x['solves']:,}", "–" if share is None else f"{100 * share:.1f} %", f"{x['lps']:,}",
+                str(x["undecided"]), "–" if err is None else f"{err:.1e}", _s(x["total_s"], 3)]
+    rows = []
+    for r in now["records"]:
+        a, b = cells(r), cells(before.get((r["kind"], r["taper_deg"])))
+        rows.append([label[r["kind"]], f"{r['taper_deg']:g}°", "–" if r.get("patterns") is None else str(r["patterns"]),
+                     *[f"{x} (was {y})" for x, y in zip(a, b)]])
+    return table(["case", "taper", "patterns", "SOCPs", "tree's first attempts decided", "pyramid LPs",
+                  "undecided", "mu^c error", "seconds"], rows)
+
+
 def _scip_cell(p: dict | None, ours: dict, limit: float | None) -> str:
     """The SCIP peer's answer and CPU seconds beside ours: the same pattern set (hash) or its
     mu^c's distance from ours; a run cut at the time limit as "> limit s"."""
@@ -626,6 +651,8 @@ BENCHMARKS: dict = {
     "bench_search_3d_kinds": (bench_search_3d_kinds, "results/bench_search_3d.json, results/bench_search_3d_no_avx512.json",
                               "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full [--no-peers --out"
                               " results/bench_search_3d_no_avx512]"),
+    "stress_3d": (stress_3d, "results/stress_3d.json, results/stress_3d_before.json",
+                  "PYTHONPATH=. .venv/bin/python scripts/stress_3d.py"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
 }
 
