@@ -28,6 +28,12 @@ VERIFY_TOL = 1e-8
 #: an infeasibility certificate z holds when ||A^T z|| and the dual-cone violation are
 #: <= CERT_TOL * |b^T z| (b^T z < 0 strictly)
 CERT_TOL = 1e-7
+#: the reaction form poses a friction cone in (r_n, r_t / mu) below this mu, and in
+#: (mu r_n, r_t) from it on (reaction_socp)
+BALANCE_MU = 0.05
+#: the reaction form takes the rigid amplitudes through the orthonormal columns of their u_n
+#: block when its singular values spread wider than this (_reaction_layout)
+WHITEN_COND = 1e3
 
 
 def violation(rows: ConeRows, mu: float, x: np.ndarray) -> float:
@@ -137,16 +143,21 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     answers on all 6,791 of the enumeration's SOCPs), and no SVD. Dense rows unit-scaled,
     rows that vanish on the kept columns dropped (as rows.kept_rows does).
 
-    Balanced at mu, like problem.balanced for x: the tangential reactions enter as r_t / mu
-    (each cone (r_n, r_t / mu), of the size of r_n) and the rigid amplitudes through the
-    orthonormal columns of their u_n block (_reaction_layout). A small taper makes both
-    scales tiny: plug3d's axial translation moves u_n by ~taper^2 (singular values of the
-    u_n block 0.30 .. 0.012 at 10 deg, .. 1.2e-6 at 0.1 deg), and r_t ~ mu r_n; there the
-    unbalanced form left first attempts non-definitive (plug3d 3 x 6 at 0.1 deg, mu = 1.5
-    tan(taper): 339 of 719 tree SOCPs, 593 pyramid LPs, 21 s; balanced: none, 0.4 s)."""
+    Balanced where the scales are far apart: below BALANCE_MU each friction cone is posed
+    in (r_n, r_t / mu), of the size of r_n, and where the u_n block of the rigid amplitudes
+    is ill-conditioned (WHITEN_COND) they enter through its orthonormal columns. A small
+    taper does both: r_t ~ mu r_n, and plug3d's axial translation moves u_n by ~taper^2
+    (that block's singular values 0.30 .. 0.012 at 10 deg, .. 1.2e-6 at 0.1 deg). There the
+    plain form left first attempts non-definitive (plug3d 3 x 6 at 0.1 deg, mu = 1.5
+    tan(taper): 339 of 719 tree SOCPs, 593 pyramid LPs, 21 s; balanced: none, 0.4 s). Not
+    everywhere: at mu = 0.18 (the global search of plug3d 3 x 6 at 10 deg) r_t / mu left 100
+    of the settling tree's 657 first attempts AlmostSolved (4 without it), and at 10 deg the
+    two changes, which leave the interior-point path the same in exact arithmetic, only
+    moved the branching (plug3d 4 x 6 at mu = 0.65: 67,311 tree SOCPs against 60,187).
+    """
     lay = _reaction_layout(rows.reactions, rows.zero_u.shape[0])
     nodes = rows.nodes
-    g = float(mu) if 0.0 < mu < math.inf else 1.0
+    g = float(mu) if 0.0 < mu < BALANCE_MU else 1.0
     cols, rest, size, kept = _gap_columns(lay, rows.zero_r.tobytes(), g)
     is_eq = np.concatenate([lay.equilibrium, rows.zero_u])
     eq = (kept & is_eq).nonzero()[0]
@@ -183,8 +194,9 @@ def _gap_columns(lay: _ReactionLayout, zero_r: bytes, g: float) -> tuple[np.ndar
 class _ReactionLayout:
     """What `reaction_socp` cuts every pattern's problem from (one per parametrisation and
     m): rest [E 0; U_n] (E rows + m, n + n_beta); cols (m, 3) the columns of each node's
-    (r_n, r_t1, r_t2); beta the rigid amplitudes' columns, whose U_n block is orthonormal:
-    beta' = the amplitudes in the basis beta = beta_map beta'; equilibrium: True per E row."""
+    (r_n, r_t1, r_t2); beta the rigid amplitudes' columns, in the basis beta = beta_map beta'
+    (the identity, or one in which their U_n block is orthonormal: reaction_socp's doc);
+    equilibrium: True per E row."""
 
     rest: np.ndarray
     cols: np.ndarray
@@ -206,8 +218,9 @@ def _reaction_layout(form: ReactionCoordinates, m: int) -> _ReactionLayout:
             # an amplitude that moves no u_n keeps its small column instead of a huge map)
             _, sv, Wt = np.linalg.svd(rest[k:, n:])
             sv = np.concatenate([sv, np.zeros(Wt.shape[0] - sv.size)])
-            beta_map = Wt.T / np.maximum(sv, ZERO_ROW_RTOL * max(sv[0], 1e-300))
-            rest[k:, n:] = rest[k:, n:] @ beta_map
+            if sv[0] > WHITEN_COND * sv[-1]:
+                beta_map = Wt.T / np.maximum(sv, ZERO_ROW_RTOL * max(sv[0], 1e-300))
+                rest[k:, n:] = rest[k:, n:] @ beta_map
         return _ReactionLayout(rest, np.arange(3 * m).reshape(3, m).T.copy(),
                                np.arange(n, form.U.shape[1]), np.ones(k, bool), beta_map)
     return kept_on(form, f"_reaction_layout_{m}", build)

@@ -21,51 +21,68 @@ def test_settings_are_values():
 
 def test_reaction_matrix_is_stored_as_clarabel_reads_it():
     """reaction_socp's DenseDiag: its dense form has the sum-r_n row on the r_n columns and
-    -1 below the reactions (balanced: a cone's slack is (r_n, r_t / mu) of the point, read
-    from the parametrisation's own rows); A^T z agrees with the dense product; the CSC handed
-    to Clarabel, rebuilt by scipy, is the same matrix entry for entry (sorted indices, no
-    duplicates), as is a dense matrix's."""
+    (-mu / g, -1, -1) below the reactions, a cone's slack being (mu r_n, r_t) / g of the
+    point (read from the parametrisation's own rows; g = mu below BALANCE_MU, else 1); A^T z
+    agrees with the dense product; the CSC handed to Clarabel, rebuilt by scipy, is the same
+    matrix entry for entry (sorted indices, no duplicates), as is a dense matrix's. At a
+    10 deg taper the plain form; at 0.1 deg with mu < BALANCE_MU the balanced one, the rigid
+    amplitudes' u_n block orthonormal."""
+    from hpcwedge.socp import BALANCE_MU, _reaction_layout
+    rng = np.random.default_rng(3)
+    for taper, (lo, hi) in ((10.0, (0.2, 1.0)), (0.1, (0.001, 0.04))):
+        p, m = plug3d_param(2, 4, taper_deg=taper)
+        lay = _reaction_layout(p.reactions, m)
+        block = lay.rest[p.reactions.E.shape[0]:, lay.beta]
+        whitened = not np.array_equal(lay.beta_map, np.eye(len(lay.beta)))
+        assert whitened == (taper < 1)
+        if whitened:
+            assert np.allclose(block.T @ block, np.eye(len(lay.beta)), rtol=0, atol=1e-8)
+        checked = 0
+        for _ in range(20):
+            masks = partial_masks(rng, m)
+            if masks is not None:
+                mu = rng.uniform(lo, hi)
+                _check_reaction_matrix(p, m, pattern_rows(p, m, *masks), mu, mu if mu < BALANCE_MU else 1.0, rng)
+                checked += 1
+        assert checked >= 10
+
+
+def _check_reaction_matrix(p, m, rows, mu, g, rng):
     import scipy.sparse as sp
+    from scipy.linalg import null_space
     from hpcwedge.conic import DenseDiag, _clarabel_csc
     from hpcwedge.socp import reaction_socp
-    p, m = plug3d_param(2, 4)
-    rng = np.random.default_rng(3)
-    for _ in range(20):
-        masks = partial_masks(rng, m)
-        if masks is None:
-            continue
-        mu = rng.uniform(0.2, 1.0)
-        rows = pattern_rows(p, m, *masks)
-        A = reaction_socp(rows, mu).problem.A
-        assert isinstance(A, DenseDiag)
-        dense = A.toarray()
-        c = len(rows.nodes)
-        assert np.array_equal(dense[0, :3 * c], np.tile([1.0, 0.0, 0.0], c)) and not dense[0, 3 * c:].any()
-        assert np.array_equal(dense[A.k:, :3 * c], -np.eye(3 * c))
-        assert not dense[A.k:, 3 * c:].any()
-        z = rng.standard_normal(A.shape[0])
-        assert np.allclose(A.rmatvec(z), dense.T @ z, rtol=0, atol=1e-13)
-        # the dense rows: unit rows; a lin row's slack s = -A w is u_n / |row| of its node,
-        # u_n = U x at the point x of w (the parametrisation's own rows, another route)
-        socp = reaction_socp(rows, mu)
-        assert np.allclose(np.linalg.norm(dense[1:A.k], axis=1), 1.0, rtol=0, atol=1e-14)
-        w = rng.standard_normal(A.shape[1])
-        lin = slice(socp.problem.n_zero, socp.problem.n_zero + socp.problem.n_lin)
-        u_n = p.U[:m] @ socp.to_x(w)
-        assert np.allclose(-(dense @ w)[lin] * socp.lin_scale, u_n[socp.lin_nodes], rtol=0,
-                           atol=1e-13 * np.abs(u_n).max())
-        # on the equalities (equilibrium among them) r is the point's own reactions
-        from scipy.linalg import null_space
-        N = null_space(dense[1:socp.problem.n_zero])
-        w = N @ rng.standard_normal(N.shape[1])
-        r = p.R @ socp.to_x(w)
-        cone = np.stack([r[rows.nodes], r[m + rows.nodes] / mu, r[2 * m + rows.nodes] / mu], axis=1).ravel()
-        assert np.allclose(-(dense @ w)[A.k:], cone, rtol=0, atol=1e-12 * np.abs(cone).max())
-        for M, ref in ((A, dense), (dense, dense)):
-            h = _clarabel_csc(M)
-            assert h.has_canonical_format and h.nnz == len(h.data) and h.shape == ref.shape
-            back = sp.csc_matrix((h.data, h.indices, h.indptr), shape=h.shape)
-            assert back.has_canonical_format and np.array_equal(back.toarray(), ref)
+    socp = reaction_socp(rows, mu)
+    A = socp.problem.A
+    assert isinstance(A, DenseDiag)
+    dense = A.toarray()
+    c = len(rows.nodes)
+    assert np.array_equal(dense[0, :3 * c], np.tile([1.0, 0.0, 0.0], c)) and not dense[0, 3 * c:].any()
+    assert np.array_equal(dense[A.k:, :3 * c], np.diag(np.tile([-mu / g, -1.0, -1.0], c)))
+    assert not dense[A.k:, 3 * c:].any()
+    z = rng.standard_normal(A.shape[0])
+    assert np.allclose(A.rmatvec(z), dense.T @ z, rtol=0, atol=1e-13)
+    # the dense rows: unit rows; a lin row's slack s = -A w is u_n / |row| of its node,
+    # u_n = U x at the point x of w (the parametrisation's own rows, another route)
+    assert np.allclose(np.linalg.norm(dense[1:A.k], axis=1), 1.0, rtol=0, atol=1e-14)
+    w = rng.standard_normal(A.shape[1])
+    lin = slice(socp.problem.n_zero, socp.problem.n_zero + socp.problem.n_lin)
+    x = socp.to_x(w)
+    u_n = p.U[:m] @ x
+    # to rounding of the terms summed (a whitened amplitude's map reaches 1 / 1.5e-6 here)
+    assert np.allclose(-(dense @ w)[lin] * socp.lin_scale, u_n[socp.lin_nodes], rtol=0,
+                       atol=1e-13 * (np.abs(p.U[:m]) @ np.abs(x)).max())
+    # on the equalities (equilibrium among them) r is the point's own reactions
+    N = null_space(dense[1:socp.problem.n_zero])
+    w = N @ rng.standard_normal(N.shape[1])
+    r = p.R @ socp.to_x(w)
+    cone = np.stack([mu * r[rows.nodes], r[m + rows.nodes], r[2 * m + rows.nodes]], axis=1).ravel() / g
+    assert np.allclose(-(dense @ w)[A.k:], cone, rtol=0, atol=1e-12 * np.abs(cone).max())
+    for M, ref in ((A, dense), (dense, dense)):
+        h = _clarabel_csc(M)
+        assert h.has_canonical_format and h.nnz == len(h.data) and h.shape == ref.shape
+        back = sp.csc_matrix((h.data, h.indices, h.indptr), shape=h.shape)
+        assert back.has_canonical_format and np.array_equal(back.toarray(), ref)
 
 
 def test_kept_solvers_answer_as_new_ones_bit_for_bit(monkeypatch):
