@@ -93,7 +93,7 @@ class ReactionSOCP:
     """The pattern SOCP in x' = (r, beta) (`reaction_socp`): problem, rows laid out
     [sum r_n = 1 | equilibrium E r = 0 | contact u_n = 0 (zero cone) | lin (u_n >= 0) |
     cones]; w = (the cone nodes' (r_n, r_t1 / g, r_t2 / g) on `cols`, beta' with beta =
-    beta_map beta'). lin_nodes / lin_scale: the node of each lin row and the norm it was
+    beta_map beta', None: beta itself). lin_nodes / lin_scale: the node of each lin row and the norm it was
     scaled by."""
 
     problem: ConicProblem
@@ -102,12 +102,13 @@ class ReactionSOCP:
     lin_nodes: np.ndarray
     lin_scale: np.ndarray
     g: float
-    beta_map: np.ndarray
+    beta_map: np.ndarray | None
 
     def _unscaled(self, v: np.ndarray) -> np.ndarray:
         """v (one entry per column of `cols`) with its tangential entries times g."""
-        v = v.copy()
-        v.reshape(-1, 3)[:, 1:] *= self.g
+        if self.g != 1.0:
+            v = v.copy()
+            v.reshape(-1, 3)[:, 1:] *= self.g
         return v
 
     def to_x(self, w: np.ndarray) -> np.ndarray:
@@ -115,13 +116,15 @@ class ReactionSOCP:
         form, k = self.rows.reactions, len(self.cols)
         r = np.zeros(form.B.shape[0])
         r[self.cols] = self._unscaled(w[:k])
-        return form.to_x(r, self.beta_map @ w[k:])
+        beta = w[k:] if self.beta_map is None else self.beta_map @ w[k:]
+        return form.to_x(r, beta)
 
     def objective(self, c: np.ndarray) -> np.ndarray:
         """q with q . w = c . x (c x-space)."""
         B = self.rows.reactions.B
         c = self.rows.reactions.pullback(c)
-        return np.concatenate([self._unscaled((B @ c[:B.shape[1]])[self.cols]), self.beta_map.T @ c[B.shape[1]:]])
+        c_beta = c[B.shape[1]:] if self.beta_map is None else self.beta_map.T @ c[B.shape[1]:]
+        return np.concatenate([self._unscaled((B @ c[:B.shape[1]])[self.cols]), c_beta])
 
     def farkas(self, z: np.ndarray) -> np.ndarray | None:
         """A certificate z of this problem in the layout of `pattern_socp` (the same
@@ -182,7 +185,8 @@ def _gap_columns(lay: _ReactionLayout, zero_r: bytes, g: float) -> tuple[np.ndar
     nodes = (~np.frombuffer(zero_r, bool)).nonzero()[0]
     cols = lay.cols[nodes].ravel()
     rest = lay.rest.take(np.concatenate([cols, lay.beta]), axis=1)
-    rest[:, 3 * np.arange(len(nodes))[:, None] + np.array([1, 2])] *= g
+    if g != 1.0:
+        rest[:, 3 * np.arange(len(nodes))[:, None] + np.array([1, 2])] *= g
     size = np.sqrt(np.einsum("ij,ij->i", rest, rest))
     out = (cols, rest, size, kept_sizes(size))
     for a in out:
@@ -195,14 +199,14 @@ class _ReactionLayout:
     """What `reaction_socp` cuts every pattern's problem from (one per parametrisation and
     m): rest [E 0; U_n] (E rows + m, n + n_beta); cols (m, 3) the columns of each node's
     (r_n, r_t1, r_t2); beta the rigid amplitudes' columns, in the basis beta = beta_map beta'
-    (the identity, or one in which their U_n block is orthonormal: reaction_socp's doc);
+    (None: beta itself; else one in which their U_n block is orthonormal: reaction_socp's doc);
     equilibrium: True per E row."""
 
     rest: np.ndarray
     cols: np.ndarray
     beta: np.ndarray
     equilibrium: np.ndarray
-    beta_map: np.ndarray
+    beta_map: np.ndarray | None
 
 
 def _reaction_layout(form: ReactionCoordinates, m: int) -> _ReactionLayout:
@@ -212,7 +216,7 @@ def _reaction_layout(form: ReactionCoordinates, m: int) -> _ReactionLayout:
         rest = np.zeros((k + m, form.U.shape[1]))
         rest[:k, :n] = form.E
         rest[k:] = form.U[:m]
-        beta_map = np.eye(form.U.shape[1] - n)
+        beta_map = None
         if n < form.U.shape[1]:
             # E has no beta entries: the U_n block V diag(sv) W^T -> V (sv clipped, so that
             # an amplitude that moves no u_n keeps its small column instead of a huge map)

@@ -33,7 +33,7 @@ def test_reaction_matrix_is_stored_as_clarabel_reads_it():
         p, m = plug3d_param(2, 4, taper_deg=taper)
         lay = _reaction_layout(p.reactions, m)
         block = lay.rest[p.reactions.E.shape[0]:, lay.beta]
-        whitened = not np.array_equal(lay.beta_map, np.eye(len(lay.beta)))
+        whitened = lay.beta_map is not None
         assert whitened == (taper < 1)
         if whitened:
             assert np.allclose(block.T @ block, np.eye(len(lay.beta)), rtol=0, atol=1e-8)
