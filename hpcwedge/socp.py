@@ -93,8 +93,8 @@ class ReactionSOCP:
     """The pattern SOCP in x' = (r, beta) (`reaction_socp`): problem, rows laid out
     [sum r_n = 1 | equilibrium E r = 0 | contact u_n = 0 (zero cone) | lin (u_n >= 0) |
     cones]; w = (the cone nodes' (r_n, r_t1 / g, r_t2 / g) on `cols`, beta' with beta =
-    beta_map beta', None: beta itself). lin_nodes / lin_scale: the node of each lin row and the norm it was
-    scaled by."""
+    beta_map beta', None: beta itself). lin_nodes / lin_scale: the node of each lin row
+    and the norm it was scaled by."""
 
     problem: ConicProblem
     rows: ConeRows
