@@ -346,7 +346,8 @@ def _show(args) -> int:
 
 def _global_caveat(res: dict) -> str:
     """What `show` adds to the global mu^c when it is not certified to 1e-9: the listed value
-    it is is not polished, or the global search left values unpolished or solves undecided."""
+    it is is not polished, or the global search left values unpolished or patterns' mu^c
+    undecided (stats.bnb.unsettled; a file without it: any solve undecided)."""
     if res["mu_c"] is None:
         return ""
     items = [it for run in res["runs"] for it in (run["cones"] or []) + (run["patterns"] or [])]
@@ -354,9 +355,16 @@ def _global_caveat(res: dict) -> str:
     if source:
         return "" if all(it.get("mu_c_polished") is not False for it in source) else "not polished: an upper bound"
     st = res["stats"]
-    unpolished, undecided = st.get("mu_c_unpolished", 0), (st.get("bnb") or {}).get("undecided", 0)
-    if unpolished or undecided:
-        return f"not certified to 1e-9: {unpolished} value(s) not polished, {undecided} solve(s) undecided"
+    bnb = st.get("bnb") or {}
+    unpolished = st.get("mu_c_unpolished", 0)
+    if "unsettled" not in bnb:
+        undecided = bnb.get("undecided", 0)
+        if unpolished or undecided:
+            return f"not certified to 1e-9: {unpolished} value(s) not polished, {undecided} solve(s) undecided"
+        return ""
+    if unpolished or bnb["unsettled"]:
+        return (f"not certified to 1e-9: {unpolished} value(s) not polished, {bnb['unsettled']} pattern(s) "
+                "with mu^c undecided")
     return ""
 
 

@@ -59,7 +59,9 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     (exponential in m: 635 tree nodes on plug2d m = 16): its answer is the certified mu^c of
     the last pattern it found, the least to the MILP's tolerance (a pattern whose mu^c lies
     within ~1e-6 relative below it can go unseen). stats.extra["route"] says which route
-    ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"].
+    ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"];
+    stats.extra["mu_c_unsettled"] the settled patterns whose mu^c no solve decided (the
+    answer is certified when it is 0 and every value is polished).
 
     The stages run as three jobs of `engine` (in-process by default; the master under
     mpirun): "global_bracket" (one task: the bracket), "global_patterns" (the settling tree
@@ -100,6 +102,10 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         items = [(*s.masks(m), top) for s in pats.found[0]]
         for (zu, zr, _), r in zip(items, run_mu_c(search.solve, items, engine=engine, name="global_mu_c")):
             _absorb(stats, r)
+            if r.mu_c is None and r.undecided:
+                # feasible at top (or left undecided by the tree) and no value: its mu^c may
+                # lie below best
+                stats.extra["mu_c_unsettled"] = stats.extra.get("mu_c_unsettled", 0) + 1
             if r.mu_c is not None:
                 pattern_of.setdefault(r.mu_c, (zu, zr))
                 best = min(best, r.mu_c)

@@ -93,7 +93,12 @@ class GlobalRouteStats:
     """stats.bnb after a global mu^c search (global_mu_c.global_mu_critical's BnBStats, its route
     "tree" or "milp" and MILP counts); it replaces the patterns stage's TreeStats. solves and
     lps count the trees' and the mu^c computations' (lps: the pyramid LPs of SOCPs no attempt
-    decided; the 2D MILP route adds the LP check of each pattern a MILP returns)."""
+    decided; the 2D MILP route adds the LP check of each pattern a MILP returns). undecided
+    counts every solve that decided nothing, the bracket's dives and the mu^c computations'
+    included; those leave the answer certified (nothing is pruned on doubt, and a polished
+    value is certified). unsettled: the settling tree's patterns whose mu^c computation came
+    back without a value and with undecided solves; only these (and unpolished values)
+    leave the global mu^c uncertified."""
 
     solves: int = 0
     skipped: int = 0
@@ -104,6 +109,7 @@ class GlobalRouteStats:
     milp_nodes: int = 0
     pruned: int = 0
     lps: int = 0
+    unsettled: int = 0
 
 
 @dataclass

@@ -74,6 +74,12 @@ def test_show_says_when_the_global_search_left_mu_c_uncertified():
     assert _global_caveat(res) == "not certified to 1e-9: 4 value(s) not polished, 98 solve(s) undecided"
     res["stats"] = {"mu_c_unpolished": 0, "bnb": {"undecided": 0}}
     assert _global_caveat(res) == ""
+    # a file that counts the patterns left unsettled: solves undecided in the bracket's dives
+    # or in a polished value's computation leave the value certified
+    res["stats"] = {"mu_c_unpolished": 0, "bnb": {"undecided": 5, "unsettled": 0}}
+    assert _global_caveat(res) == ""
+    res["stats"] = {"mu_c_unpolished": 0, "bnb": {"undecided": 5, "unsettled": 2}}
+    assert _global_caveat(res) == "not certified to 1e-9: 0 value(s) not polished, 2 pattern(s) with mu^c undecided"
 
 
 @pytest.mark.parametrize("text,key", [

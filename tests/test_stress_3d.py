@@ -25,3 +25,30 @@ def test_small_taper_runs_are_decided_and_accurate(kind):
     assert abs(r["mu_c"] - want) <= 1e-9 * want
     if kind == "enumerate":
         assert r["patterns"] == 1 and r["first_attempt_share"] == 1.0 and r["lps"] == 0
+
+
+def test_global_mu_c_at_a_hundredth_of_a_degree_is_certified(tmp_path, capsys):
+    """plug3d 2 x 4 at 0.01 deg, the global search alone, through `hpcwedge run` and `show`:
+    its bracket's dives leave a solve undecided (1 here), which cannot change the answer
+    (nothing is pruned on doubt; the settling tree finds every pattern), so no pattern's
+    mu^c is left unsettled and `show` calls the value certified (before stats.bnb.unsettled
+    it said "not certified to 1e-9: 0 value(s) not polished, 1 solve(s) undecided"); the
+    value lies within 1e-9 of tan(taper) (1.8e-10 here)."""
+    from hpcwedge.cli import main
+    scene = tmp_path / "s.toml"
+    scene.write_text('name = "p"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = 2\nring = 4\ntaper_deg = 0.01\n'
+                     '[friction]\nmu = [0.001]\n[compute]\nenumerate = false\nmu_c = "global"\n'
+                     '[run]\nsymmetry = false\n')
+    out = str(tmp_path / "r.h5")
+    assert main(["run", str(scene), "-o", out]) == 0
+    capsys.readouterr()
+    assert main(["show", out]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert head.endswith("(found)"), head
+    assert main(["show", "--json", out]) == 0
+    import json
+    res = json.loads(capsys.readouterr().out)
+    bnb = res["stats"]["bnb"]
+    assert bnb["unsettled"] == 0 and res["stats"]["mu_c_unpolished"] == 0
+    want = math.tan(math.radians(0.01))
+    assert abs(res["mu_c"] - want) <= 1e-9 * want
