@@ -14,6 +14,7 @@ master's stop) cancels the computation within one solve; the task is redone on r
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -144,25 +145,45 @@ def _result(probe: Probe, mu_c: float | None, polished: bool, x: np.ndarray | No
 
 def mu_c_task(solve, payload) -> dict:
     """Task "mu_c": payload (zero_u, zero_r, mu_hi) -> MuC fields (mu_c NaN = None; lps: its
-    solves; pyramid_lps: the pyramid LPs among its statuses, "lp_calls")."""
+    solves; pyramid_lps: the pyramid LPs among its statuses, "lp_calls"; statuses: all of
+    them, JSON bytes)."""
     zero_u, zero_r, mu_hi = payload
     r = solve(np.asarray(zero_u, dtype=bool), np.asarray(zero_r, dtype=bool), mu_hi=mu_hi)
     return {"mu_c": np.nan if r.mu_c is None else float(r.mu_c), "polished": bool(r.polished),
             "lps": int(r.solves), "undecided": int(r.undecided),
-            "pyramid_lps": int(r.statuses.get("lp_calls", 0))}
+            "pyramid_lps": int(r.statuses.get("lp_calls", 0)),
+            "statuses": json.dumps(r.statuses, sort_keys=True).encode()}
 
 
 def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> list:
-    """mu^c of every (zero_u, zero_r, mu_hi) in `items`, through the engine.
+    """mu^c of every (zero_u, zero_r, mu_hi) in `items`, through the engine (no job when
+    items is empty).
 
     solve: a picklable callable solve(zero_u, zero_r, mu_hi=...) -> MuC,
     e.g. functools.partial(mu_critical, param, m, mu_max=..., method=..., tol=...).
-    Returns the MuC list in the order of items; of their statuses only "lp_calls" (the
-    pyramid LPs) travels back from a task (a checkpoint of an older version has none)."""
+    Returns the MuC list in the order of items, with their statuses (a checkpoint of an
+    older version holds only "lp_calls", the pyramid LPs, or none); the job's counters
+    (stats.parallel.jobs) get their sums as "status_<status>" and "undecided"."""
+    if not items:
+        return []
     engine = engine or Engine()
     payloads = [(np.asarray(zu, dtype=bool), np.asarray(zr, dtype=bool), float(mu_hi))
                 for zu, zr, mu_hi in items]
-    out = engine.run(TaskJob(name, "mu_c", solve, payloads)).output()
-    return [MuC(mu_c=None if math.isnan(r["mu_c"]) else float(r["mu_c"]), polished=bool(r["polished"]),
-                solves=int(r["lps"]), undecided=int(r["undecided"]),
-                statuses={"lp_calls": int(r["pyramid_lps"])} if r.get("pyramid_lps") else {}) for r in out]
+    job = engine.run(TaskJob(name, "mu_c", solve, payloads))
+    out = [MuC(mu_c=None if math.isnan(r["mu_c"]) else float(r["mu_c"]), polished=bool(r["polished"]),
+               solves=int(r["lps"]), undecided=int(r["undecided"]), statuses=_statuses(r)) for r in job.output()]
+    total = MuC(None)
+    for r in out:
+        add_counts(total, r)
+    # set, not added: a resumed job's counters come back from its checkpoint
+    job.counters.update({"solves": total.solves, "undecided": total.undecided,
+                         **{f"status_{k}": v for k, v in sorted(total.statuses.items())}})
+    return out
+
+
+def _statuses(r: dict) -> dict:
+    """A mu_c task's statuses (mu_c_task) as a dict, from a result of any version."""
+    if r.get("statuses") is not None:
+        text = r["statuses"]
+        return json.loads(text.decode() if isinstance(text, bytes) else str(text))
+    return {"lp_calls": int(r["pyramid_lps"])} if r.get("pyramid_lps") else {}
