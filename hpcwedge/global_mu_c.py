@@ -25,9 +25,12 @@ from .symmetry import Symmetry
 MILP_STEPS = (1e-2, 1e-4, 1e-6)
 #: tree route: the next bound is best (1 - TREE_STEP). Every pattern between it and best is
 #: settled by the final enumeration at best (1 + 1e-9), so the step sets the work, not the
-#: answer; at 1e-7 the tree's problems at the bound lay within Clarabel's tolerance of
-#: their boundary (plug3d 4 x 6 without symmetry: 6 undecided, 16 s; 1e-5: none, 6.7 s)
-TREE_STEP = 1e-5
+#: answer. The last dive's problems lie a step from their boundary: at 1e-7 within
+#: Clarabel's tolerance on plug3d 4 x 6 at 10 deg (6 undecided, 16 s; 1e-5: none, 6.7 s),
+#: at 1e-5 at a 0.01 deg taper (plug3d 3 x 6: 70 s; 1e-2: 7 s) and at 1e-3 at 0.001 deg
+#: (87 s; 1e-2: 4.5 s). Fewer, longer steps also mean fewer dives and mu^c computations:
+#: random 3D bodies, m = 7, 2,934 tree nodes at 1e-5, 2,725 at 1e-2
+TREE_STEP = 1e-2
 #: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
 DIVE_NODES = 2
 #: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,

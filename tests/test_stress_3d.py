@@ -52,3 +52,15 @@ def test_global_mu_c_at_a_hundredth_of_a_degree_is_certified(tmp_path, capsys):
     assert bnb["unsettled"] == 0 and res["stats"]["mu_c_unpolished"] == 0
     want = math.tan(math.radians(0.01))
     assert abs(res["mu_c"] - want) <= 1e-9 * want
+
+
+def test_global_search_below_a_tenth_of_a_degree_keeps_off_the_solvers_tolerance():
+    """plug3d 2 x 5 at 0.01 deg, the global search alone: the bracket's last dive, which
+    shows no pattern feasible a step below the incumbent, runs a relative step
+    (global_mu_c.TREE_STEP) clear of Clarabel's tolerance there. At 1e-5 its SOCPs sat within
+    it: 90 undecided solves and 644 pyramid LPs, 27 s; at 1e-2: 1 and 10, 0.6 s. The
+    value is the same (1.0e-9 below tan(taper): the float data's limit at 0.01 deg)."""
+    r = stress_3d.worker("global", 2, 5, 0.01)
+    want = math.tan(math.radians(0.01))
+    assert r["undecided"] <= 3 and r["lps"] <= 40, r
+    assert r["mu_c_unpolished"] == 0 and abs(r["mu_c"] - want) <= 2e-9 * want
