@@ -355,17 +355,12 @@ def _global_caveat(res: dict) -> str:
     if source:
         return "" if all(it.get("mu_c_polished") is not False for it in source) else "not polished: an upper bound"
     st = res["stats"]
-    bnb = st.get("bnb") or {}
-    unpolished = st.get("mu_c_unpolished", 0)
-    if "unsettled" not in bnb:
-        undecided = bnb.get("undecided", 0)
-        if unpolished or undecided:
-            return f"not certified to 1e-9: {unpolished} value(s) not polished, {undecided} solve(s) undecided"
-        return ""
-    if unpolished or bnb["unsettled"]:
-        return (f"not certified to 1e-9: {unpolished} value(s) not polished, {bnb['unsettled']} pattern(s) "
-                "with mu^c undecided")
-    return ""
+    bnb, unpolished = st.get("bnb") or {}, st.get("mu_c_unpolished", 0)
+    if "unsettled" in bnb:
+        doubt, what = bnb["unsettled"], "pattern(s) with mu^c undecided"
+    else:
+        doubt, what = bnb.get("undecided", 0), "solve(s) undecided"
+    return f"not certified to 1e-9: {unpolished} value(s) not polished, {doubt} {what}" if unpolished or doubt else ""
 
 
 def _mu_c_text(item: dict) -> str:
