@@ -130,10 +130,22 @@ def test_run_mu_c_equals_direct_calls():
     for zu_bits in range(1, 1 << m, 3):
         zu = np.array([(zu_bits >> i) & 1 for i in range(m)], dtype=bool)
         items.append((zu, ~zu, 50.0))
-    got = run_mu_c(partial(mu_critical, param, m, mu_max=100.0), items)
+    from hpcwedge.parallel import Engine
+    engine = Engine()
+    got = run_mu_c(partial(mu_critical, param, m, mu_max=100.0), items, engine=engine)
+    solves, statuses = 0, {}
     for (zu, zr, mu_hi), r in zip(items, got):
         want = mu_critical(param, m, zu, zr, mu_hi=mu_hi, mu_max=100.0)
         assert (r.mu_c, r.polished, r.solves, r.undecided) == (want.mu_c, want.polished, want.solves, want.undecided)
+        # every status travels back from the task (before: only the pyramid LPs, "lp_calls")
+        assert r.statuses == want.statuses and r.statuses
+        solves += r.solves
+        for k, v in r.statuses.items():
+            statuses[f"status_{k}"] = statuses.get(f"status_{k}", 0) + v
+    # ... and their sums are the job's counters (stats.parallel.jobs); an empty list runs no job
+    assert engine.summary()["jobs"]["mu_c"] == {"tasks": len(items), "solves": solves, "undecided": 0, **statuses}
+    assert run_mu_c(partial(mu_critical, param, m, mu_max=100.0), [], engine=engine, name="none") == []
+    assert list(engine.summary()["jobs"]) == ["mu_c"]
 
 
 @pytest.mark.parametrize("scale", [0.1, 1.0, 3.0])
