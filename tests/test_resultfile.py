@@ -17,8 +17,9 @@ from hpcwedge.resultfile import read_result
 from mpi_helpers import ROOT, damaged, run, show_json, write_scene
 
 SCENE = 'name = "plug"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 2\n[friction]\nmu = [0.65]\n'
-#: a result written before checksums (kept in the repository)
-OLD_RESULT = os.path.join(ROOT, "results", "demo", "plug2d_r4.h5")
+#: a result written before checksums (plug2d m = 8; a copy of the demo's from before them,
+#: since `make demo` rewrites results/demo)
+OLD_RESULT = os.path.join(ROOT, "tests", "data", "result_before_checksums.h5")
 
 
 @pytest.fixture(scope="module")
@@ -162,7 +163,7 @@ def test_malformed_result_refused(result, tmp_path, capsys, tamper, sealed):
 
 
 def test_result_without_checksum_read_with_a_note(tmp_path, capsys):
-    """Results written before checksums (the repository's demo results) are still read."""
+    """Results written before checksums (a demo result of that time) are still read."""
     path = str(tmp_path / "old.h5")
     shutil.copy(OLD_RESULT, path)
     assert verify_checksum(path) is False
