@@ -3,6 +3,7 @@
 
     PYTHONPATH=. python scripts/bench_lp_screens.py [--scenes 2x6 3x5 3x6] [--mu 0.65]
                                                     [--facets 8] [--engines clp highs]
+                                                    [--forms facets generators]
                                                     [--out results/bench_lp_screens]
 
 Each scene is plug3d LEVELSxRING at mu without symmetry (bench_search_3d.scene), its whole
@@ -15,8 +16,10 @@ in patterns' namespace for this measurement only):
          returns is a point of the node's problem once it verifies on the circular cones
          (socp.violation <= socp.VERIFY_TOL) and is the node's point; then the outer LP;
          then the SOCP
-One LP model per (scene, pyramid), kept warm in the engine (a node changes bounds only:
-the reactions of its gap nodes fixed to 0, the u_n rows of its contact nodes fixed to 0):
+One LP model per (scene, pyramid, form), kept warm in the engine (a node changes bounds
+only: the reactions of its gap nodes fixed to 0, the u_n rows of its contact nodes fixed to
+0), in either form of the same pyramids (PyramidLP): `facets` (a row per facet) or
+`generators` (a column per edge, k + m + 1 rows):
   clp    COIN-OR CLP through cylp (EPL-2.0): dual simplex, the bounds written into CLP's
          own arrays, its work areas kept between solves
   highs  HiGHS through highspy: dual simplex, presolve off, bounds changed by its API; a
@@ -53,36 +56,70 @@ BIG = float(np.finfo(float).max)
 
 class PyramidLP:
     """The LP of a node's problem at mu with every friction cone replaced by a k-facet
-    pyramid (rows.pyramid_rows: inner inscribed, outer circumscribed), in the reaction
-    coordinates x' = (r, beta) of problem.ReactionCoordinates, one model for every node:
-    E r = 0; u_n = U_n x' >= 0 (= 0 at a contact node); the facets; sum r_n = 1; r_n >= 0
-    as column bounds (a gap node's three reactions fixed to 0). Rows unit-scaled.
-    `run(zu, zr)`: (status "optimal" / "infeasible" / "other", x-space point or None)."""
+    pyramid (rows.pyramid_rows: inner inscribed, outer circumscribed; a facet normal on t1),
+    in the reaction coordinates x' = (r, beta) of problem.ReactionCoordinates, one model for
+    every node, in one of two forms of the same pyramids:
+      facets      columns (r, beta): E r = 0; u_n = U_n x' >= 0 (= 0 at a contact node); the
+                  k facets of every node; sum r_n = 1; r_n >= 0 as column bounds (a gap
+                  node's three reactions fixed to 0)
+      generators  columns (lambda, beta), r = G lambda with lambda >= 0 on the k edges of
+                  every node's pyramid (pyramid_edges): E G lambda = 0; u_n >= 0 (= 0 at a
+                  contact node); sum lambda = 1 (each edge has r_n = 1); a gap node's k
+                  lambdas fixed to 0. k + m + 1 rows instead of k + m + km + 1.
+    Rows unit-scaled. `run(zu, zr)`: (status "optimal" / "infeasible" / "other", x-space
+    point or None)."""
 
-    def __init__(self, param, m: int, mu: float, facets: int, inner: bool, engine: str):
+    def __init__(self, param, m: int, mu: float, facets: int, inner: bool, engine: str,
+                 form: str = "facets"):
         from hpcwedge.rows import pyramid_rows
-        form = param.reactions
-        self.form, self.m = form, m
-        n, nb, k = form.E.shape[1], form.U.shape[1] - form.E.shape[1], form.E.shape[0]
-        self.n, self.k, nc = n, k, n + nb
-        # the pattern rows of no fixing, in x': what pyramid_rows reads of a rows.ConeRows
-        # (eq, lin, the cones' rn and rt, norm); every cone a coordinate cone
-        cols = np.eye(nc)[:n].reshape(3, m, nc)
-        Un = form.U[:m]
-        free = SimpleNamespace(eq=np.hstack([form.E, np.zeros((k, nb))]),
-                               lin=Un / np.linalg.norm(Un, axis=1, keepdims=True),
-                               rn=cols[0], rt=cols[1:].transpose(1, 0, 2), norm=cols[0].sum(axis=0))
-        pyramid = pyramid_rows(free, facets, inner, phase=np.zeros(m))   # a facet normal on t1
-        A = pyramid.a0 + mu * pyramid.a1
-        A[k + m:] /= np.linalg.norm(A[k + m:], axis=1, keepdims=True)   # the facets; the rest are unit
-        A = np.vstack([A, free.norm])
-        rows = A.shape[0] - 1                         # [eq (k) | u_n (m) | facets] and sum r_n
+        rc = param.reactions
+        self.rc, self.m, self.form = rc, m, form
+        n, nb, k = rc.E.shape[1], rc.U.shape[1] - rc.E.shape[1], rc.E.shape[0]
+        self.n, self.k = n, k
+        Un = rc.U[:m]
+        if form == "facets":
+            nc = n + nb
+            # the pattern rows of no fixing, in x': what pyramid_rows reads of a rows.ConeRows
+            # (eq, lin, the cones' rn and rt, norm); every cone a coordinate cone
+            cols = np.eye(nc)[:n].reshape(3, m, nc)
+            free = SimpleNamespace(eq=np.hstack([rc.E, np.zeros((k, nb))]),
+                                   lin=Un / np.linalg.norm(Un, axis=1, keepdims=True),
+                                   rn=cols[0], rt=cols[1:].transpose(1, 0, 2), norm=cols[0].sum(axis=0))
+            pyramid = pyramid_rows(free, facets, inner, phase=np.zeros(m))
+            A = pyramid.a0 + mu * pyramid.a1
+            A[k + m:] /= np.linalg.norm(A[k + m:], axis=1, keepdims=True)   # the facets; the rest are unit
+            A = np.vstack([A, free.norm])
+            self.G, fixed = None, 3 * m               # a gap node fixes r_n, r_t1, r_t2
+            self.col_lo = np.concatenate([np.zeros(m), np.full(nc - m, -BIG)])
+        else:
+            edges = mu * pyramid_edges(facets, inner)                 # (k, 2)
+            G = np.zeros((n, m * facets))                             # node i's edges: columns i*k..
+            for a, coef in enumerate((np.ones(facets), edges[:, 0], edges[:, 1])):
+                G[a * m + np.repeat(np.arange(m), facets), np.arange(m * facets)] = np.tile(coef, m)
+            A_u = np.hstack([Un[:, :n] @ G, Un[:, n:]])
+            A = np.vstack([np.hstack([rc.E @ G, np.zeros((k, nb))]),
+                           A_u / np.linalg.norm(A_u, axis=1, keepdims=True),
+                           np.concatenate([np.ones(m * facets), np.zeros(nb)])])
+            self.G, fixed = G, m * facets
+            self.col_lo = np.concatenate([np.zeros(fixed), np.full(nb, -BIG)])
+        self.facets = facets
+        rows = A.shape[0] - 1
         self.row_lo = np.concatenate([np.zeros(rows), [1.0]])
         self.row_hi = np.concatenate([np.zeros(k), np.full(rows - k, BIG), [1.0]])
-        self.col_lo = np.concatenate([np.zeros(m), np.full(nc - m, -BIG)])
-        self.col_hi = np.full(nc, BIG)
+        self.col_hi = np.full(A.shape[1], BIG)
+        self.fixed = fixed                            # the leading columns a gap node fixes
         self.seconds, self.calls, self.iterations, self.cold_retries = 0.0, 0, 0, 0
         self._solve = getattr(self, "_load_" + engine)(A)
+
+    def gap_columns(self, zr: np.ndarray) -> np.ndarray:
+        """The mask over the leading `fixed` columns of the gap nodes zr."""
+        return np.concatenate([zr, zr, zr]) if self.G is None else np.repeat(zr, self.facets)
+
+    def to_x(self, xp: np.ndarray) -> np.ndarray:
+        """The x-space point of the LP's column values xp."""
+        if self.G is None:
+            return self.rc.to_x(xp[:self.n], xp[self.n:])
+        return self.rc.to_x(self.G @ xp[:self.fixed], xp[self.fixed:])
 
     def _load_clp(self, A):
         """CLP's model of A; returns its solve(g, zu) -> (status, x' or None)."""
@@ -98,12 +135,12 @@ class PyramidLP:
         # views of CLP's own bound arrays, written in place (cylp's array setters hand CLP
         # the numpy buffer itself, which CLP then frees: a double free at exit)
         cl, cu, ru = s.variablesLower, s.variablesUpper, s.constraintsUpper
-        m, k, lo = self.m, self.k, self.col_lo[:3 * self.m]
+        m, k, f, lo = self.m, self.k, self.fixed, self.col_lo[:self.fixed]
         statuses = {0: "optimal", 1: "infeasible"}
 
         def solve(g, zu):
-            cl[:3 * m] = np.where(g, 0.0, lo)
-            cu[:3 * m] = np.where(g, 0.0, BIG)
+            cl[:f] = np.where(g, 0.0, lo)
+            cu[:f] = np.where(g, 0.0, BIG)
             ru[k:k + m] = np.where(zu, 0.0, BIG)
             s.dual(startFinishOptions="x")
             self.iterations += s.iteration
@@ -124,14 +161,14 @@ class PyramidLP:
         R = sp.csr_matrix(A)
         h.addRows(A.shape[0], _highs_inf(self.row_lo, inf), _highs_inf(self.row_hi, inf), R.nnz,
                   R.indptr[:-1].astype(np.int32), R.indices.astype(np.int32), R.data)
-        m, k = self.m, self.k
-        cols, urows = np.arange(3 * m, dtype=np.int32), np.arange(k, k + m, dtype=np.int32)
-        lo, zeros = _highs_inf(self.col_lo[:3 * m], inf), np.zeros(m)
+        m, k, f = self.m, self.k, self.fixed
+        cols, urows = np.arange(f, dtype=np.int32), np.arange(k, k + m, dtype=np.int32)
+        lo, zeros = _highs_inf(self.col_lo[:f], inf), np.zeros(m)
         statuses = {highspy.HighsModelStatus.kOptimal: "optimal",
                     highspy.HighsModelStatus.kInfeasible: "infeasible"}
 
         def solve(g, zu):
-            h.changeColsBounds(3 * m, cols, np.where(g, 0.0, lo), np.where(g, 0.0, inf))
+            h.changeColsBounds(f, cols, np.where(g, 0.0, lo), np.where(g, 0.0, inf))
             h.changeRowsBounds(m, urows, zeros, np.where(zu, 0.0, inf))
             h.run()
             self.iterations += h.getInfo().simplex_iteration_count
@@ -146,11 +183,21 @@ class PyramidLP:
 
     def run(self, zu: np.ndarray, zr: np.ndarray) -> tuple[str, np.ndarray | None]:
         t0 = time.process_time()
-        status, xp = self._solve(np.concatenate([zr, zr, zr]), zu)
-        x = None if xp is None else self.form.to_x(xp[:self.n], xp[self.n:])
+        status, xp = self._solve(self.gap_columns(zr), zu)
+        x = None if xp is None else self.to_x(xp)
         self.seconds += time.process_time() - t0
         self.calls += 1
         return status, x
+
+
+def pyramid_edges(facets: int, inner: bool) -> np.ndarray:
+    """(k, 2): the tangential part per unit r_n (mu = 1) of the k edges of the pyramid
+    rows.pyramid_rows builds with a facet normal on t1 (phase 0): facet normals at angles
+    2 pi j / k, at distance cos(pi / k) (inner) or 1 (outer); its edges lie between two
+    adjacent normals, at angle pi / k + 2 pi j / k and radius 1 (inner) or 1 / cos(pi / k)."""
+    th = np.pi / facets + 2 * np.pi * np.arange(facets) / facets
+    rad = 1.0 if inner else 1.0 / np.cos(np.pi / facets)
+    return rad * np.stack([np.cos(th), np.sin(th)], axis=1)
 
 
 def _highs_inf(v: np.ndarray, inf: float) -> np.ndarray:
@@ -158,15 +205,17 @@ def _highs_inf(v: np.ndarray, inf: float) -> np.ndarray:
     return np.where(v >= BIG, inf, np.where(v <= -BIG, -inf, v))
 
 
-def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: int) -> dict:
-    """The enumeration tree with `variant` screens (module doc) on `engine`: counts, CPU."""
+def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: int,
+                  form: str = "facets") -> dict:
+    """The enumeration tree with `variant` screens (module doc) on `engine`, its LPs in
+    `form` (PyramidLP): counts, CPU."""
     import hpcwedge.patterns as patterns
     from hpcwedge.feasibility import Decision, decide
     from hpcwedge.rows import Status
     from hpcwedge.socp import VERIFY_TOL, violation
     lps = {} if variant == "none" else {
-        "outer": PyramidLP(param, m, mu, facets, False, engine),
-        **({"inner": PyramidLP(param, m, mu, facets, True, engine)} if variant == "both" else {})}
+        "outer": PyramidLP(param, m, mu, facets, False, engine, form),
+        **({"inner": PyramidLP(param, m, mu, facets, True, engine, form)} if variant == "both" else {})}
     counted = {"socps": 0, "inner_feasible": 0, "outer_infeasible": 0, "outer_wrong": 0, "audit": 0.0}
 
     def screened(rows, mu_, options, counts=None, **kw):
@@ -198,7 +247,8 @@ def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: i
         patterns.decide = saved
     found = sorted((f.contact, f.gap) for f in ex.found)
     calls = sum(lp.calls for lp in lps.values())
-    return {"variant": variant, "engine": engine if lps else None, "tree_nodes": ex.stats.nodes,
+    return {"variant": variant, "engine": engine if lps else None, "form": form if lps else None,
+            "tree_nodes": ex.stats.nodes,
             "socps": counted["socps"], "patterns": len(found),
             "socps_per_pattern": round(counted["socps"] / max(len(found), 1), 1),
             "inner_feasible": counted["inner_feasible"], "outer_infeasible": counted["outer_infeasible"],
@@ -218,7 +268,8 @@ def available(engine: str) -> bool:
         return False
 
 
-def study(levels: int, ring: int, mu: float, engines: list[str], facets: int) -> list[dict]:
+def study(levels: int, ring: int, mu: float, engines: list[str], facets: int,
+          forms: tuple[str, ...] = ("facets",)) -> list[dict]:
     from hpcwedge.build import contact_problem
     from hpcwedge.problem import parametrize
     prob = contact_problem(scene("enumerate", levels, ring))
@@ -226,11 +277,11 @@ def study(levels: int, ring: int, mu: float, engines: list[str], facets: int) ->
     base = screened_tree(param, m, mu, "none", "", facets)
     rows = [base]
     for engine in engines:
-        for variant in ("outer", "both"):
+        for form, variant in ((f, v) for f in forms for v in ("outer", "both")):
             if not available(engine):
-                rows.append({"variant": variant, "engine": engine, "missing": True})
+                rows.append({"variant": variant, "engine": engine, "form": form, "missing": True})
                 continue
-            r = screened_tree(param, m, mu, variant, engine, facets)
+            r = screened_tree(param, m, mu, variant, engine, facets, form)
             r["same_patterns"] = r["hash"] == base["hash"]
             rows.append(r)
     for r in rows:
@@ -244,21 +295,22 @@ def main(argv=None) -> int:
     ap.add_argument("--mu", type=float, default=0.65)
     ap.add_argument("--facets", type=int, default=8)
     ap.add_argument("--engines", nargs="+", default=["clp", "highs"], choices=["clp", "highs"])
+    ap.add_argument("--forms", nargs="+", default=["facets", "generators"], choices=["facets", "generators"])
     ap.add_argument("--out", default=os.path.join(os.path.dirname(HERE), "results", "bench_lp_screens"))
     args = ap.parse_args(argv)
     rows = []
-    print(f"{'scene':<13} {'screens':<12} {'nodes':>7} {'SOCPs':>7} {'/pattern':>8} {'LPs':>7} "
+    print(f"{'scene':<13} {'screens':<16} {'nodes':>7} {'SOCPs':>7} {'/pattern':>8} {'LPs':>7} "
           f"{'it/LP':>6} {'ms/LP':>6} {'LP s':>6} {'CPU s':>6} {'wrong':>5}  patterns")
     for s in args.scenes:
         levels, ring = (int(v) for v in s.split("x"))
-        for r in study(levels, ring, args.mu, args.engines, args.facets):
+        for r in study(levels, ring, args.mu, args.engines, args.facets, tuple(args.forms)):
             rows.append(r)
-            name = r["variant"] if r["engine"] is None else f"{r['variant']} {r['engine']}"
+            name = r["variant"] if r["engine"] is None else f"{r['variant']} {r['engine']} {r['form'][:3]}"
             if r.get("missing"):
-                print(f"{r['scene']:<13} {name:<12} missing (bench extras)")
+                print(f"{r['scene']:<13} {name:<16} missing (bench extras)")
                 continue
             same = "" if "same_patterns" not in r else (" same" if r["same_patterns"] else " DIFFERENT")
-            print(f"{r['scene']:<13} {name:<12} {r['tree_nodes']:>7} {r['socps']:>7} {r['socps_per_pattern']:>8} "
+            print(f"{r['scene']:<13} {name:<16} {r['tree_nodes']:>7} {r['socps']:>7} {r['socps_per_pattern']:>8} "
                   f"{r['lps']:>7} {r['iterations_per_lp']:>6} {r['ms_per_lp']:>6} {r['lp_cpu_seconds']:>6} "
                   f"{r['cpu_seconds']:>6} {r['outer_infeasible_but_socp_feasible']:>5}  {r['patterns']} {r['hash']}{same}",
                   flush=True)
