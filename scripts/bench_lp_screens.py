@@ -4,6 +4,7 @@
     PYTHONPATH=. python scripts/bench_lp_screens.py [--scenes 2x6 3x5 3x6] [--mu 0.65]
                                                     [--facets 8] [--engines clp highs]
                                                     [--forms facets generators]
+                                                    [--from-depths 6 8 9 10]
                                                     [--out results/bench_lp_screens]
 
 Each scene is plug3d LEVELSxRING at mu without symmetry (bench_search_3d.scene), its whole
@@ -16,6 +17,9 @@ in patterns' namespace for this measurement only):
          returns is a point of the node's problem once it verifies on the circular cones
          (socp.violation <= socp.VERIFY_TOL) and is the node's point; then the outer LP;
          then the SOCP
+Then `both` on CLP's generator form from each --from-depths D on: the screens only at tree
+nodes with >= D nodes fixed, the SOCP alone above (its interior points choose the branching
+there; no node of plug3d 3 x 6 with fewer than 8 fixings is infeasible).
 One LP model per (scene, pyramid, form), kept warm in the engine (a node changes bounds
 only: the reactions of its gap nodes fixed to 0, the u_n rows of its contact nodes fixed to
 0), in either form of the same pyramids (PyramidLP): `facets` (a row per facet) or
@@ -206,9 +210,10 @@ def _highs_inf(v: np.ndarray, inf: float) -> np.ndarray:
 
 
 def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: int,
-                  form: str = "facets") -> dict:
+                  form: str = "facets", from_depth: int = 0) -> dict:
     """The enumeration tree with `variant` screens (module doc) on `engine`, its LPs in
-    `form` (PyramidLP): counts, CPU."""
+    `form` (PyramidLP), at the tree nodes with at least `from_depth` nodes fixed (above:
+    the SOCP alone, whose interior points choose the branching there): counts, CPU."""
     import hpcwedge.patterns as patterns
     from hpcwedge.feasibility import Decision, decide
     from hpcwedge.rows import Status
@@ -220,7 +225,7 @@ def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: i
 
     def screened(rows, mu_, options, counts=None, **kw):
         zu, zr = rows.zero_u, rows.zero_r
-        if lps and (~zr).any():
+        if lps and (~zr).any() and np.count_nonzero(zu | zr) >= from_depth:
             if "inner" in lps:
                 status, x = lps["inner"].run(zu, zr)
                 if status == "optimal" and violation(rows, mu_, x) <= VERIFY_TOL:
@@ -248,7 +253,7 @@ def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: i
     found = sorted((f.contact, f.gap) for f in ex.found)
     calls = sum(lp.calls for lp in lps.values())
     return {"variant": variant, "engine": engine if lps else None, "form": form if lps else None,
-            "tree_nodes": ex.stats.nodes,
+            "from_depth": from_depth, "tree_nodes": ex.stats.nodes,
             "socps": counted["socps"], "patterns": len(found),
             "socps_per_pattern": round(counted["socps"] / max(len(found), 1), 1),
             "inner_feasible": counted["inner_feasible"], "outer_infeasible": counted["outer_infeasible"],
@@ -269,7 +274,10 @@ def available(engine: str) -> bool:
 
 
 def study(levels: int, ring: int, mu: float, engines: list[str], facets: int,
-          forms: tuple[str, ...] = ("facets",)) -> list[dict]:
+          forms: tuple[str, ...] = ("facets",), from_depths: tuple[int, ...] = ()) -> list[dict]:
+    """The rows of one scene: the product's tree, then per engine and form the outer and
+    both screens at every node, then both screens on CLP's generator form from each of
+    `from_depths` on (when CLP imports)."""
     from hpcwedge.build import contact_problem
     from hpcwedge.problem import parametrize
     prob = contact_problem(scene("enumerate", levels, ring))
@@ -284,6 +292,10 @@ def study(levels: int, ring: int, mu: float, engines: list[str], facets: int,
             r = screened_tree(param, m, mu, variant, engine, facets, form)
             r["same_patterns"] = r["hash"] == base["hash"]
             rows.append(r)
+    for d in from_depths if available("clp") else ():
+        r = screened_tree(param, m, mu, "both", "clp", facets, "generators", d)
+        r["same_patterns"] = r["hash"] == base["hash"]
+        rows.append(r)
     for r in rows:
         r.update(scene=f"plug3d {levels}x{ring}", m=m, mu=mu, facets=facets)
     return rows
@@ -296,21 +308,25 @@ def main(argv=None) -> int:
     ap.add_argument("--facets", type=int, default=8)
     ap.add_argument("--engines", nargs="+", default=["clp", "highs"], choices=["clp", "highs"])
     ap.add_argument("--forms", nargs="+", default=["facets", "generators"], choices=["facets", "generators"])
+    ap.add_argument("--from-depths", nargs="*", type=int, default=[6, 8, 9, 10],
+                    help="rows of both screens (CLP, generators) from this many fixings on")
     ap.add_argument("--out", default=os.path.join(os.path.dirname(HERE), "results", "bench_lp_screens"))
     args = ap.parse_args(argv)
     rows = []
-    print(f"{'scene':<13} {'screens':<16} {'nodes':>7} {'SOCPs':>7} {'/pattern':>8} {'LPs':>7} "
+    print(f"{'scene':<13} {'screens':<20} {'nodes':>7} {'SOCPs':>7} {'/pattern':>8} {'LPs':>7} "
           f"{'it/LP':>6} {'ms/LP':>6} {'LP s':>6} {'CPU s':>6} {'wrong':>5}  patterns")
     for s in args.scenes:
         levels, ring = (int(v) for v in s.split("x"))
-        for r in study(levels, ring, args.mu, args.engines, args.facets, tuple(args.forms)):
+        for r in study(levels, ring, args.mu, args.engines, args.facets, tuple(args.forms),
+                       tuple(args.from_depths)):
             rows.append(r)
             name = r["variant"] if r["engine"] is None else f"{r['variant']} {r['engine']} {r['form'][:3]}"
+            name += f" >={r['from_depth']}" if r.get("from_depth") else ""
             if r.get("missing"):
-                print(f"{r['scene']:<13} {name:<16} missing (bench extras)")
+                print(f"{r['scene']:<13} {name:<20} missing (bench extras)")
                 continue
             same = "" if "same_patterns" not in r else (" same" if r["same_patterns"] else " DIFFERENT")
-            print(f"{r['scene']:<13} {name:<16} {r['tree_nodes']:>7} {r['socps']:>7} {r['socps_per_pattern']:>8} "
+            print(f"{r['scene']:<13} {name:<20} {r['tree_nodes']:>7} {r['socps']:>7} {r['socps_per_pattern']:>8} "
                   f"{r['lps']:>7} {r['iterations_per_lp']:>6} {r['ms_per_lp']:>6} {r['lp_cpu_seconds']:>6} "
                   f"{r['cpu_seconds']:>6} {r['outer_infeasible_but_socp_feasible']:>5}  {r['patterns']} {r['hash']}{same}",
                   flush=True)

@@ -98,3 +98,15 @@ def test_screened_trees_find_the_products_patterns_with_fewer_socps(body, engine
         assert r["lps"] > 0 and r["outer_infeasible"] > 0
     assert outer["socps"] < base["socps"] and both["socps"] < outer["socps"]
     assert both["inner_feasible"] > 0
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_screens_from_a_depth_on_leave_the_tree_above_it_alone(body, engine):
+    param, m = body
+    base = bench_lp_screens.screened_tree(param, m, MU, "none", "", 8)
+    below = bench_lp_screens.screened_tree(param, m, MU, "both", engine, 8, "generators", from_depth=m + 1)
+    assert (below["lps"], below["tree_nodes"], below["socps"]) == (0, base["tree_nodes"], base["socps"])
+    deep = bench_lp_screens.screened_tree(param, m, MU, "both", engine, 8, "generators", from_depth=m // 2)
+    every = bench_lp_screens.screened_tree(param, m, MU, "both", engine, 8, "generators")
+    assert deep["hash"] == base["hash"] and deep["lps"] > 0
+    assert 0 < deep["lps"] < every["lps"]
