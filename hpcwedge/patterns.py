@@ -25,6 +25,7 @@ from .parallel.tasks import task_stopping
 from .problem import Parametrization, blocks
 from .results import TreeStats
 from .rows import ConeRows, Status, count, node_rows, pattern_rows, problem_dim
+from .screens import PyramidScreens
 from .socp import verified
 from .symmetry import Symmetry
 
@@ -141,7 +142,7 @@ class PatternTree:
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None, symmetry: Symmetry | None = None,
                  learn_cores: bool = False, orbital_fixing: bool = True,
-                 options: SolverOptions = TREE_OPTIONS):
+                 options: SolverOptions = TREE_OPTIONS, screens: bool = False):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
         #: the solver options of every solve (3D: long steps by default; DEFAULT_OPTIONS for
         #: a search near mu^c, global_mu_c, where long steps left nodes undecided)
@@ -167,6 +168,8 @@ class PatternTree:
         #: without symmetry: 0-6 % fewer SOCPs, the same B&B time within noise)
         self._cores = Cores(m) if learn_cores and self.dim == 3 and friction and m <= Cores.MAX_M else None
         self._node_rows = node_rows(param, m) if self._cores is not None else None
+        #: 3D with friction and screens: LP screens before the SOCPs of deep nodes (screens.py)
+        self._screens = PyramidScreens(param, m, mu) if screens and self.dim == 3 and friction else None
 
     def root(self) -> Subtree:
         return Subtree(0)
@@ -206,12 +209,16 @@ class PatternTree:
                 if self._cores is not None and self._cores.covers(node):
                     stats.pruned += 1
                     continue
-                stats.solves += 1
                 zu, zr = node.masks(m)
-                steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
                 rows = pattern_rows(param, m, zu, zr, self.friction)
-                dec = decide(rows, mu, self.options, stats.statuses, objective=steer,
-                             farkas=self._cores is not None)
+                dec = None
+                if self._screens is not None and self._screens.applies(zu, zr):
+                    dec = self._screens.decide(rows, zu, zr, stats.statuses)
+                if dec is None:
+                    stats.solves += 1
+                    steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
+                    dec = decide(rows, mu, self.options, stats.statuses, objective=steer,
+                                 farkas=self._cores is not None)
                 if dec.status == Status.INFEASIBLE:
                     if dec.farkas is not None and self._cores is not None:
                         self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
@@ -249,7 +256,7 @@ class PatternTree:
                 kid = Subtree(node.depth + len(contacts) + len(gaps), kc, kg)
                 kids.append((kid, None if pt is None else self._witness(kid, pt, contacts, gaps, mu)))
             stack.extend(reversed(kids))
-        stats.lps = stats.statuses.get("lp_calls", 0)
+        stats.lps = stats.statuses.get("lp_calls", 0) + stats.statuses.get("screen_lps", 0)
         rest = stack[::-1]
         return Explored(found, [node for node, _ in rest], stats, undecided,
                         open_x=[w for _, w in rest], stopped=stopped)

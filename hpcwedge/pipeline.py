@@ -396,7 +396,7 @@ def patterns(ctx: Context) -> PatternSets:
     representatives, expanded here). 2D: redone from the exact rays when the LP decisions
     are suspect and m small (numerics.recheck_patterns_2d). A warning for undecided ones."""
     scene, m, sym = ctx.scene, ctx.m, ctx.symmetry
-    make_tree = partial(PatternTree, ctx.float_param, m, symmetry=sym)
+    make_tree = partial(PatternTree, ctx.float_param, m, symmetry=sym, screens=scene.screens)
     pats = run_patterns(make_tree, scene.mu, engine=ctx.engine, budget=scene.task_budget)
     items = []
     for found, doubt in zip(pats.found, pats.undecided):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.util
 import inspect
 import math
 import os
@@ -33,7 +34,7 @@ COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate
                     "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
                     "exact_fallback_max_m": 10}
 RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
-                "condense": "auto", "max_memory_gb": "auto"}
+                "condense": "auto", "max_memory_gb": "auto", "screens": False}
 #: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
 CONDENSE_MODES = ("auto", "serial", "distributed")
 #: friction coefficients (friction.mu, compute.mu_max) outside this range overflow or
@@ -90,6 +91,7 @@ class Scene:
     base_dir: str = "."
     task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel/)
     symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
+    screens: bool = False          # run.screens: 3D tree, LP screens before deep SOCPs (screens.py)
     face_split: int | str = "auto"  # run.face_split: branching nodes of the 2D DD split (faces.branching_nodes)
     condense: str = "auto"         # run.condense: auto | serial | distributed (under mpirun)
     obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
@@ -262,8 +264,11 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     v = run["task_budget"]
     if isinstance(v, bool) or not isinstance(v, int) or v < 1:
         raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
-    if not isinstance(run["symmetry"], bool):
-        raise SceneError(f"run.symmetry: true or false, got {run['symmetry']!r}")
+    for key in ("symmetry", "screens"):
+        if not isinstance(run[key], bool):
+            raise SceneError(f"run.{key}: true or false, got {run[key]!r}")
+    if run["screens"] and importlib.util.find_spec("cylp") is None:
+        raise SceneError("run.screens: needs COIN-OR CLP, which is not installed (pip install cylp)")
     v = run["face_split"]
     if v != "auto" and (isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 8):
         raise SceneError(f"run.face_split: \"auto\" or a whole number 0..8 (branching nodes), got {v!r}")
@@ -310,7 +315,7 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                  mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
                  exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
                  text=text, base_dir=base_dir, task_budget=run["task_budget"],
-                 symmetry=run["symmetry"], face_split=run["face_split"], condense=run["condense"],
+                 symmetry=run["symmetry"], screens=run["screens"], face_split=run["face_split"], condense=run["condense"],
                  obstacles=obstacles, obstacle_key=obstacle_key,
                  exact_fallback_max_m=compute["exact_fallback_max_m"], max_memory_gb=run["max_memory_gb"])
 

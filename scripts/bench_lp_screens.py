@@ -54,6 +54,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from bench_search_3d import scene  # noqa: E402
 
+from hpcwedge.screens import edge_matrix  # noqa: E402
+
 #: what the engines take for an infinite bound (CLP: COIN_DBL_MAX)
 BIG = float(np.finfo(float).max)
 
@@ -96,10 +98,7 @@ class PyramidLP:
             self.G, fixed = None, 3 * m               # a gap node fixes r_n, r_t1, r_t2
             self.col_lo = np.concatenate([np.zeros(m), np.full(nc - m, -BIG)])
         else:
-            edges = mu * pyramid_edges(facets, inner)                 # (k, 2)
-            G = np.zeros((n, m * facets))                             # node i's edges: columns i*k..
-            for a, coef in enumerate((np.ones(facets), edges[:, 0], edges[:, 1])):
-                G[a * m + np.repeat(np.arange(m), facets), np.arange(m * facets)] = np.tile(coef, m)
+            G = edge_matrix(m, mu, facets, inner)                     # node i's edges: columns i*k..
             A_u = np.hstack([Un[:, :n] @ G, Un[:, n:]])
             A = np.vstack([np.hstack([rc.E @ G, np.zeros((k, nb))]),
                            A_u / np.linalg.norm(A_u, axis=1, keepdims=True),
@@ -192,16 +191,6 @@ class PyramidLP:
         self.seconds += time.process_time() - t0
         self.calls += 1
         return status, x
-
-
-def pyramid_edges(facets: int, inner: bool) -> np.ndarray:
-    """(k, 2): the tangential part per unit r_n (mu = 1) of the k edges of the pyramid
-    rows.pyramid_rows builds with a facet normal on t1 (phase 0): facet normals at angles
-    2 pi j / k, at distance cos(pi / k) (inner) or 1 (outer); its edges lie between two
-    adjacent normals, at angle pi / k + 2 pi j / k and radius 1 (inner) or 1 / cos(pi / k)."""
-    th = np.pi / facets + 2 * np.pi * np.arange(facets) / facets
-    rad = 1.0 if inner else 1.0 / np.cos(np.pi / facets)
-    return rad * np.stack([np.cos(th), np.sin(th)], axis=1)
 
 
 def _highs_inf(v: np.ndarray, inf: float) -> np.ndarray:

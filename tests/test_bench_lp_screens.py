@@ -68,24 +68,6 @@ def test_pyramid_lps_agree_with_the_socp(body, partitions, engine, form):
     assert (proved_feasible, proved_infeasible) == (feasible, len(partitions) - feasible)
 
 
-@pytest.mark.parametrize("inner", [True, False])
-def test_pyramid_edges_span_the_pyramid_of_the_facets(inner):
-    """Each edge of pyramid_edges lies on two adjacent facets of rows.pyramid_rows's pyramid
-    (phase 0) and inside all the others, so both forms describe one pyramid."""
-    from types import SimpleNamespace
-    from hpcwedge.rows import pyramid_rows
-    k = 8
-    cone = SimpleNamespace(eq=np.zeros((0, 3)), lin=np.zeros((0, 3)), rn=np.array([[1.0, 0, 0]]),
-                           rt=np.array([[[0, 1.0, 0], [0, 0, 1.0]]]), norm=np.array([1.0, 0, 0]))
-    rows = pyramid_rows(cone, k, inner, phase=np.zeros(1))
-    edges = np.column_stack([np.ones(k), bench_lp_screens.pyramid_edges(k, inner)])   # mu = 1
-    slack = edges @ (rows.a0 + rows.a1).T                                           # (edge, facet)
-    assert slack.min() > -1e-15
-    assert ((np.abs(slack) < 1e-15).sum(axis=1) == 2).all()
-    if inner:   # inscribed: the edges lie on the circular cone
-        assert np.allclose(np.hypot(edges[:, 1], edges[:, 2]), 1.0, rtol=0, atol=1e-15)
-
-
 @pytest.mark.parametrize("engine", ENGINES)
 def test_screened_trees_find_the_products_patterns_with_fewer_socps(body, engine):
     param, m = body

@@ -98,6 +98,7 @@ NAN, INF = float("nan"), float("inf")
     ({"run": {"task_budget": True}}, "run.task_budget"),
     ({"run": {"face_split": 2.0}}, "run.face_split"),
     ({"run": {"symmetry": 1}}, "run.symmetry"),
+    ({"run": {"screens": "lp"}}, "run.screens"),
     ({"run": {"checkpoint_every": 1}}, "run.checkpoint_every"),
     # stiffness: [model] and [contact]
     ({"model": {**BASE["model"], "null_spcae": [[1.0], [0.0]]}}, "model.null_spcae"),
