@@ -6,7 +6,8 @@
 
 Scenes: plug3d LEVELS x RING (m = LEVELS * RING contact nodes), `run.symmetry = false`
 (a generic body: no orbit saves a solve), each in its own process (bench_2d.run_script)
-through `hpcwedge run`'s route (pipeline.run_scene):
+through `hpcwedge run`'s route (pipeline.run_scene), enumerations both as `ours` (the
+default tree) and as `screens` (`run.screens = true`: LP screens before the deep SOCPs):
   enumerate  all feasible sign patterns at mu = 0.65 (`mu_c = "none"`): 2 x 6, 3 x 5, 3 x 6,
              and with --full 4 x 6 (about 4 minutes)
   global     the global mu^c (`enumerate = false`, `mu_c = "global"`, mu = 0.3): 2 x 6, 3 x 6,
@@ -19,7 +20,7 @@ on issue 13's indicator MISOCP (reference.scip_model: friction as second-order c
   global     bisection on mu in (0, 0.3] to 1e-6 relative (reference.scip_wedged): 2 x 6,
              3 x 6, with --full 4 x 6
 Per row: the patterns (their set's hash, to compare runs), tree nodes, SOCPs, SOCPs per
-feasible pattern, undecided, the share of SOCPs that Clarabel's first attempt settled
+feasible pattern, LPs (screens and pyramid fallbacks), undecided, the share of SOCPs that Clarabel's first attempt settled
 (`first_attempt`: the SOCPs that needed no retry over all SOCPs, from the result's solver
 statuses), CPU and wall seconds. Counts are the same on every machine; seconds are not
 (2 shared cores: read them as +-2x). --quick: 2 x 6 only.
@@ -50,14 +51,14 @@ MU_ENUMERATE = 0.65
 MU_GLOBAL = 0.3
 
 
-def scene(task: str, levels: int, ring: int):
+def scene(task: str, levels: int, ring: int, screens: bool = False):
     from hpcwedge.scene import parse_scene
     enum = task == "enumerate"
     return parse_scene({"name": f"plug3d-{levels}x{ring}", "dim": 3,
                         "model": {"kind": "plug3d", "levels": levels, "ring": ring},
                         "friction": {"mu": [MU_ENUMERATE if enum else MU_GLOBAL]},
                         "compute": {"enumerate": enum, "mu_c": "none" if enum else "global"},
-                        "run": {"symmetry": False}})
+                        "run": {"symmetry": False, "screens": screens}})
 
 
 def first_attempt(statuses: dict) -> tuple[int, int]:
@@ -96,14 +97,15 @@ def scip_worker(task: str, levels: int, ring: int) -> dict:
     return out
 
 
-def worker(task: str, levels: int, ring: int) -> dict:
+def worker(task: str, levels: int, ring: int, screens: bool = False) -> dict:
     from hpcwedge.pipeline import run_scene
     t, c = time.perf_counter(), time.process_time()
-    res = run_scene(scene(task, levels, ring))
+    res = run_scene(scene(task, levels, ring, screens))
     wall, cpu = time.perf_counter() - t, time.process_time() - c
     bnb = res.stats["bnb"]
     statuses = res.stats.get("socp_statuses") or {}
-    out = {"m": res.m, "nodes": bnb.get("nodes"), "socps": bnb.get("solves"), "undecided": bnb.get("undecided"),
+    out = {"m": res.m, "nodes": bnb.get("nodes"), "socps": bnb.get("solves"), "lps": bnb.get("lps"),
+           "undecided": bnb.get("undecided"),
            "seconds": cpu, "wall_in_process": wall}
     if task == "enumerate":
         pats = [tuple(p["contact"]) for p in res.runs[0].patterns]
@@ -128,10 +130,11 @@ def main() -> None:
     args = ap.parse_args()
     if args.worker:
         engine, task, levels, ring = args.worker[0], args.worker[1], int(args.worker[2]), int(args.worker[3])
-        out = (worker if engine == "ours" else scip_worker)(task, levels, ring)
+        out = scip_worker(task, levels, ring) if engine == "scip" else worker(task, levels, ring, engine == "screens")
         print(bench_2d.MARK + json.dumps(out))
         return
-    plan = [("ours", "enumerate", lr) for lr in (ENUMERATE[:1] if args.quick else ENUMERATE + (FULL if args.full else ()))]
+    plan = [(e, "enumerate", lr) for lr in (ENUMERATE[:1] if args.quick else ENUMERATE + (FULL if args.full else ()))
+            for e in ("ours", "screens")]
     plan += [("ours", "global", lr) for lr in (GLOBAL[:1] if args.quick else GLOBAL + (FULL_GLOBAL if args.full else ()))]
     if not args.no_peers:
         plan += [("scip", "enumerate", lr) for lr in
@@ -163,14 +166,14 @@ def main() -> None:
 
 
 def line(r: dict) -> str:
-    keys = ("patterns", "patterns_hash", "nodes", "socps", "socps_per_pattern", "first_attempt", "milp_solves",
+    keys = ("patterns", "patterns_hash", "nodes", "socps", "socps_per_pattern", "lps", "first_attempt", "milp_solves",
             "milp_nodes", "undecided", "mu_c", "seconds")
-    return f"{r['engine']:4s} {r['task']:9s} m={r['m']:3d} {r['status']:7s} {bench_2d.fields(r, keys, 4)}"
+    return f"{r['engine']:7s} {r['task']:9s} m={r['m']:3d} {r['status']:7s} {bench_2d.fields(r, keys, 4)}"
 
 
 #: the CSV's columns
 COLUMNS = ["engine", "task", "levels", "ring", "m", "status", "patterns", "patterns_hash", "nodes", "socps",
-           "socps_per_pattern", "first_attempt", "milp_solves", "milp_nodes", "undecided", "mu_c", "seconds",
+           "socps_per_pattern", "lps", "first_attempt", "milp_solves", "milp_nodes", "undecided", "mu_c", "seconds",
            "wall"]
 
 

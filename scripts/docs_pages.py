@@ -63,6 +63,8 @@ MEANINGS: dict[str, dict[str, tuple[str, str, str]]] = {
         "checkpoint_every_s": ("number > 0", "s", "Period of the master's checkpoint `RESULT.h5.ckpt`."),
         "task_budget": ("integer ≥ 1", "tree nodes", "Sign-pattern tree nodes per task before a subtree is handed back."),
         "symmetry": ("boolean", "", "Use the node symmetries of K (orbits of patterns, mu^c once per orbit)."),
+        "screens": ("boolean", "", "3D: LP screens (COIN-OR CLP) before the SOCP of every sign-pattern tree node "
+                    "with half the nodes fixed: fewer SOCPs (plug3d 3 × 6: 8.5 per pattern against 57), about the same time."),
         "face_split": ('"auto" or integer 0..8', "nodes",
                        "2D: branching nodes of the double-description split over faces (\"auto\": 3 from m = 16 on)."),
         "condense": ('"auto", "serial" or "distributed"', "",
@@ -551,6 +553,26 @@ def bench_search_3d_kinds() -> str:
                   "patterns (hash) or mu^c (to 1e-14)", f"CPU s ({arch[0]})", f"CPU s ({arch[1]})"], rows)
 
 
+def bench_search_3d_screens() -> str:
+    """The enumerations of results/bench_search_3d.json with and without the LP screens
+    (engines "ours" and "screens", `run.screens`): patterns (the same set?), nodes, SOCPs
+    (per pattern), LPs, first attempt settled and CPU seconds of each."""
+    recs = _load("bench_search_3d.json")["records"]
+    screened = {r["m"]: r for r in recs if r.get("engine") == "screens" and r["task"] == "enumerate"}
+    rows = []
+    for a in (r for r in recs if r.get("engine", "ours") == "ours" and r["task"] == "enumerate"):
+        b = screened.get(a["m"])
+        if b is None or "ok" not in (a["status"], b["status"]) or a["status"] != b["status"]:
+            continue
+        same = "the same" if a["patterns_hash"] == b["patterns_hash"] else "ANOTHER SET"
+        cells = [[f"{x['nodes']:,}", f"{x['socps']:,} ({x['socps_per_pattern']:.1f})", f"{x.get('lps') or 0:,}",
+                  f"{100 * x['first_attempt']:.1f} %", _s(x["seconds"], 3)] for x in (a, b)]
+        rows.append([f"{a['levels']} × {a['ring']}", str(a["m"]), f"{a['patterns']:,} ({same})",
+                     *[f"{u} → {v}" for u, v in zip(*cells)]])
+    return table(["plug3d", "m", "patterns (screened)", "tree nodes", "SOCPs (per pattern)", "LPs",
+                  "first attempt settled", "CPU s"], rows)
+
+
 def stress_3d() -> str:
     """results/stress_3d.json (scripts/stress_3d.py) beside results/stress_3d_before.json (the
     same script on the code before the balanced reaction form): per case the patterns, SOCPs,
@@ -651,6 +673,8 @@ BENCHMARKS: dict = {
     "bench_search_3d_kinds": (bench_search_3d_kinds, "results/bench_search_3d.json, results/bench_search_3d_no_avx512.json",
                               "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full [--no-peers --out"
                               " results/bench_search_3d_no_avx512]"),
+    "bench_search_3d_screens": (bench_search_3d_screens, "results/bench_search_3d.json",
+                                "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full"),
     "stress_3d": (stress_3d, "results/stress_3d.json, results/stress_3d_before.json",
                   "PYTHONPATH=. .venv/bin/python scripts/stress_3d.py"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
