@@ -171,17 +171,17 @@ class PyramidScreens:
 
     def decide(self, rows: ConeRows, zu: np.ndarray, zr: np.ndarray,
                counts: dict | None = None) -> Decision | None:
-        status, x = self._lp(True).solve(zu, zr)
-        count(counts, "screen_lps")
-        if status == "optimal":
-            x = verified(rows, self.mu, x)
-            if x is None:
-                return None                              # the outer LP, wider, is feasible too
-            count(counts, "screen_feasible")
-            return Decision(Status.FEASIBLE, x)
+        # the outer LP first: 10,145 LPs against 10,869 inner first on plug3d 3 x 6 (more of
+        # the screened nodes are infeasible, 3,485 against 2,761 feasible)
         status, _ = self._lp(False).solve(zu, zr)
         count(counts, "screen_lps")
         if status == "infeasible":
             count(counts, "screen_infeasible")
             return Decision(Status.INFEASIBLE)
-        return None
+        status, x = self._lp(True).solve(zu, zr)
+        count(counts, "screen_lps")
+        x = verified(rows, self.mu, x) if status == "optimal" else None
+        if x is None:
+            return None
+        count(counts, "screen_feasible")
+        return Decision(Status.FEASIBLE, x)
