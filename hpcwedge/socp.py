@@ -209,6 +209,12 @@ class _ReactionLayout:
     beta_map: np.ndarray | None
 
 
+def beta_whitening(form: ReactionCoordinates, m: int) -> np.ndarray | None:
+    """The map W (nb, nb) of the reaction form's rigid amplitudes, beta = W beta', under which
+    the u_n block's beta columns are orthonormal (WHITEN_COND); None: kept as they are."""
+    return _reaction_layout(form, m).beta_map
+
+
 def _reaction_layout(form: ReactionCoordinates, m: int) -> _ReactionLayout:
     """_ReactionLayout of (form, m), computed once (kept on `form`)."""
     def build() -> _ReactionLayout:
