@@ -17,7 +17,7 @@ scripts/bench_socp_count.py (results/bench_socp_count.json); its table is
 copied into the JSON here when present.
 
     .venv/bin/python scripts/bench_parallel.py [--levels 3] [--ring 6] [--mu 1.0] [--repeat 2]
-        [--mu-c cones|none] [--no-symmetry] [--workers 0 1 2 3] [--out results/bench_parallel]
+        [--mu-c cones|none] [--no-symmetry] [--screens] [--workers 0 1 2 3] [--out results/bench_parallel]
 
 Issue 13's target (plug3d 4 x 6 without symmetry, patterns only, 2 workers >= 1.8x 1 worker):
     .venv/bin/python scripts/bench_parallel.py --levels 4 --ring 6 --mu 0.65 --mu-c none \
@@ -42,12 +42,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "results")
 
 
-def scene_text(levels: int, ring: int, mu: float, mu_c: str = "cones", symmetry: bool = True) -> str:
+def scene_text(levels: int, ring: int, mu: float, mu_c: str = "cones", symmetry: bool = True,
+               screens: bool = False) -> str:
     """mu_c "global": the global mu^c alone (no enumeration), else the patterns and mu_c."""
     enumerate_ = str(mu_c != "global").lower()
     return (f'name = "plug3d-{levels}x{ring}"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = {levels}\n'
             f'ring = {ring}\n[friction]\nmu = [{mu}]\n[compute]\nenumerate = {enumerate_}\nmu_c = "{mu_c}"\n'
-            f'[run]\ncheckpoint_every_s = 600\nsymmetry = {str(symmetry).lower()}\n')
+            f'[run]\ncheckpoint_every_s = 600\nsymmetry = {str(symmetry).lower()}\n'
+            f'screens = {str(screens).lower()}\n')
 
 
 def run(ranks: int | None, scene: str, out: str) -> float:
@@ -82,13 +84,14 @@ def main() -> None:
                     help="global: the global mu^c search alone (its jobs global_bracket, global_patterns, "
                          "global_mu_c), no enumeration")
     ap.add_argument("--no-symmetry", action="store_true", help="run.symmetry = false (a generic body)")
+    ap.add_argument("--screens", action="store_true", help="run.screens = true (LP screens in the 3D tree)")
     ap.add_argument("--workers", type=int, nargs="*", default=[0, 1, 2, 3],
                     help="configurations: 0 = serial, k = mpirun with k workers (1 must be among them)")
     ap.add_argument("--out", default=os.path.join(OUT, "bench_parallel"))
     args = ap.parse_args()
     if 1 not in args.workers:
         ap.error("--workers must include 1: the speedups are against 1 worker")
-    text = scene_text(args.levels, args.ring, args.mu, args.mu_c, not args.no_symmetry)
+    text = scene_text(args.levels, args.ring, args.mu, args.mu_c, not args.no_symmetry, args.screens)
     tmp = tempfile.mkdtemp(prefix="bench_parallel_")
     scene = os.path.join(tmp, "scene.toml")
     with open(scene, "w") as f:

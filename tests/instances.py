@@ -238,3 +238,32 @@ def python_calls(build) -> int:
     finally:
         sys.setprofile(None)
     return calls
+
+
+def pyramid_agreement(param, m: int, mu: float, inner, outer) -> None:
+    """Every partition of a 3D body (a node out of gap) decided by two pyramid LPs,
+    inner(zu, zr) and outer(zu, zr) -> (status "optimal" / "infeasible" / ..., x or None),
+    and by the SOCP route (feasibility.decide): an inner point that verifies on the circular
+    cones only where the SOCP is feasible, an outer "infeasible" only where it is not, and
+    (pyramids of 64 facets, within 1.2e-3 of the circle, on a body with no full pattern that
+    close to its mu^c) every partition decided one way or the other (test_screens.py,
+    test_bench_lp_screens.py)."""
+    from hpcwedge.feasibility import decide
+    from hpcwedge.rows import Status, pattern_rows
+    from hpcwedge.socp import VERIFY_TOL, violation
+    feasible = proved_feasible = proved_infeasible = 0
+    for code in range(1, 2 ** m):
+        zr = np.array([not code >> i & 1 for i in range(m)])
+        zu = ~zr
+        rows = pattern_rows(param, m, zu, zr)
+        status = decide(rows, mu).status
+        feasible += status == Status.FEASIBLE
+        s_in, x = inner(zu, zr)
+        if s_in == "optimal" and violation(rows, mu, x) <= VERIFY_TOL:
+            assert status == Status.FEASIBLE
+            proved_feasible += 1
+        if outer(zu, zr)[0] == "infeasible":
+            assert status == Status.INFEASIBLE
+            proved_infeasible += 1
+    assert 0 < feasible < 2 ** m - 1
+    assert (proved_feasible, proved_infeasible) == (feasible, 2 ** m - 1 - feasible)

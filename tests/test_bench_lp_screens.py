@@ -7,18 +7,15 @@ the screened trees find the product's patterns with fewer SOCPs."""
 import os
 import sys
 
-import numpy as np
 import pytest
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "scripts"))
 import bench_lp_screens   # noqa: E402
 from bench_search_3d import scene   # noqa: E402
+from instances import pyramid_agreement   # noqa: E402
 
 from hpcwedge.build import contact_problem
-from hpcwedge.feasibility import decide
 from hpcwedge.problem import parametrize
-from hpcwedge.rows import Status, pattern_rows
-from hpcwedge.socp import VERIFY_TOL, violation
 
 MU = 0.65
 ENGINES = [pytest.param(e, marks=pytest.mark.skipif(not bench_lp_screens.available(e),
@@ -32,40 +29,13 @@ def body():
     return parametrize(prob), prob.m
 
 
-@pytest.fixture(scope="module")
-def partitions(body):
-    """Every (contact, gap) partition of plug3d 2 x 4 with a node out of gap, and the SOCP's
-    status of each."""
-    param, m = body
-    out = []
-    for code in range(1, 2 ** m):
-        zr = np.array([not code >> i & 1 for i in range(m)])
-        zu = ~zr
-        out.append((zu, zr, decide(pattern_rows(param, m, zu, zr), MU).status))
-    return out
-
-
 @pytest.mark.parametrize("form", ["facets", "generators"])
 @pytest.mark.parametrize("engine", ENGINES)
-def test_pyramid_lps_agree_with_the_socp(body, partitions, engine, form):
+def test_pyramid_lps_agree_with_the_socp(body, engine, form):
     param, m = body
     inner = bench_lp_screens.PyramidLP(param, m, MU, 64, True, engine, form)
     outer = bench_lp_screens.PyramidLP(param, m, MU, 64, False, engine, form)
-    proved_feasible = proved_infeasible = 0
-    for zu, zr, status in partitions:
-        rows = pattern_rows(param, m, zu, zr)
-        s_in, x = inner.run(zu, zr)
-        if s_in == "optimal" and violation(rows, MU, x) <= VERIFY_TOL:
-            assert status == Status.FEASIBLE
-            proved_feasible += 1
-        if outer.run(zu, zr)[0] == "infeasible":
-            assert status == Status.INFEASIBLE
-            proved_infeasible += 1
-    feasible = sum(s == Status.FEASIBLE for *_, s in partitions)
-    assert 0 < feasible < len(partitions)
-    # 64 facets are within 1.2e-3 of the circular cone: no full pattern of this body is
-    # that close to its mu^c, so every one is decided
-    assert (proved_feasible, proved_infeasible) == (feasible, len(partitions) - feasible)
+    pyramid_agreement(param, m, MU, inner.run, outer.run)
 
 
 @pytest.mark.parametrize("engine", ENGINES)

@@ -10,14 +10,14 @@ import pytest
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "scripts"))
 from bench_search_3d import scene   # noqa: E402
-from instances import brute_3d, random_problem_3d   # noqa: E402
+from instances import brute_3d, pyramid_agreement, random_problem_3d   # noqa: E402
 from mpi_helpers import needs_mpirun, run, show_json   # noqa: E402
 
 from hpcwedge.build import contact_problem
 from hpcwedge.feasibility import decide
 from hpcwedge.patterns import BnBStats, PatternTree
 from hpcwedge.problem import parametrize
-from hpcwedge.rows import Status, pattern_rows, pyramid_rows
+from hpcwedge.rows import Status, pyramid_rows
 from hpcwedge.screens import PyramidLP, PyramidScreens, pyramid_edges, screens_available
 from hpcwedge.socp import VERIFY_TOL, violation
 
@@ -58,22 +58,7 @@ def test_pyramid_lps_agree_with_the_socp_on_every_partition(body):
     body is that close to its mu^c) each pyramid decides every partition."""
     param, m = body
     inner, outer = PyramidLP(param, m, MU, True, 64), PyramidLP(param, m, MU, False, 64)
-    feasible = proved_feasible = proved_infeasible = 0
-    for code in range(1, 2 ** m):
-        zr = np.array([not code >> i & 1 for i in range(m)])
-        zu = ~zr
-        rows = pattern_rows(param, m, zu, zr)
-        status = decide(rows, MU).status
-        feasible += status == Status.FEASIBLE
-        s_in, x = inner.solve(zu, zr)
-        if s_in == "optimal" and violation(rows, MU, x) <= VERIFY_TOL:
-            assert status == Status.FEASIBLE
-            proved_feasible += 1
-        if outer.solve(zu, zr)[0] == "infeasible":
-            assert status == Status.INFEASIBLE
-            proved_infeasible += 1
-    assert 0 < feasible < 2 ** m - 1
-    assert (proved_feasible, proved_infeasible) == (feasible, 2 ** m - 1 - feasible)
+    pyramid_agreement(param, m, MU, inner.solve, outer.solve)
     assert inner.calls == outer.calls == 2 ** m - 1
 
 
