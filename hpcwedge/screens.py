@@ -21,10 +21,10 @@ branching that follows from it — does not depend on which LP was solved before
 split of the tree over tasks, ranks and resumes). The outer LP has no objective; only its
 status is used.
 
-Measured on plug3d 3 x 6 at mu 0.65 without symmetry (scripts/bench_lp_screens.py): the
-screens from half the depth on (SCREEN_FROM) take the SOCPs per feasible pattern from 57
-to about 9 at about the same CPU time; above that depth no node of that body is
-infeasible and the SOCP's interior points choose better branchings than LP vertices.
+Measured on plug3d 3 x 6 at mu 0.65 without symmetry (scripts/bench_search_3d.py): the
+screens from 0.4 of the depth on (SCREEN_FROM) take the SOCPs per feasible pattern from 57
+to 6.7 in about the same CPU time; above that depth hardly a node of that body is
+infeasible, and the SOCP's interior points choose better branchings than LP vertices.
 """
 from __future__ import annotations
 
@@ -40,8 +40,10 @@ from .socp import beta_whitening, verified
 
 #: facets per friction cone of both pyramids
 SCREEN_FACETS = 8
-#: the screens run at tree nodes with at least this share of the m nodes fixed
-SCREEN_FROM = 0.5
+#: the screens run at tree nodes with at least this share of the m nodes fixed (plug3d at
+#: mu 0.65: from 0.35 to 0.6 the same CPU time within 3 %; SOCPs per pattern at 0.4 and 0.5:
+#: m = 18 6.7 and 8.5, m = 24 9.2 and 12.8)
+SCREEN_FROM = 0.4
 #: what CLP takes for an infinite bound (COIN_DBL_MAX)
 BIG = float(np.finfo(float).max)
 #: CLP's primal feasibility tolerance on the inner LP (lp.LP_OPTIONS' for HiGHS)

@@ -111,7 +111,7 @@ def test_every_screen_decision_agrees_with_the_socp(levels, ring, taper, decided
 def test_screened_tree_finds_the_brute_forces_patterns(seed, everywhere):
     """Random bodies (even seeds supported, odd free), m = 6, at two mu: the screened tree's
     full patterns are the brute force's (one SOCP per partition); `everywhere` screens every
-    node (from depth 0) instead of from half the depth."""
+    node (from depth 0) instead of from 0.4 of the depth (SCREEN_FROM)."""
     rng = np.random.default_rng(4100 + seed)
     m = 6
     param = parametrize(random_problem_3d(rng, m, free=bool(seed % 2)))
