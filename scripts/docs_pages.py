@@ -64,7 +64,7 @@ MEANINGS: dict[str, dict[str, tuple[str, str, str]]] = {
         "task_budget": ("integer ≥ 1", "tree nodes", "Sign-pattern tree nodes per task before a subtree is handed back."),
         "symmetry": ("boolean", "", "Use the node symmetries of K (orbits of patterns, mu^c once per orbit)."),
         "screens": ("boolean", "", "3D: LP screens (COIN-OR CLP) before the SOCP of every sign-pattern tree node "
-                    "with half the nodes fixed: fewer SOCPs (plug3d 3 × 6: 8.5 per pattern against 57), about the same time."),
+                    "with 40 % of the nodes fixed: fewer SOCPs (plug3d 3 × 6: 6.7 per pattern against 57), about the same time."),
         "face_split": ('"auto" or integer 0..8', "nodes",
                        "2D: branching nodes of the double-description split over faces (\"auto\": 3 from m = 16 on)."),
         "condense": ('"auto", "serial" or "distributed"', "",
