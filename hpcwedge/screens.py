@@ -80,8 +80,9 @@ def edge_matrix(m: int, mu: float, facets: int, inner: bool) -> np.ndarray:
 
 class PyramidLP:
     """The generator-form LP (module doc) of one pyramid at mu, held warm in CLP.
-    `solve(zu, zr)` -> (status "optimal" / "infeasible" / "other", x-space point or None);
-    zu, zr: (m,) bool, the nodes fixed to contact and to gap."""
+    `solve(zu, zr)` -> (status "optimal" / "infeasible" / "other", x-space point or None:
+    the inner LP's optimum; the outer LP returns its status alone); zu, zr: (m,) bool, the
+    nodes fixed to contact and to gap."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, inner: bool,
                  facets: int = SCREEN_FACETS):
@@ -141,7 +142,7 @@ class PyramidLP:
         self.calls += 1
         self.iterations += s.iteration
         status = {0: "optimal", 1: "infeasible"}.get(s.getStatusCode(), "other")
-        if status != "optimal":
+        if status != "optimal" or self.split:
             return status, None
         xp = np.array(s.primalVariableSolution)
         beta = xp[f:]
