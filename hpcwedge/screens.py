@@ -130,7 +130,7 @@ class PyramidLP:
             s.primalTolerance = INNER_TOL
         s.dual()
         self._s, self.rc, self.G, self.m, self.k, self.facets, self.fixed = s, rc, G, m, k, facets, f
-        self.calls = self.iterations = 0
+        self.calls = 0
 
     def solve(self, zu: np.ndarray, zr: np.ndarray) -> tuple[str, np.ndarray | None]:
         f, k, m, s = self.fixed, self.k, self.m, self._s
@@ -140,7 +140,6 @@ class PyramidLP:
         s.constraintsUpper[k:k + m] = np.where(zu, 0.0, BIG)
         s.dual(startFinishOptions="x")
         self.calls += 1
-        self.iterations += s.iteration
         status = {0: "optimal", 1: "infeasible"}.get(s.getStatusCode(), "other")
         if status != "optimal" or self.split:
             return status, None
