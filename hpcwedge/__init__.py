@@ -1,43 +1,32 @@
 """hpcwedge: wedged configurations of elastic bodies in frictional contact (Fujita & Kanno 2010).
 
-Importing it sets the thread policy (environment.py): one BLAS/OpenMP thread, whatever the
-caller's settings, so that the float bits of a result do not depend on them (SPEC §5).
+The public API is `hpcwedge.api`, re-exported here on first use (so that `import hpcwedge`
+loads no numpy). The package, bottom to top (data flow one way; tests/test_layers.py
+holds every import to this order):
+
+- errors, version, nodesets, exact, files, environment, progress: leaves.
+- parallel/: the engine (serial, or master and workers over MPI), its jobs, cancellation and
+  checkpoints; it knows nothing of wedging.
+- models/: bodies (trusses, meshes, built-ins) as a Model record.
+- scene/: TOML -> a validated Scene.
+- contact/: Scene -> Model -> ContactProblem (condensation with PETSc).
+- solvers/: a pattern's feasibility problem on Clarabel, HiGHS and CLP, and `decide`.
+- rays/: 2D rays and cones; patterns/: 3D sign patterns; mu_c/: mu^c of each, and global.
+- results/: the Result record and its HDF5 file; post/: configurations, figures, VTU.
+- run/: the pipeline; api.py, cli.py: the faces.
 """
-import sys
-import types
+from hpcwedge.version import __version__
 
-from .environment import set_thread_variables
-
-set_thread_variables()
-__version__ = "0.1.0"
-
-#: the public API (api.py), imported on first use so that `import hpcwedge` stays light
-#: (no numpy: the thread policy above must come before the libraries load)
 __all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
            "plot", "export_vtu", "DEFAULT_MU", "__version__"]
 
 
 def __getattr__(name: str):
     if name in __all__:
-        from . import api
+        from hpcwedge import api
         return getattr(api, name)
     raise AttributeError(f"module 'hpcwedge' has no attribute {name!r}")
 
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
-
-
-
-class _Package(types.ModuleType):
-    """This package: importing a submodule that shares a public name (hpcwedge.plot) must
-    not rebind that name, or `hw.plot` would turn from api.plot into the module once the
-    module is imported (api.plot itself imports it)."""
-
-    def __setattr__(self, name: str, value) -> None:
-        if name in __all__ and isinstance(value, types.ModuleType):
-            return              # the submodule is in sys.modules; hw.<name> stays the API's
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

@@ -7,7 +7,7 @@ import sys
 signal.signal(signal.SIGUSR1, signal.SIG_IGN)
 
 try:
-    from .cli import main
+    from hpcwedge.cli import main
 except KeyboardInterrupt:                       # Ctrl-C while Python starts: as cli.main does
     sys.stderr.write("hpcwedge: error: interrupted (nothing written)\n")
     sys.exit(130)

@@ -16,6 +16,8 @@ import sys
 
 
 def main(argv: list[str] | None = None) -> int:
+    from hpcwedge.environment import set_thread_variables
+    set_thread_variables()          # the thread policy (environment.py), before numpy loads
     # a checkpoint request (SIGUSR1, forwarded by mpirun to every rank) that arrives
     # during start-up must not kill a rank: ignored until the master's handler is in.
     # Called in-process (argv given), every handler is put back on return; as the
@@ -29,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     stderr = sys.stderr
     sys.stderr = _Stderr(stderr)
-    from . import __version__
+    from hpcwedge.version import __version__
     p = _Parser(prog="hpcwedge", description="Wedged configurations and critical friction "
                 "coefficients of elastic bodies in frictional contact.",
                 epilog="Exit status: 0 done; 2 a failure you can fix (one line naming the key or "
@@ -81,9 +83,10 @@ def main(argv: list[str] | None = None) -> int:
         # written (outputs are atomic); one line and the status of a process ended by SIGINT
         code = _error("interrupted (nothing written)", 128 + signal.SIGINT)
     except BaseException as e:                  # noqa: BLE001  (a bug: one line, the traceback on request)
-        from .files import FileError
+        from hpcwedge.files import FileError
         if not isinstance(e, Exception):
-            if type(e).__name__ != "Interrupted":
+            from hpcwedge.errors import Interrupted
+            if not isinstance(e, Interrupted):
                 raise                           # SystemExit (argparse's exits)
             # a stop (parallel.Interrupted) outside _run's own handling of it
             code = _error(f"{e}: stopped before any checkpointable work", 75)
@@ -103,6 +106,11 @@ def main(argv: list[str] | None = None) -> int:
             sys.stderr = stderr
     return code
 
+
+#: modules a worker imports before its first task (the task handlers' heavy imports),
+#: while the master condenses
+WORKER_MODULES = ("hpcwedge.patterns.job", "hpcwedge.mu_c.critical", "hpcwedge.rays.faces",
+                  "hpcwedge.mu_c.global_search")
 
 #: stop signals received before the run's handlers were in (main -> _run)
 _EARLY_STOP: list = []
@@ -182,23 +190,26 @@ def _to_devnull(stream) -> None:
 
 
 def _run(args) -> int:
-    from .parallel import EXIT_INTERRUPTED, Engine, Interrupted, ParallelError, serve, world
+    from hpcwedge.errors import Interrupted
+    from hpcwedge.parallel.engine import EXIT_INTERRUPTED, Engine
+    from hpcwedge.parallel.mpi import ParallelError, world
+    from hpcwedge.parallel.worker import serve
     try:
         comm = world()
     except ParallelError as e:
         raise _UserError(str(e)) from None
     if comm is not None and comm.rank != 0:
         sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
-        from .pipeline import condense
+        from hpcwedge.run.pipeline import condense
         condense(None, comm)                    # the master's run_scene: the collective condense stage
-        serve(comm)
+        serve(comm, WORKER_MODULES)
         return 0
-    from .files import FileError, OutputLock, check_output, refuse_not_ours, remove_if_there
-    from .parallel.checkpoint import CheckpointError, checkpoint_path
-    from .pipeline import release_workers, run_scene
-    from .progress import Progress
-    from .resultfile import result_state, write_result
-    from .scene import SceneError, load_scene
+    from hpcwedge.files import FileError, OutputLock, check_output, checkpoint_path, refuse_not_ours, remove_if_there
+    from hpcwedge.parallel.checkpoint import CheckpointError
+    from hpcwedge.progress import Progress
+    from hpcwedge.results.hdf5 import result_state, write_result
+    from hpcwedge.run.pipeline import release_workers, run_scene
+    from hpcwedge.scene.parse import SceneError, changed_settings, load_scene
     progress = Progress(quiet=args.quiet)
     engine = Engine(comm, progress=None if args.quiet else progress)
     engine.install_signals()
@@ -221,7 +232,7 @@ def _run(args) -> int:
             # the temp file of a result write that a kill -9 cut short (under the lock: ours)
             remove_if_there(args.output + ".tmp")
             if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
-                                     inputs=scene.input_digests):
+                                     inputs=scene.input_digests, changed_settings=changed_settings):
                 done = engine.checkpoints
                 progress.note(f"resuming from {ckpt} (session {done.resumes + 1}; "
                               f"{done.elapsed_before:.1f} s of work before it)")
@@ -284,7 +295,7 @@ def _run(args) -> int:
 def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     """The message for a result that could not be written at the end of a run, after saving
     the engine's state as a checkpoint (if it can) so that --resume does not redo the work."""
-    from .files import error_reason
+    from hpcwedge.files import error_reason
     why = error_reason(err)
     try:
         kept = engine.write_checkpoint("output failed")
@@ -298,8 +309,8 @@ def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
 
 
 def _read(path: str, with_rays: bool = True) -> dict:
-    from .files import FileError
-    from .resultfile import read_result
+    from hpcwedge.files import FileError
+    from hpcwedge.results.hdf5 import read_result
     try:
         return read_result(path, with_rays=with_rays)
     except FileError as e:
@@ -307,8 +318,8 @@ def _read(path: str, with_rays: bool = True) -> dict:
 
 
 def _show(args) -> int:
-    from .files import CheckpointGiven, FileError
-    from .resultfile import dump_result_json, read_result
+    from hpcwedge.files import CheckpointGiven, FileError
+    from hpcwedge.results.hdf5 import dump_result_json, read_result
     if args.no_rays and not args.json:
         raise _UserError("show: --no-rays only applies with --json (the text summary has no rays)")
     try:
@@ -375,10 +386,12 @@ def _show_checkpoint(args) -> int:
     """`show` of a checkpoint: how far its run got (parallel.checkpoint.checkpoint_summary)."""
     import json
     import time
-    from .files import resume_hint
-    from .parallel.checkpoint import CheckpointError, checkpoint_summary
+
+    from hpcwedge.files import resume_hint
+    from hpcwedge.parallel.checkpoint import CheckpointError, checkpoint_summary
+    from hpcwedge.patterns.job import describe_saved
     try:
-        ck = checkpoint_summary(args.result)
+        ck = checkpoint_summary(args.result, describe_saved)
     except CheckpointError as e:
         raise _UserError(str(e)) from None
     if args.json:
@@ -406,8 +419,8 @@ def _show_checkpoint(args) -> int:
 
 
 def _plot(args) -> int:
-    from .files import check_output
-    from .plot import figure_format, plot_result
+    from hpcwedge.files import check_output
+    from hpcwedge.post.plot import figure_format, plot_result
     check_output(args.output, (args.result,), figure_format)
     _read(args.result, with_rays=False)
     try:
@@ -423,14 +436,14 @@ def _cannot_write(output: str, e: OSError) -> _UserError:
     """The one line of an output that failed while written (a folder that refuses files
     although os.access allowed it, as /sys for root; a full disk): nothing is left, as
     files.replace_atomic removed its temp file."""
-    from .files import error_reason
+    from hpcwedge.files import error_reason
     return _UserError(f"{output}: cannot write ({error_reason(e)})")
 
 
 def _export(args) -> int:
-    from .export import check_vtu_name, write_vtu
-    from .files import check_output
-    from .recovery import ConfigurationError, load_configuration
+    from hpcwedge.files import check_output
+    from hpcwedge.post.export import check_vtu_name, write_vtu
+    from hpcwedge.post.recovery import ConfigurationError, load_configuration
     check_output(args.output, (args.result,), check_vtu_name)
     try:
         config = load_configuration(args.result, run=args.run, ray=args.ray, cone=args.cone,

@@ -85,7 +85,7 @@ def environment() -> dict:
 def _static() -> dict:
     from importlib.metadata import PackageNotFoundError, version
 
-    from . import __version__
+    from hpcwedge.version import __version__
 
     def ver(name: str) -> str | None:
         try:

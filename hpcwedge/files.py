@@ -18,10 +18,10 @@ import re
 import stat
 import tempfile
 
-import h5py
+from hpcwedge.errors import UserError
 
 
-class FileError(ValueError):
+class FileError(UserError):
     """A file this program wrote (a result, a checkpoint) that cannot be used: damaged, not
     ours, or missing parts. The message is one line naming the file and the reason."""
 
@@ -186,6 +186,7 @@ def write_atomic(path: str, fill, tmp_path: str | None = None, verify=None) -> N
         # a quota is an OSError here, not a failure inside the HDF5 library (which ended a run
         # with a segfault and h5py's tracebacks when its file could not be flushed or closed)
         image = io.BytesIO()
+        import h5py  # HDF5 only where a file is written or read
         with h5py.File(image, "w", userblock_size=USERBLOCK_SIZE) as f:
             fill(f)
         body = image.getbuffer()[USERBLOCK_SIZE:]
@@ -203,6 +204,7 @@ def is_hdf5(path: str) -> bool:
     """Does the file at `path` carry HDF5's signature (after a user block, as a result's
     checksum block)? False when it cannot be read."""
     try:
+        import h5py
         return bool(h5py.is_hdf5(path))
     except OSError:
         return False
@@ -288,6 +290,7 @@ def written_by_us(path: str) -> bool:
         with open(path, "rb") as fh:
             if fh.read(len(CHECKSUM_MAGIC)) == CHECKSUM_MAGIC:
                 return True
+        import h5py
         with h5py.File(path, "r") as f:
             return "scene_text" in f
     except Exception:  # noqa: BLE001  (h5py raises OSError, RuntimeError... on damaged files)
@@ -340,3 +343,11 @@ def check_output(path: str, inputs=(), name_check=None, replaces_hdf5_only: bool
             name_check(path)
         except ValueError as e:
             raise FileError(str(e)) from None
+
+
+def compression(arr) -> str | None:
+    """The h5py filter for a dataset: gzip for large integer/bool/bytes arrays (zero sets,
+    bit words, flags), none for floats (rays): gzip shrank float rays by ~8 % at 10x the
+    write time (plug2d m = 16: 76 MB in 2.9 s against 82 MB in 0.3 s; m = 20: 1.20 GB
+    against 1.28 GB, 40 s against ~2 s)."""
+    return "gzip" if arr.size > 4096 and arr.dtype.kind not in "fc" else None

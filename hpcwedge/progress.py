@@ -7,7 +7,7 @@ import os
 import sys
 import time
 
-from .scene import SceneError
+from hpcwedge.errors import UserError
 
 GB = float(2 ** 30)
 #: run.max_memory_gb = "auto": this fraction of the memory available when the run starts
@@ -18,7 +18,7 @@ AUTO_FRACTION = 0.8
 DD_GROWTH = 3.0
 
 
-class MemoryLimit(SceneError):
+class MemoryLimit(UserError):
     """The run would exceed run.max_memory_gb (one line, exit status 2)."""
 
 

@@ -24,9 +24,9 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .feasibility import decide
-from .nodesets import to_bits
-from .rows import Status, pattern_rows
+from hpcwedge.nodesets import to_bits
+from hpcwedge.solvers.feasibility import decide
+from hpcwedge.solvers.rows import Status, pattern_rows
 
 CDD_HELP = ("pycddlib is not installed (needed for the cddlib peers). Install it with\n"
             "    apt-get install -y libcdd-dev libgmp-dev\n"
@@ -177,7 +177,7 @@ def cdd_generators(H, number_type: str = "fraction"):
         mat = cdd.matrix_from_array(H, rep_type=cdd.RepType.INEQUALITY)
         gen = cdd.copy_generators(cdd.polyhedron_from_matrix(mat))
         return list(gen.array), set(gen.lin_set), version
-    import cdd.gmp                                   # pycddlib 3.x (needs a GMP build)
+    import cdd.gmp  # pycddlib 3.x (needs a GMP build)
     mat = cdd.gmp.matrix_from_array(H, rep_type=cdd.RepType.INEQUALITY)
     gen = cdd.gmp.copy_generators(cdd.gmp.polyhedron_from_matrix(mat))
     return list(gen.array), set(gen.lin_set), version
@@ -209,8 +209,9 @@ def cdd_zero(rows, gens, exact: bool, tol: float | None = None) -> np.ndarray:
 
 
 def _exact_zero(Aint, gens) -> np.ndarray:
-    import flint
     from fractions import Fraction
+
+    import flint
     rays = []
     for g in gens:
         if g[0] != 0:          # the apex (origin) vertex

@@ -114,8 +114,8 @@ wait "$child"; rc=$?
 
 complete=$("$PY" - "$SCENE" "$RESULT" <<'PYEOF' 2>/dev/null
 import os, sys
-from hpcwedge.resultfile import read_result
-from hpcwedge.scene import load_scene
+from hpcwedge.results.hdf5 import read_result
+from hpcwedge.scene.parse import load_scene
 scene, result = sys.argv[1:3]
 r = read_result(result, with_rays=False) if os.path.exists(result) else {}
 print(int(bool(r.get("complete")) and r.get("scene_hash") == load_scene(scene).hash))

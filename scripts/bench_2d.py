@@ -21,7 +21,7 @@ Engines, run in the same invocation on the same condensed stiffness:
   cdd_exact       the peer: a full double description with cddlib in exact arithmetic
                   (pycddlib, number_type 'fraction' = GMP rationals) of the cone
                   P = {x : A x >= 0}, then a complementarity filter and a clique search
-                  (networkx find_cliques via hpcwedge.cones.maximal_cones)
+                  (networkx find_cliques via hpcwedge.rays.cones.maximal_cones)
 
 The peer's A is friction_rows_2d() of *our* parametrisation (SPEC §1): lineality-free, the
 rigid modes of the free body factored out exactly. We hand it the exact rows (primitive
@@ -78,10 +78,10 @@ def _tables(rows: int) -> dict:
 
 
 def _problem(rows: int):
-    import hpcwedge.cones  # noqa: F401  (networkx: imported before any clock starts)
-    from hpcwedge.condense import condense
+    import hpcwedge.rays.cones  # noqa: F401  (networkx: imported before any clock starts)
+    from hpcwedge.contact.condense import condense
+    from hpcwedge.contact.problem import ContactProblem
     from hpcwedge.models.library import plug2d
-    from hpcwedge.problem import ContactProblem
     K, N = condense(plug2d(rows, COLS, TAPER))
     return ContactProblem(2, K, N)
 
@@ -99,7 +99,7 @@ def _fingerprint(zero_wedged, cone_keys) -> str:
 
 def _cones_of(zero, wedged):
     """maximal_cones on complementary rays given by their (R, 3m) zero flags."""
-    from hpcwedge.cones import maximal_cones
+    from hpcwedge.rays.cones import maximal_cones
     gap = ~zero[:, 0::3]
     load = ~(zero[:, 1::3] & zero[:, 2::3])
     return maximal_cones(gap, load, wedged)
@@ -108,10 +108,10 @@ def _cones_of(zero, wedged):
 def _run_scene(tables: dict, mu: float, mu_c: str, exact: bool = False):
     """(Result, wall seconds) of pipeline.run_scene on a 2D scene (tables: its model / contact
     tables) at one mu, enumerate = true, the given compute.mu_c and compute.exact."""
-    import hpcwedge.cones  # noqa: F401  (networkx: imported before any clock starts)
-    from hpcwedge.condense import solver_name
-    from hpcwedge.pipeline import run_scene
-    from hpcwedge.scene import parse_scene
+    import hpcwedge.rays.cones  # noqa: F401  (networkx: imported before any clock starts)
+    from hpcwedge.contact.condense import solver_name
+    from hpcwedge.run.pipeline import run_scene
+    from hpcwedge.scene.parse import parse_scene
     solver_name()      # imports and initialises petsc4py before the clock starts
     scene = parse_scene({"name": "bench", "dim": 2, **tables, "friction": {"mu": [mu]},
                          "compute": {"enumerate": True, "mu_c": mu_c, "exact": exact}})
@@ -158,8 +158,10 @@ def worker_scene(rows: int, mu: float) -> dict:
 def worker_mpirun(rows: int, mu: float, workers: int = 2) -> dict:
     import shutil
     import tempfile
+
     import h5py
-    from hpcwedge.resultfile import read_result
+
+    from hpcwedge.results.hdf5 import read_result
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         raise SystemExit(3)
@@ -199,8 +201,8 @@ def peer_cdd(problem, mu: float, number_type: str = "fraction") -> dict:
     it), cddlib's float arithmetic, zero test |a.x| <= dd.FLOAT_ZERO_TOL on unit rows and rays.
     Raises RuntimeError when cddlib returns lines (a cone it takes for not pointed) or a
     generator outside P; exits with status 3 (CDD_HELP) without pycddlib."""
-    from hpcwedge.dd import FLOAT_ZERO_TOL
-    from hpcwedge.problem import friction_rows_2d, parametrize
+    from hpcwedge.contact.problem import friction_rows_2d, parametrize
+    from hpcwedge.rays.dd import FLOAT_ZERO_TOL
     from hpcwedge.reference import cdd_generators, cdd_zero, complementary_filter
     m = problem.m
     exact = number_type == "fraction"

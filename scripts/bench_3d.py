@@ -17,14 +17,14 @@ import math
 import os
 import time
 
-from hpcwedge.build import contact_problem
+from hpcwedge.contact.build import contact_problem
+from hpcwedge.contact.problem import parametrize
 from hpcwedge.environment import environment
-from hpcwedge.global_mu_c import global_mu_critical
-from hpcwedge.mu_critical import mu_critical
-from hpcwedge.patterns import BnBStats, PatternTree, Subtree
-from hpcwedge.problem import parametrize
+from hpcwedge.mu_c.critical import mu_critical
+from hpcwedge.mu_c.global_search import global_mu_critical
+from hpcwedge.patterns.tree import BnBStats, PatternTree, Subtree
 from hpcwedge.reference import brute_force_patterns
-from hpcwedge.scene import parse_scene
+from hpcwedge.scene.parse import parse_scene
 
 
 def main():

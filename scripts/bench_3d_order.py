@@ -21,12 +21,13 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 
-from hpcwedge.build import contact_problem                       # noqa: E402
-from hpcwedge.environment import environment                     # noqa: E402
-from hpcwedge.patterns import PatternTree                          # noqa: E402
-from hpcwedge.problem import parametrize                           # noqa: E402
-from hpcwedge.scene import parse_scene                             # noqa: E402
-from instances import random_problem_3d                            # noqa: E402
+from instances import random_problem_3d  # noqa: E402
+
+from hpcwedge.contact.build import contact_problem  # noqa: E402
+from hpcwedge.contact.problem import parametrize  # noqa: E402
+from hpcwedge.environment import environment  # noqa: E402
+from hpcwedge.patterns.tree import PatternTree  # noqa: E402
+from hpcwedge.scene.parse import parse_scene  # noqa: E402
 
 
 def orders(prob):

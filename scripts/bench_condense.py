@@ -47,7 +47,7 @@ def worker(refine: int, out: str) -> None:
     from mpi4py import MPI
 
     sys.path.insert(0, ROOT)
-    from hpcwedge.condense import condense_distributed
+    from hpcwedge.contact.condense import condense_distributed
     from hpcwedge.models import block2d
 
     comm = MPI.COMM_WORLD
@@ -120,7 +120,7 @@ def main() -> None:
     K1 = Ks[a.ranks[0]]
     for row in rows:
         row["rel_diff_vs_first"] = float(np.abs(Ks[row["ranks"]] - K1).max() / np.abs(K1).max())
-    from hpcwedge.condense import solver_name
+    from hpcwedge.contact.condense import solver_name
     from hpcwedge.environment import environment
     solver_name()                       # PETSc initialised the way the product does it
     from petsc4py import PETSc

@@ -26,8 +26,8 @@ import time
 
 from hpcwedge.environment import environment
 from hpcwedge.models.patch import boundary_nodes, patch_slaves
-from hpcwedge.pipeline import run_scene
-from hpcwedge.scene import parse_scene
+from hpcwedge.run.pipeline import run_scene
+from hpcwedge.scene.parse import parse_scene
 
 OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "results")
 

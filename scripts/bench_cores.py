@@ -52,7 +52,7 @@ class Walk(NamedTuple):
 
 def tree_nodes(param, m: int, mu: float) -> Walk:
     """The enumeration tree's nodes in depth-first order (Walk)."""
-    from hpcwedge.patterns import PatternTree
+    from hpcwedge.patterns.tree import PatternTree
     tree = PatternTree(param, m, mu)
     stack, infeasible, feasible, patterns = [(tree.root(), None)], [], [], []
     nodes = solves = 0
@@ -95,8 +95,8 @@ def dead_roots(walk: Walk, alive: np.ndarray) -> int:
 
 def minimal_core(param, m: int, mu: float, zu: np.ndarray, zr: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """A minimal infeasible subset of the fixings (zu, zr) by a deletion filter, and its SOCPs."""
-    from hpcwedge.feasibility import TREE_OPTIONS, decide
-    from hpcwedge.rows import Status, pattern_rows
+    from hpcwedge.solvers.feasibility import TREE_OPTIONS, decide
+    from hpcwedge.solvers.rows import Status, pattern_rows
     cu, cr, socps = zu.copy(), zr.copy(), 0
     for i in np.flatnonzero(zu | zr):
         tu, tr = cu.copy(), cr.copy()
@@ -108,9 +108,9 @@ def minimal_core(param, m: int, mu: float, zu: np.ndarray, zr: np.ndarray) -> tu
 
 
 def study(levels: int, ring: int, mu: float) -> dict:
-    from hpcwedge.build import contact_problem
-    from hpcwedge.patterns import PatternTree
-    from hpcwedge.problem import parametrize
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.contact.problem import parametrize
+    from hpcwedge.patterns.tree import PatternTree
     prob = contact_problem(scene("enumerate", levels, ring))
     param, m = parametrize(prob), prob.m
     t0 = time.process_time()

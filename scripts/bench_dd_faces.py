@@ -43,10 +43,10 @@ COLS, TAPER = 3, 10.0
 
 
 def _rows(m: int, mu: float):
-    from hpcwedge.condense import condense
+    import hpcwedge.rays.cones  # noqa: F401  (networkx imported before any clock starts)
+    from hpcwedge.contact.condense import condense
+    from hpcwedge.contact.problem import ContactProblem, friction_rows_2d, parametrize
     from hpcwedge.models.library import plug2d
-    from hpcwedge.problem import ContactProblem, friction_rows_2d, parametrize
-    import hpcwedge.cones  # noqa: F401  (networkx imported before any clock starts)
     K, N = condense(plug2d(m // 2, COLS, TAPER))
     t = time.perf_counter()
     A = friction_rows_2d(parametrize(ContactProblem(2, K, N)), mu, m)
@@ -54,7 +54,7 @@ def _rows(m: int, mu: float):
 
 
 def _cones(dd):
-    from hpcwedge.cones import maximal_cones
+    from hpcwedge.rays.cones import maximal_cones
     zero = dd.zero
     return maximal_cones(~zero[:, 0::3], ~(zero[:, 1::3] & zero[:, 2::3]), dd.wedged())
 
@@ -64,7 +64,7 @@ def _rss_gb() -> float:
 
 
 def worker(m: int, mu: float, face: str | None) -> dict:
-    from hpcwedge.dd import complementary_rays
+    from hpcwedge.rays.dd import complementary_rays
     A, t_param = _rows(m, mu)
     f = json.loads(face) if face else None
     t, c = time.perf_counter(), time.process_time()
@@ -120,8 +120,10 @@ def _face_task(face):
     ~700 MB through the pool's pipe costs ~10 s at m = 20; an MPI layer would send
     the arrays as buffers)."""
     import tempfile
+
     import numpy as np
-    from hpcwedge.dd import complementary_rays
+
+    from hpcwedge.rays.dd import complementary_rays
     t, c = time.perf_counter(), time.process_time()
     dd = complementary_rays(_A, _A.shape[0] // 3, face=face)
     wall, cpu = time.perf_counter() - t, time.process_time() - c
@@ -133,7 +135,8 @@ def _face_task(face):
 
 def _load_face(path, stats):
     import numpy as np
-    from hpcwedge.dd import DDResult
+
+    from hpcwedge.rays.dd import DDResult
     with np.load(path) as f:
         X, zero = f["X"], np.unpackbits(f["zero"], axis=1, count=int(f["n"])).astype(bool)
     os.unlink(path)
@@ -146,7 +149,8 @@ SHM = "/dev/shm" if os.path.isdir("/dev/shm") else None
 def parallel_run(m: int, mu: float, nodes: list[int], workers: int, cost: dict) -> dict:
     """The enumerate stage with the faces on `workers` processes (fork), largest first."""
     import multiprocessing as mp
-    from hpcwedge.faces import merge_results, split_faces
+
+    from hpcwedge.rays.faces import merge_results, split_faces
     global _A
     t0 = time.perf_counter()
     _A, t_param = _rows(m, mu)
@@ -184,7 +188,7 @@ def main(argv=None) -> int:
     if args.worker:
         print(MARK + json.dumps(worker(args.m[0], args.mu, args.face)), flush=True)
         return 0
-    from hpcwedge.faces import split_faces
+    from hpcwedge.rays.faces import split_faces
     report = []
     for m in args.m:
         if not args.no_full:

@@ -57,16 +57,16 @@ def m_of(rows: int) -> int:
 def problem(rows: int):
     """(result of the enumeration-free run, parametrisation, m, numerics scale)."""
     import numpy as np
-    from hpcwedge.problem import stiffness_range
-    from hpcwedge.pipeline import run_scene
-    from hpcwedge.problem import parametrize
+
+    from hpcwedge.contact.problem import parametrize, stiffness_range
+    from hpcwedge.run.pipeline import run_scene
     res = run_scene(scene(rows, "none"))
     lo, hi = stiffness_range(res.problem)
     return parametrize(res.problem), res.m, float(np.sqrt(lo * hi)) if lo > 0 else hi
 
 
 def scene(rows: int, mu_c: str):
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.scene.parse import parse_scene
     model = {"kind": MODEL, "rows": rows, "taper_deg": TAPER}
     if MODEL == "block2d":
         model["refine"] = 2
@@ -83,12 +83,12 @@ def bisect(decide, hi: float = MU_MAX, rtol: float = BISECT_RTOL) -> float | Non
 
 def worker(engine: str, rows: int) -> dict:
     """One engine on one scene: {"mu_c", "seconds", counts...}."""
-    from hpcwedge.milp import wedge_milp
-    from hpcwedge.rows import Status
-    from hpcwedge.global_mu_c import global_mu_critical
-    from hpcwedge.patterns import BnBStats
-    from hpcwedge.pipeline import run_scene
+    from hpcwedge.mu_c.global_search import global_mu_critical
+    from hpcwedge.patterns.tree import BnBStats
     from hpcwedge.reference import scip_wedged
+    from hpcwedge.run.pipeline import run_scene
+    from hpcwedge.solvers.milp import wedge_milp
+    from hpcwedge.solvers.rows import Status
     if engine == "ours":
         t = time.perf_counter()
         res = run_scene(scene(rows, "global"))
@@ -106,8 +106,9 @@ def worker(engine: str, rows: int) -> dict:
                 "tree_nodes": st.nodes, "undecided": st.undecided}
     if engine == "ours_milp":
         from functools import partial
-        from hpcwedge.mu_critical import mu_critical
-        from hpcwedge.global_mu_c import global_bracket_milp
+
+        from hpcwedge.mu_c.critical import mu_critical
+        from hpcwedge.mu_c.global_search import global_bracket_milp
         st = BnBStats()
         t = time.perf_counter()
         mu = global_bracket_milp(param, m, MU_MAX, partial(mu_critical, param, m, mu_max=MU_MAX, scale=s),

@@ -62,6 +62,7 @@ def worker_3d(engine: str, ring: int) -> dict:
     per partition (reference.brute_force_patterns), "condense" = model + parametrize."""
     if engine == "brute":
         from bench_socp_count import plug
+
         from hpcwedge.reference import brute_force_patterns
         t0 = time.perf_counter()
         p, m = plug(LEVELS, ring)
@@ -70,8 +71,8 @@ def worker_3d(engine: str, ring: int) -> dict:
         stages = {"condense": t1 - t0, "enumerate": time.perf_counter() - t1}
         counters = {"solves": 2 ** m}
     else:
-        from hpcwedge.pipeline import run_scene
-        from hpcwedge.scene import parse_scene
+        from hpcwedge.run.pipeline import run_scene
+        from hpcwedge.scene.parse import parse_scene
         scene = parse_scene({"name": "growth", "dim": 3, "friction": {"mu": [MU_3D]},
                              "model": {"kind": "plug3d", "levels": LEVELS, "ring": ring, "taper_deg": 10.0},
                              "compute": {"enumerate": True, "mu_c": "none"},

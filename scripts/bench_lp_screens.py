@@ -54,7 +54,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from bench_search_3d import scene  # noqa: E402
 
-from hpcwedge.screens import edge_matrix  # noqa: E402
+from hpcwedge.solvers.screens import edge_matrix  # noqa: E402
 
 #: what the engines take for an infinite bound (CLP: COIN_DBL_MAX)
 BIG = float(np.finfo(float).max)
@@ -77,7 +77,7 @@ class PyramidLP:
 
     def __init__(self, param, m: int, mu: float, facets: int, inner: bool, engine: str,
                  form: str = "facets"):
-        from hpcwedge.rows import pyramid_rows
+        from hpcwedge.solvers.rows import pyramid_rows
         rc = param.reactions
         self.rc, self.m, self.form = rc, m, form
         n, nb, k = rc.E.shape[1], rc.U.shape[1] - rc.E.shape[1], rc.E.shape[0]
@@ -203,10 +203,10 @@ def screened_tree(param, m: int, mu: float, variant: str, engine: str, facets: i
     """The enumeration tree with `variant` screens (module doc) on `engine`, its LPs in
     `form` (PyramidLP), at the tree nodes with at least `from_depth` nodes fixed (above:
     the SOCP alone, whose interior points choose the branching there): counts, CPU."""
-    import hpcwedge.patterns as patterns
-    from hpcwedge.feasibility import Decision, decide
-    from hpcwedge.rows import Status
-    from hpcwedge.socp import VERIFY_TOL, violation
+    import hpcwedge.patterns.tree as patterns
+    from hpcwedge.solvers.feasibility import Decision, decide
+    from hpcwedge.solvers.rows import Status
+    from hpcwedge.solvers.socp import VERIFY_TOL, violation
     lps = {} if variant == "none" else {
         "outer": PyramidLP(param, m, mu, facets, False, engine, form),
         **({"inner": PyramidLP(param, m, mu, facets, True, engine, form)} if variant == "both" else {})}
@@ -267,8 +267,8 @@ def study(levels: int, ring: int, mu: float, engines: list[str], facets: int,
     """The rows of one scene: the product's tree, then per engine and form the outer and
     both screens at every node, then both screens on CLP's generator form from each of
     `from_depths` on (when CLP imports)."""
-    from hpcwedge.build import contact_problem
-    from hpcwedge.problem import parametrize
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.contact.problem import parametrize
     prob = contact_problem(scene("enumerate", levels, ring))
     param, m = parametrize(prob), prob.m
     base = screened_tree(param, m, mu, "none", "", facets)

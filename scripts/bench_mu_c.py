@@ -33,12 +33,12 @@ import time
 
 import numpy as np
 
+from hpcwedge.contact.problem import parametrize
 from hpcwedge.environment import environment
-from hpcwedge.feasibility import SolverOptions
-from hpcwedge.mu_critical import mu_critical
-from hpcwedge.pipeline import run_scene
-from hpcwedge.problem import parametrize
-from hpcwedge.scene import parse_scene
+from hpcwedge.mu_c.critical import mu_critical
+from hpcwedge.run.pipeline import run_scene
+from hpcwedge.scene.parse import parse_scene
+from hpcwedge.solvers.feasibility import SolverOptions
 
 OUT = os.path.join(os.path.dirname(__file__), "..", "results")
 TOLS = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12]

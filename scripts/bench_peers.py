@@ -97,9 +97,9 @@ def scenes_2d(quick: bool) -> list[dict]:
 
 
 def _problem(spec: dict, mu: float):
-    from hpcwedge.build import contact_problem
-    from hpcwedge.scene import parse_scene
-    import hpcwedge.cones  # noqa: F401  (networkx imported before any clock starts)
+    import hpcwedge.rays.cones  # noqa: F401  (networkx imported before any clock starts)
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.scene.parse import parse_scene
     return contact_problem(parse_scene({"name": "peers", "dim": 2, **spec, "friction": {"mu": [mu]}}))
 
 
@@ -112,7 +112,7 @@ def _bits(patterns) -> list[int]:
 
 def worker_2d(engine: str, spec: dict, mu: float) -> dict:
     if engine in ("ours_float", "ours_exact"):
-        from hpcwedge.cones import implied_patterns
+        from hpcwedge.rays.cones import implied_patterns
         out = bench_2d.enumerate_ours(spec, mu, exact=engine == "ours_exact")
         out["patterns"] = _bits(implied_patterns(out.pop("ray_zero"), out["m"]))
         return {**out, "n_patterns": len(out["patterns"])}
@@ -121,7 +121,7 @@ def worker_2d(engine: str, spec: dict, mu: float) -> dict:
     if engine in ("cdd_exact", "cdd_float"):
         out = bench_2d.peer_cdd(problem, mu, "fraction" if engine == "cdd_exact" else "float")
     elif engine == "brute_lp":
-        from hpcwedge.problem import parametrize
+        from hpcwedge.contact.problem import parametrize
         from hpcwedge.reference import brute_force_patterns
         t0 = time.perf_counter()
         param = parametrize(problem)
@@ -137,7 +137,8 @@ def worker_2d(engine: str, spec: dict, mu: float) -> dict:
 
 def worker_muc(index: int, quick: bool) -> dict:
     import bench_mu_c
-    from hpcwedge.mu_critical import mu_critical
+
+    from hpcwedge.mu_c.critical import mu_critical
     label, dim, model, mu, want = muc_scenes(quick)[index]
     param, m, zu, zr = bench_mu_c.critical_pattern(dim, model, mu)
     out = {"label": label, "dim": dim, "m": m, "analytic": want, "methods": {}}

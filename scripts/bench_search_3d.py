@@ -52,7 +52,7 @@ MU_GLOBAL = 0.3
 
 
 def scene(task: str, levels: int, ring: int, screens: bool = False):
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.scene.parse import parse_scene
     enum = task == "enumerate"
     return parse_scene({"name": f"plug3d-{levels}x{ring}", "dim": 3,
                         "model": {"kind": "plug3d", "levels": levels, "ring": ring},
@@ -76,8 +76,8 @@ def patterns_hash(contacts) -> str:
 
 def scip_worker(task: str, levels: int, ring: int) -> dict:
     """The SCIP peer on the scene's parametrisation (the program's own condensation)."""
-    from hpcwedge.build import contact_problem
-    from hpcwedge.problem import parametrize
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.contact.problem import parametrize
     from hpcwedge.reference import bisect, scip_patterns, scip_wedged
     prob = contact_problem(scene(task, levels, ring))
     param, m = parametrize(prob), prob.m
@@ -98,7 +98,7 @@ def scip_worker(task: str, levels: int, ring: int) -> dict:
 
 
 def worker(task: str, levels: int, ring: int, screens: bool = False) -> dict:
-    from hpcwedge.pipeline import run_scene
+    from hpcwedge.run.pipeline import run_scene
     t, c = time.perf_counter(), time.process_time()
     res = run_scene(scene(task, levels, ring, screens))
     wall, cpu = time.perf_counter() - t, time.process_time() - c

@@ -23,13 +23,13 @@ import json
 import os
 import time
 
-from hpcwedge.build import contact_problem
+from hpcwedge.contact.build import contact_problem
+from hpcwedge.contact.problem import parametrize
 from hpcwedge.environment import environment
-from hpcwedge.patterns import PatternTree
-from hpcwedge.problem import parametrize
+from hpcwedge.patterns.symmetry import node_symmetries
+from hpcwedge.patterns.tree import PatternTree
 from hpcwedge.reference import brute_force_patterns
-from hpcwedge.scene import parse_scene
-from hpcwedge.symmetry import node_symmetries
+from hpcwedge.scene.parse import parse_scene
 
 
 def plug(levels, ring, taper=10.0, symmetry=False):

@@ -47,10 +47,10 @@ def available() -> bool:
 def tree_socps(levels: int, ring: int, mu: float, sample: int) -> tuple[list, dict]:
     """The first `sample` first-attempt SOCPs of the enumeration tree, as (A dense, b, n_zero,
     n_lin, n_soc, long_steps, tree status), and the tree's counts."""
-    from hpcwedge import socp
-    from hpcwedge.build import contact_problem
-    from hpcwedge.patterns import PatternTree
-    from hpcwedge.problem import parametrize
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.contact.problem import parametrize
+    from hpcwedge.patterns.tree import PatternTree
+    from hpcwedge.solvers import socp
     recorded = []
     solve = socp.solve
 
@@ -90,7 +90,8 @@ def _residual_ok(A, b, n_zero, n_lin, n_soc, w, tol: float) -> bool:
 def clarabel_engine(problems):
     """Prepared Clarabel solves: a list of callables returning (status, iterations, x)."""
     import clarabel
-    from hpcwedge.conic import settings
+
+    from hpcwedge.solvers.conic import settings
     out = []
     for A, b, nz, nl, ns, long_steps, _ in problems:
         n = A.shape[1]
@@ -126,7 +127,7 @@ def qoco_engine(problems):
 
 
 def study(levels: int, ring: int, mu: float, sample: int, repeat: int) -> dict:
-    from hpcwedge.socp import VERIFY_TOL
+    from hpcwedge.solvers.socp import VERIFY_TOL
     problems, tree = tree_socps(levels, ring, mu, sample)
     engines = {"clarabel": clarabel_engine}
     if available():

@@ -23,10 +23,10 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from hpcwedge.pipeline import run_scene  # noqa: E402
 from hpcwedge.progress import Progress  # noqa: E402
-from hpcwedge.resultfile import write_result  # noqa: E402
-from hpcwedge.scene import load_scene  # noqa: E402
+from hpcwedge.results.hdf5 import write_result  # noqa: E402
+from hpcwedge.run.pipeline import run_scene  # noqa: E402
+from hpcwedge.scene.parse import load_scene  # noqa: E402
 
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
 import make_examples  # noqa: E402  (the example parameters; gmsh is not needed to import it)
@@ -124,9 +124,9 @@ def run_gmsh_examples(out: str, only=None) -> str:
     """Run the committed Gmsh example scenes (scripts/examples/<name>.toml) into
     out/gmsh_<name>.h5; plot the first wedged ray of cork2d and export cone 0 of cork2d
     and pattern 0 (at the last mu) of plug3d as VTU. Returns a markdown table."""
-    from hpcwedge.export import write_vtu
-    from hpcwedge.recovery import load_configuration
-    from hpcwedge.plot import plot_result
+    from hpcwedge.post.export import write_vtu
+    from hpcwedge.post.plot import plot_result
+    from hpcwedge.post.recovery import load_configuration
     taper = {"cork2d": make_examples.TAPER_2D_DEG, "plug3d": make_examples.TAPER_3D_DEG}
     head = ("scene", "dim", "m", "mu", "wedged rays", "cones", "patterns", "global mu^c", "tan(taper)", "seconds")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -173,7 +173,7 @@ def main() -> int:
         h5 = os.path.join(args.out, key + ".h5")
         write_result(h5, res)
         try:
-            from hpcwedge.plot import plot_result
+            from hpcwedge.post.plot import plot_result
             plot_result(h5, os.path.join(args.out, key + ".png"))
         except ImportError:
             pass

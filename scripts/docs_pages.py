@@ -141,12 +141,12 @@ MEANINGS: dict[str, dict[str, tuple[str, str, str]]] = {
 def accepted_keys() -> dict[str, dict[str, object]]:
     """{table: {key: default}} as the parser has them (REQUIRED where there is no default,
     NONE where absence has a meaning of its own). Tables as in MEANINGS, plus
-    "model.<builtin>" for each built-in; read from hpcwedge.scene, models.obstacle and
+    "model.<builtin>" for each built-in; read from hpcwedge.scene.parse, models.obstacle and
     models.library, never written here."""
-    from hpcwedge import scene
     from hpcwedge.models.library import BUILTINS
     from hpcwedge.models.mesh import DEFAULT_TOLERANCE
     from hpcwedge.models.obstacle import OBSTACLE_KEYS
+    from hpcwedge.scene import parse as scene
     req = {"name", "dim", "model", "friction"}
     out: dict[str, dict[str, object]] = {
         "scene": {k: (REQUIRED if k in req else NONE) for k in sorted(scene.TOP_KEYS)},
@@ -215,7 +215,7 @@ TITLES = {
 
 def scene_reference() -> str:
     """The Markdown page of every scene key: table, type, default, unit, meaning."""
-    from hpcwedge import scene
+    from hpcwedge.scene import parse as scene
     lines = ["# Scene reference", "",
              "Every key a scene file may hold, generated at build time from the parser's own key",
              "sets and defaults (`hpcwedge/scene.py`, `models/obstacle.py`, the built-ins'",

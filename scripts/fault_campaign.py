@@ -341,8 +341,8 @@ def long_scene(folder: str, every: float = 0.2, raw: str | None = None) -> str:
 def write_raw(folder: str, rows: int, name: str, scale: float = 1.0, taper_deg: float = 10.0) -> str:
     import numpy as np
 
-    from hpcwedge.build import contact_problem
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.scene.parse import parse_scene
     sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": rows, "taper_deg": taper_deg},
                       "friction": {"mu": 1.0}})
     prob = contact_problem(sc)

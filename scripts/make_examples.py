@@ -177,8 +177,8 @@ def mesh_summary(path: str, dim: int) -> dict:
 def run_counts(scene_path: str) -> dict:
     """Run a scene in process and return what the example test compares: m, the global
     mu^c and per mu the wedged / trivial ray, cone and pattern counts."""
-    from hpcwedge.pipeline import run_scene
-    from hpcwedge.scene import load_scene
+    from hpcwedge.run.pipeline import run_scene
+    from hpcwedge.scene.parse import load_scene
     res = run_scene(load_scene(scene_path))
     return {"m": int(res.m), "mu_c": res.mu_c,
             "runs": [{"mu": r.mu, "n_wedged_rays": r.n_wedged_rays, "n_trivial_rays": r.n_trivial_rays,

@@ -60,14 +60,15 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path[:0] = [ROOT, os.path.join(ROOT, "tests")]
 
-from hpcwedge.cones import implied_patterns                         # noqa: E402
-from hpcwedge.dd import complementary_rays                         # noqa: E402
-from hpcwedge.environment import environment                       # noqa: E402
-from hpcwedge.models.library import plug2d                          # noqa: E402
-from hpcwedge.pipeline import run_scene                              # noqa: E402
-from hpcwedge.problem import friction_rows_2d, parametrize          # noqa: E402
-from hpcwedge.scene import parse_scene                               # noqa: E402
-from instances import random_problem                                 # noqa: E402  (tests/)
+from instances import random_problem  # noqa: E402  (tests/)
+
+from hpcwedge.contact.problem import friction_rows_2d, parametrize  # noqa: E402
+from hpcwedge.environment import environment  # noqa: E402
+from hpcwedge.models.library import plug2d  # noqa: E402
+from hpcwedge.rays.cones import implied_patterns  # noqa: E402
+from hpcwedge.rays.dd import complementary_rays  # noqa: E402
+from hpcwedge.run.pipeline import run_scene  # noqa: E402
+from hpcwedge.scene.parse import parse_scene  # noqa: E402
 
 BRACKET_RTOL = 1e-8
 MU = 0.65
@@ -245,7 +246,7 @@ def _timed(fn):
 
 def _wedged_exact(spec: dict, mu: float) -> int:
     """Wedged rays at mu by the exact DD (for the mu^c bracket)."""
-    from hpcwedge.build import contact_problem
+    from hpcwedge.contact.build import contact_problem
     prob = contact_problem(_scene(spec, mu, {}))
     p = parametrize(prob, exact=True)
     return int(complementary_rays(friction_rows_2d(p, mu, prob.m, exact=True), prob.m, exact=True)

@@ -48,8 +48,8 @@ def scene(kind: str, levels: int, ring: int, taper: float) -> dict:
 
 def worker(kind: str, levels: int, ring: int, taper: float) -> dict:
     """One case through run_scene: its counts and seconds."""
-    from hpcwedge.pipeline import run_scene
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.run.pipeline import run_scene
+    from hpcwedge.scene.parse import parse_scene
     data = scene(kind, levels, ring, taper)
     res = run_scene(parse_scene(data))
     st = res.stats

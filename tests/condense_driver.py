@@ -9,10 +9,10 @@ import json
 import sys
 
 import numpy as np
+from model_cases import make_model
 from mpi4py import MPI
 
-from hpcwedge.condense import condense_distributed
-from model_cases import make_model
+from hpcwedge.contact.condense import condense_distributed
 
 
 def main() -> None:

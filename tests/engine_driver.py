@@ -5,7 +5,7 @@ waits in a plain blocking comm.recv, which Open MPI busy-polls. Prints one
 JSON line: seconds of CPU per rank and phase, and each phase's length.
 
 With the argument "cancel": every worker runs a 60 s task that calls
-parallel.task_tick(); the master gets SIGTERM after 0.5 s and closes the
+task_tick(); the master gets SIGTERM after 0.5 s and closes the
 engine; prints when the job was interrupted and when close() returned.
 
 With the arguments "stuck PATH": every worker runs an 8 s task that never ticks; the master,
@@ -18,26 +18,26 @@ import os
 import sys
 import time
 
-from hpcwedge import parallel
-from hpcwedge.parallel.tasks import warm_up
+from hpcwedge.cli import WORKER_MODULES
+from hpcwedge.errors import Interrupted
+from hpcwedge.parallel.cancel import task_tick
+from hpcwedge.parallel.engine import Engine, run_tasks
+from hpcwedge.parallel.mpi import world
+from hpcwedge.parallel.worker import serve
 
 
 def spin(ctx, seconds):
     t = time.perf_counter()
     while time.perf_counter() - t < seconds:
         if ctx == "tick":
-            parallel.task_tick()
+            task_tick()
     return {"pid": os.getpid()}
 
-
-parallel.register("spin", spin)
 
 
 def boom(ctx, payload):
     raise ValueError("injected fault")
 
-
-parallel.register("boom", boom)
 
 
 def cpu(pid):
@@ -47,14 +47,15 @@ def cpu(pid):
 
 
 def main(period):
-    comm = parallel.world()
-    warm_up()                        # the workers' start-up imports, done before measuring
+    comm = world()
+    for name in WORKER_MODULES:      # the workers' start-up imports, done before measuring
+        __import__(name)
     pids = comm.gather(os.getpid(), root=0)
     if comm.rank:
-        parallel.serve(comm)
+        serve(comm)
         comm.recv(source=0)          # phase C: a blocking receive (busy-polls)
         return
-    engine = parallel.Engine(comm)
+    engine = Engine(comm)
     time.sleep(0.3)                  # let the workers settle into their idle wait
     out = {"pids": pids, "period": period}
 
@@ -66,7 +67,7 @@ def main(period):
                       "cpu": [cpu(p) - b for p, b in zip(pids, before)]}
 
     measure("master_busy", lambda: spin(None, period))
-    measure("one_task", lambda: parallel.run_tasks("spin", None, [period], engine=engine))
+    measure("one_task", lambda: run_tasks(spin, None, [period], engine=engine))
     engine.close()
     time.sleep(0.2)
     measure("blocking_recv", lambda: time.sleep(period / 2))
@@ -77,9 +78,9 @@ def main(period):
 
 def _master():
     """The world's communicator on the master; None on a worker, after it has served."""
-    comm = parallel.world()
+    comm = world()
     if comm.rank:
-        parallel.serve(comm)
+        serve(comm)
         return None
     return comm
 
@@ -90,14 +91,14 @@ def cancel():
     comm = _master()
     if comm is None:
         return
-    engine = parallel.Engine(comm)
+    engine = Engine(comm)
     engine.install_signals()
     threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
     t = time.perf_counter()
     out = {"interrupted": None}
     try:
-        parallel.run_tasks("spin", "tick", [60.0] * (comm.size - 1), engine=engine)
-    except parallel.Interrupted:
+        run_tasks(spin, "tick", [60.0] * (comm.size - 1), engine=engine)
+    except Interrupted:
         out["interrupted"] = time.perf_counter() - t
     engine.close(timeout=30.0)
     out["closed"] = time.perf_counter() - t
@@ -113,7 +114,7 @@ def stuck(path):
     comm = _master()
     if comm is None:
         return
-    engine = parallel.Engine(comm)
+    engine = Engine(comm)
     engine.install_signals()
     engine.use_checkpoint(path, "h", "scene", 3600.0, resume=False)
     t = time.perf_counter()
@@ -128,8 +129,8 @@ def stuck(path):
     watcher.start()
     threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
     try:
-        parallel.run_tasks("spin", None, [8.0] * (comm.size - 1), engine=engine)
-    except parallel.Interrupted:
+        run_tasks(spin, None, [8.0] * (comm.size - 1), engine=engine)
+    except Interrupted:
         out["interrupted"] = time.perf_counter() - t
     watcher.join()
     engine.close(timeout=30.0)
@@ -140,9 +141,9 @@ def fail():
     comm = _master()
     if comm is None:
         return
-    engine = parallel.Engine(comm)
+    engine = Engine(comm)
     try:
-        parallel.run_tasks("boom", None, [1], engine=engine)
+        run_tasks(boom, None, [1], engine=engine)
     except RuntimeError as e:
         print(json.dumps({"first_line": str(e).splitlines()[0]}), flush=True)
     engine.close(timeout=30.0)

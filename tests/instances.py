@@ -8,8 +8,8 @@ import math
 import numpy as np
 import scipy.linalg as sla
 
-from hpcwedge.problem import ContactProblem, parametrize
-from hpcwedge.rows import pattern_rows
+from hpcwedge.contact.problem import ContactProblem, parametrize
+from hpcwedge.solvers.rows import pattern_rows
 
 
 def rigid_modes_local(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -44,7 +44,8 @@ def tree_factory(seed: int, m: int = 5, free: bool = False):
     """(make_tree, problem): make_tree(mu) -> the PatternTree of a random 2D problem at mu
     (picklable: the engine's subtree tasks take it)."""
     from functools import partial
-    from hpcwedge.patterns import PatternTree
+
+    from hpcwedge.patterns.tree import PatternTree
     prob = random_problem(np.random.default_rng(seed), m, free=free)
     return partial(PatternTree, parametrize(prob), m), prob
 
@@ -137,8 +138,8 @@ def symmetric_problem_3d(rng: np.random.Generator, m: int, free: bool) -> Contac
 def global_run(model: dict, dim: int = 2, mu_max: float | None = None, mu_c: str = "global"):
     """run_scene of a scene of `model` that asks only for the global mu^c (test_global_mu_c.py,
     test_milp.py)."""
-    from hpcwedge.pipeline import run_scene
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.run.pipeline import run_scene
+    from hpcwedge.scene.parse import parse_scene
     data = {"name": "g", "dim": dim, "model": model, "friction": {"mu": [0.01]},
             "compute": {"enumerate": False, "mu_c": mu_c}}
     if mu_max is not None:
@@ -150,8 +151,8 @@ def plug3d_param(levels: int = 2, ring: int = 5, **model):
     """(parametrisation, m) of the built-in plug3d LEVELS x RING, other model keys as given
     (e.g. taper_deg): a body searched without its symmetry (test_socp.py,
     test_global_mu_c.py, test_mu_critical.py)."""
-    from hpcwedge.build import contact_problem
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.scene.parse import parse_scene
     prob = contact_problem(parse_scene({"name": "p", "dim": 3, "friction": {"mu": [1.0]},
                                         "model": {"kind": "plug3d", "levels": levels, "ring": ring, **model}}))
     return parametrize(prob), prob.m
@@ -196,9 +197,9 @@ def result_file(tmp_path, text: str, name: str = "result.h5", compute: dict | No
     (test_plot.py, test_plot3d.py)."""
     import tomllib
 
-    from hpcwedge.pipeline import run_scene
-    from hpcwedge.resultfile import write_result
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.results.hdf5 import write_result
+    from hpcwedge.run.pipeline import run_scene
+    from hpcwedge.scene.parse import parse_scene
     data = tomllib.loads(text)
     if compute:
         data["compute"] = compute
@@ -248,9 +249,9 @@ def pyramid_agreement(param, m: int, mu: float, inner, outer) -> None:
     (pyramids of 64 facets, within 1.2e-3 of the circle, on a body with no full pattern that
     close to its mu^c) every partition decided one way or the other (test_screens.py,
     test_bench_lp_screens.py)."""
-    from hpcwedge.feasibility import decide
-    from hpcwedge.rows import Status, pattern_rows
-    from hpcwedge.socp import VERIFY_TOL, violation
+    from hpcwedge.solvers.feasibility import decide
+    from hpcwedge.solvers.rows import Status, pattern_rows
+    from hpcwedge.solvers.socp import VERIFY_TOL, violation
     feasible = proved_feasible = proved_infeasible = 0
     for code in range(1, 2 ** m):
         zr = np.array([not code >> i & 1 for i in range(m)])

@@ -59,8 +59,8 @@ def _write_raw_plug(tmp_path, rows: int) -> None:
     """plug{2 rows}.npz in tmp_path: plug2d's condensed K and rigid modes."""
     import numpy as np
     if rows not in _RAW:
-        from hpcwedge.build import contact_problem
-        from hpcwedge.scene import parse_scene
+        from hpcwedge.contact.build import contact_problem
+        from hpcwedge.scene.parse import parse_scene
         sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": rows},
                           "friction": {"mu": 1.0}})
         prob = contact_problem(sc)

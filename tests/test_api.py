@@ -11,11 +11,11 @@ import sys
 
 import numpy as np
 import pytest
+from instances import python_calls
 
 import hpcwedge as hw
 import hpcwedge.api
-from hpcwedge.build import contact_problem
-from instances import python_calls
+from hpcwedge.contact.build import contact_problem
 
 TAN10 = math.tan(math.radians(10))
 
@@ -42,7 +42,7 @@ def test_acceptance_builtin_prints_tan_10():
 def test_acceptance_stiffness_array_prints_tan_10():
     """plug2d rows 4 condensed (build.contact_problem), given back as a K array and its
     rigid modes: the same mu^c, also as numpy arrays built in the process."""
-    out = python("import hpcwedge as hw; from hpcwedge.build import contact_problem\n"
+    out = python("import hpcwedge as hw; from hpcwedge.contact.build import contact_problem\n"
                  "p = contact_problem(hw.Scene.builtin('plug2d', rows=4))\n"
                  "r = hw.solve(hw.Scene.from_stiffness(p.K, null_space=p.N, dim=2)); print(r.mu_c)")
     assert abs(float(out) - TAN10) <= 1e-12
@@ -87,7 +87,8 @@ def test_scene_text_reads_back_as_the_table_validated(data):
     must read back as exactly that table (types included), or Scene.text would describe
     another scene than the one solved."""
     import tomllib
-    from hpcwedge.api import _plain
+
+    from hpcwedge.scene.constructors import _plain
     back, plain = tomllib.loads(hw.Scene.from_dict(data).text), _plain(data, "")
 
     def typed(v):                   # the value with every leaf's type, -0.0 told from 0.0
@@ -280,14 +281,17 @@ def test_import_is_light_and_exports_resolve():
 
 
 def test_doctests():
-    res = doctest.testmod(hpcwedge.api)
-    assert res.attempted >= 20 and res.failed == 0
+    import hpcwedge.scene.constructors
+    res = [doctest.testmod(hpcwedge.api),        # the constructors' examples solve through the API
+           doctest.testmod(hpcwedge.scene.constructors, extraglobs={"solve": hpcwedge.api.solve})]
+    assert sum(r.attempted for r in res) >= 20 and sum(r.failed for r in res) == 0
 
 
 def test_plot_stays_the_function_after_the_plot_module_is_imported():
-    """hw.plot is api.plot even after hpcwedge.plot (the module, which api.plot imports on
-    its first call) is loaded: a notebook calls it twice (docs/examples/cork.md)."""
-    out = python("import hpcwedge as hw\nimport hpcwedge.plot\nfrom hpcwedge.plot import plot_result\n"
+    """hw.plot is api.plot even after hpcwedge.post.plot (the module, which api.plot imports on
+    its first call) is loaded: a notebook calls it twice (docs/examples/cork.md). No module of
+    the package is named after a public name, so no import can rebind one."""
+    out = python("import hpcwedge as hw\nimport hpcwedge.post.plot\nfrom hpcwedge.post.plot import plot_result\n"
                  "from hpcwedge import plot\nprint(hw.plot is hw.api.plot, plot is hw.plot, callable(plot_result))")
     assert out.split() == ["True", "True", "True"]
 

@@ -230,7 +230,7 @@ def test_export_stiffness_scene_and_missing_file(tmp_path, capsys):
 def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monkeypatch, chunk):
     """`show --json` streams the rays in chunks; the object equals read_result's (ray
     vectors to the last bit: repr round-trips floats) whatever the chunk size."""
-    from hpcwedge import resultfile as results
+    from hpcwedge.results import hdf5 as results
     monkeypatch.setattr(results, "RAY_CHUNK", chunk)
     out, got = run_show_json(tmp_path, capsys, 'name = "p"\ndim = 2\n[model]\nkind = "plug2d"\n'
                              'rows = 3\n[friction]\nmu = [0.65, 2.0]\n[compute]\nmu_c = "cones"\n')
@@ -246,8 +246,7 @@ def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monk
 
 # ----------------------------------------------------------------------------- user faults (issue 11)
 
-from mpi_helpers import (all_gone, answers, command, env, launch, needs_mpirun, rank_pids,  # noqa: E402
-                         show_json, tmpfs)
+from mpi_helpers import all_gone, answers, command, env, launch, needs_mpirun, rank_pids, show_json, tmpfs  # noqa: E402
 
 TRUSS = ('name = "t"\ndim = 2\n[model]\nkind = "truss"\nnodes = [[0.0, 0.0], [1.0, 0.0]]\nbars = [[0, 1]]\n'
          'EA = 1.0\n{model}\n[contact]\nnodes = [0, 1]\nnormals = [[1.0, 1.0], [-1.0, 1.0]]\n{contact}\n'
@@ -325,7 +324,7 @@ def test_usage_errors_one_line_exit_2(tmp_path, capsys):
 
 
 def test_version_and_no_command(capsys):
-    from hpcwedge import __version__
+    from hpcwedge.version import __version__
     with pytest.raises(SystemExit) as e:
         main(["--version"])
     assert e.value.code == 0 and capsys.readouterr().out == f"hpcwedge {__version__}\n"
@@ -471,7 +470,7 @@ def test_run_through_a_symlink_writes_and_locks_its_target(tmp_path, capsys):
     """-o a symbolic link to a result: the result is written to the target and the link
     stays a link (before: the link was replaced by a regular file, the target left stale),
     and the target's lock is the one taken (a second run on the link was not refused)."""
-    from hpcwedge.files import OutputLock, FileError
+    from hpcwedge.files import FileError, OutputLock
     scene = write(tmp_path, _t(PLUG))
     target = tmp_path / "target.h5"
     link = tmp_path / "alias.h5"
@@ -492,6 +491,7 @@ def test_run_through_a_symlink_writes_and_locks_its_target(tmp_path, capsys):
 def test_device_output_refused():
     """-o on a device node (as root, a run would have replaced it by a regular file)."""
     import stat
+
     from hpcwedge.files import FileError, check_output
     devices = [d for d in ("/dev/full", "/dev/zero", "/dev/random")
                if os.path.exists(d) and stat.S_ISCHR(os.stat(d).st_mode)]
@@ -844,7 +844,7 @@ def test_sigterm_before_the_runs_handlers_are_in(tmp_path):
     out = str(tmp_path / "r.h5")
     code = ("import os, signal, sys\n"
             "from hpcwedge import cli\n"
-            "from hpcwedge.parallel import Engine\n"
+            "from hpcwedge.parallel.engine import Engine\n"
             "install = Engine.install_signals\n"
             "def early(self):\n"
             "    os.kill(os.getpid(), signal.SIGTERM)\n"

@@ -14,10 +14,10 @@ import json
 import os
 
 import pytest
+from mpi_helpers import THREADS_1, THREADS_2, THREADS_UNSET, needs_mpirun, run, show_json, write_rays_scene
 from numpy._core._multiarray_umath import __cpu_features__ as CPU
 
-from hpcwedge.faces import branching_nodes
-from mpi_helpers import THREADS_1, THREADS_2, THREADS_UNSET, needs_mpirun, run, show_json, write_rays_scene
+from hpcwedge.rays.faces import branching_nodes
 
 #: the kernels every run of this module uses (see module doc); the caller's core type wins
 KERNELS = {} if not CPU.get("AVX2") else {"OPENBLAS_CORETYPE": "Haswell"}

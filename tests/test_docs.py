@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from hpcwedge.scene import SceneError, parse_scene
+from hpcwedge.scene.parse import SceneError, parse_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "scripts"))

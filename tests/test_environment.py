@@ -2,7 +2,7 @@
 at import and around run_scene), the environment record (stats.environment), and the
 answers under other kernels of this machine — OpenBLAS core types, numpy without its
 AVX-512 code or on its baseline alone — which stand in for other x86-64 CPUs: tests/test_determinism.py,
-tests/test_numerics.py and tests/test_stress.py run again in subprocesses under each
+tests/run/test_numerics.py and tests/run/test_stress.py run again in subprocesses under each
 ("legs"; slow)."""
 import json
 import os
@@ -11,12 +11,13 @@ import sys
 from importlib.metadata import version
 
 import pytest
+from mpi_helpers import ROOT, env
 from numpy._core._multiarray_umath import __cpu_baseline__ as BASELINE
-from numpy._core._multiarray_umath import __cpu_dispatch__ as DISPATCH, __cpu_features__ as CPU
+from numpy._core._multiarray_umath import __cpu_dispatch__ as DISPATCH
+from numpy._core._multiarray_umath import __cpu_features__ as CPU
 from threadpoolctl import threadpool_info
 
 from hpcwedge.environment import THREAD_VARIABLES, environment
-from mpi_helpers import ROOT, env
 
 
 def python(code: str, caller: dict) -> dict:
@@ -47,8 +48,8 @@ NOTEBOOK = """
 import json, numpy, scipy.linalg
 from threadpoolctl import threadpool_info, threadpool_limits
 assert all(i["num_threads"] == 2 for i in threadpool_info())
-from hpcwedge.pipeline import run_scene
-from hpcwedge.scene import parse_scene
+from hpcwedge.run.pipeline import run_scene
+from hpcwedge.scene.parse import parse_scene
 scene = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 6},
                      "friction": {"mu": [0.65]}, "compute": {"mu_c": "none"}})
 two = run_scene(scene)
@@ -110,7 +111,7 @@ LEGS = {
 #: what each leg runs: the bit-for-bit tests, the float-against-exact checks and the
 #: numerical stress cases (three of which asserted more than the float path guarantees and
 #: failed under Sandybridge kernels only)
-LEG_TESTS = ["tests/test_determinism.py", "tests/test_numerics.py", "tests/test_stress.py"]
+LEG_TESTS = ["tests/test_determinism.py", "tests/run/test_numerics.py", "tests/run/test_stress.py"]
 
 PROBE = """
 import json

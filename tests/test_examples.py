@@ -9,8 +9,8 @@ import os
 
 import pytest
 
-from hpcwedge.build import build_model
-from hpcwedge.scene import load_scene
+from hpcwedge.contact.build import build_model
+from hpcwedge.scene.parse import load_scene
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 _spec = importlib.util.spec_from_file_location("make_examples", os.path.join(ROOT, "scripts", "make_examples.py"))

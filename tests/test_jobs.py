@@ -14,7 +14,6 @@ import sys
 import time
 
 import pytest
-
 from slurm import LocalSlurm, SlurmUnavailable
 
 pytestmark = [pytest.mark.slow, pytest.mark.mpi]

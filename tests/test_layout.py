@@ -45,7 +45,7 @@ def test_no_private_imports(path):
 
 
 def test_private_import_check_can_fail(tmp_path):
-    bad = PACKAGE / "pipeline.py"
+    bad = PACKAGE / "run" / "pipeline.py"
     src = tmp_path / "m.py"
     src.write_text("from .dd import _secret\nfrom . import dd\nx = dd._other\n")
     assert _private_imports(src) == ["from dd import _secret", "dd._other"]

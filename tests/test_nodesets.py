@@ -5,9 +5,23 @@ import itertools
 import numpy as np
 import pytest
 
-from hpcwedge.nodesets import (NODES_PER_WORD, RowBits, bit_images, bits_to_mask, bits_to_nodes, bits_to_words,
-                               canonical_face, canonical_order, masks_to_bits, pack_rows, pattern_key,
-                               to_bits, to_mask, unpack_rows, words_to_bits)
+from hpcwedge.nodesets import (
+    NODES_PER_WORD,
+    RowBits,
+    bit_images,
+    bits_to_mask,
+    bits_to_nodes,
+    bits_to_words,
+    canonical_face,
+    canonical_order,
+    masks_to_bits,
+    pack_rows,
+    pattern_key,
+    to_bits,
+    to_mask,
+    unpack_rows,
+    words_to_bits,
+)
 
 
 @pytest.mark.parametrize("m", [1, 5, 63])

@@ -10,10 +10,10 @@ import subprocess
 import sys
 
 import pytest
+from mpi_helpers import command, env, needs_mpirun
 
 from hpcwedge.progress import GB, MemoryGuard, MemoryLimit, Progress, eta, rss_bytes
-from hpcwedge.scene import SceneError, parse_scene
-from mpi_helpers import command, env, needs_mpirun
+from hpcwedge.scene.parse import SceneError, parse_scene
 
 #: plug2d with 36 contact nodes: its rays outgrow any small memory within seconds
 RUNAWAY = """name = "runaway"
@@ -122,8 +122,8 @@ def test_guard_on_3d_pattern_stage(tmp_path):
     condensed K given as a stiffness scene, so that no condensation is checked first) with
     run.max_memory_gb below what the process holds stops at the first merge, in one line
     naming the key and the stage (exit 2, nothing written)."""
-    from hpcwedge.api import builtin_scene
-    from hpcwedge.pipeline import condense
+    from hpcwedge.run.pipeline import condense
+    from hpcwedge.scene.constructors import builtin_scene
     problem = condense(builtin_scene("plug3d")).problem
     scene = tmp_path / "s.toml"
     scene.write_text(f'name = "p"\ndim = 3\n[model]\nkind = "stiffness"\nK = {problem.K.tolist()!r}\n'

@@ -7,13 +7,22 @@ import math
 
 import numpy as np
 import pytest
-
-from hpcwedge.dd import FLOAT_ZERO_TOL, complementary_rays
-from hpcwedge.cones import implied_patterns
-from hpcwedge.problem import friction_rows_2d, parametrize
-from hpcwedge.reference import (bisect, brute_force_patterns, cdd_generators, cdd_zero, complementary_filter,
-                                contact_mask, patterns_of_rays, scip_patterns, scip_wedged)
 from instances import random_problem
+
+from hpcwedge.contact.problem import friction_rows_2d, parametrize
+from hpcwedge.rays.cones import implied_patterns
+from hpcwedge.rays.dd import FLOAT_ZERO_TOL, complementary_rays
+from hpcwedge.reference import (
+    bisect,
+    brute_force_patterns,
+    cdd_generators,
+    cdd_zero,
+    complementary_filter,
+    contact_mask,
+    patterns_of_rays,
+    scip_patterns,
+    scip_wedged,
+)
 
 
 def test_contact_mask():
@@ -76,8 +85,8 @@ def test_bisect():
 
 
 def _plug(rows: int = 2):
-    from hpcwedge.build import contact_problem
-    from hpcwedge.scene import parse_scene
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.scene.parse import parse_scene
     sc = parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": rows, "taper_deg": 10.0},
                       "friction": {"mu": [1.0]}})
     prob = contact_problem(sc)

@@ -6,9 +6,16 @@ from collections.abc import Mapping
 import numpy as np
 import scipy.sparse as sp
 
-from .record import as_float_array
-from .assembly import CHUNK_ENTRIES, assemble_blocks
-from .elements import CELL_TYPES, REFERENCE, centroid_stress, check_jacobians, element_stiffness, von_mises
+from hpcwedge.models.assembly import CHUNK_ENTRIES, assemble_blocks
+from hpcwedge.models.elements import (
+    CELL_TYPES,
+    REFERENCE,
+    centroid_stress,
+    check_jacobians,
+    element_stiffness,
+    von_mises,
+)
+from hpcwedge.models.record import as_float_array
 
 
 def _per_element(v, ne: int, key: str) -> np.ndarray:

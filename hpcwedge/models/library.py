@@ -14,12 +14,11 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-from .record import Model, contact_frames
-from .continuum import ContinuumAssembly, continuum_material
-from .patch import check_patch_size, with_contact_patch
-from .rigid import rigid_modes
-from .truss import truss_model
-
+from hpcwedge.models.continuum import ContinuumAssembly, continuum_material
+from hpcwedge.models.patch import check_patch_size, with_contact_patch
+from hpcwedge.models.record import Model, contact_frames
+from hpcwedge.models.rigid import rigid_modes
+from hpcwedge.models.truss import truss_model
 
 #: the least value of each whole-number parameter of a built-in (scene.py checks scenes by it)
 WHOLE_MINIMUM = {"plug2d": {"rows": 2, "cols": 2}, "plug3d": {"levels": 1, "ring": 3},

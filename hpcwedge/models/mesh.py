@@ -20,13 +20,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .record import (Model, as_index_array, check_contact_free, check_contact_nodes, check_supports,
-                     contact_frames)
-from .continuum import ContinuumAssembly
-from .elements import CELL_TYPES
-from .obstacle import Cone, Plane, obstacle_frames, orient_into_body
-from .patch import check_patch_size, with_contact_patch
-from .rigid import rigid_modes
+from hpcwedge.models.continuum import ContinuumAssembly
+from hpcwedge.models.elements import CELL_TYPES
+from hpcwedge.models.obstacle import Cone, Plane, obstacle_frames, orient_into_body
+from hpcwedge.models.patch import check_patch_size, with_contact_patch
+from hpcwedge.models.record import (
+    Model,
+    as_index_array,
+    check_contact_free,
+    check_contact_nodes,
+    check_supports,
+    contact_frames,
+)
+from hpcwedge.models.rigid import rigid_modes
 
 #: default obstacle tolerance: contact nodes within DEFAULT_TOLERANCE x the median element
 #: extent of the nearest obstacle surface

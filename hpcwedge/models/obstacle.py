@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .record import as_float_array, contact_frames
+from hpcwedge.models.record import as_float_array, contact_frames
 
 OBSTACLE_KEYS = {"plane": ("point", "normal"), "cone": ("apex", "axis", "half_angle_deg")}
 

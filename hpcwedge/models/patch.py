@@ -37,8 +37,8 @@ import numbers
 import numpy as np
 import scipy.sparse as sp
 
-from .record import Model, Tie
-from .rigid import orthonormalise
+from hpcwedge.models.record import Model, Tie
+from hpcwedge.models.rigid import orthonormalise
 
 #: a boundary node at distance d <= a (1 + DIST_RTOL) of a contact node is in its patch
 #: (mirror-image nodes land on the same side of the cut despite rounding in their coordinates)

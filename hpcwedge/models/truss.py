@@ -4,9 +4,15 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .record import (Model, as_float_array, check_contact_free, check_contact_nodes,
-                     check_supports, contact_frames)
-from .rigid import rigid_modes
+from hpcwedge.models.record import (
+    Model,
+    as_float_array,
+    check_contact_free,
+    check_contact_nodes,
+    check_supports,
+    contact_frames,
+)
+from hpcwedge.models.rigid import rigid_modes
 
 
 def _bar_geometry(coords: np.ndarray, bars: np.ndarray, key: str = "model.bars"):

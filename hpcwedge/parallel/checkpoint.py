@@ -34,14 +34,11 @@ import sys
 import time
 import tomllib
 
-import h5py
 import numpy as np
 
-from .. import __version__
-from ..files import CHECKPOINT_FORMAT as FORMAT
-from ..files import FileError, checkpoint_path, error_reason, verify_checksum, write_atomic
-from ..resultfile import compression
-from ..scene import changed_settings
+from hpcwedge.files import CHECKPOINT_FORMAT as FORMAT
+from hpcwedge.files import FileError, compression, error_reason, verify_checksum, write_atomic
+from hpcwedge.version import __version__
 
 #: 2: checksummed (files.write_atomic), with the scene's input digests
 FORMAT_VERSION = 2
@@ -84,6 +81,7 @@ def read_checkpoint(path: str) -> dict:
         raise CheckpointError(f"{path}: unreadable checkpoint (no checksum: written by an older hpcwedge); "
                               f"finish the run with that version, or remove it to start afresh")
     try:
+        import h5py  # HDF5 only where a checkpoint is read or written
         with h5py.File(path, "r") as f:
             attrs = {k: _plain(v) for k, v in f.attrs.items()}
             if attrs.get("format") != FORMAT:
@@ -110,15 +108,15 @@ def read_checkpoint(path: str) -> dict:
     return {"attrs": attrs, "scene_text": text, "jobs": jobs, "order": order}
 
 
-def checkpoint_summary(path: str) -> dict:
+def checkpoint_summary(path: str, describe=None) -> dict:
     """How far the run of a checkpoint got (`hpcwedge show RESULT.h5.ckpt`), after
     read_checkpoint's checks (CheckpointError as there): {"checkpoint": true, "name" (the
     scene's, None if its text does not parse), "version", "scene_hash", "written_unix",
     "reason", "elapsed_s" (all sessions), "resumes", "ranks", "jobs": [{"name", "kind",
     "finished", "counters"} + subtree jobs: "mu" (list), "found" (patterns, orbit
     representatives where a tree uses a symmetry), "open" (subtrees left);
-    task jobs: "tasks", "done"], in the order they ran}."""
-    from .jobs import SubtreeJob      # jobs imports this module
+    task jobs: "tasks", "done"], in the order they ran}. describe(attrs, data) -> dict | None:
+    what the job's owner says of a job's saved state (None: a TaskJob's tasks and done)."""
     ck = read_checkpoint(path)
     a = ck["attrs"]
     try:
@@ -131,9 +129,9 @@ def checkpoint_summary(path: str) -> dict:
             ja, data = ck["jobs"][job_name]["attrs"], ck["jobs"][job_name]["data"]
             job = {"name": job_name, "kind": ja["kind"], "finished": bool(ja["finished"]),
                    "counters": json.loads(ja["counters"])}
-            if ja["kind"] == SubtreeJob.kind:
-                job.update(mu=[float(v) for v in data["mus"]], found=len(data["found_mu"]),
-                           open=len(data["open_mu"]))
+            extra = describe(ja, data) if describe is not None else None
+            if extra is not None:
+                job.update(extra)
             else:
                 job.update(tasks=int(ja["n_tasks"]), done=len(data["done"]))
             jobs.append(job)
@@ -172,11 +170,13 @@ class Checkpointer:
         return self.path is not None
 
     def use(self, path: str, scene_hash: str, scene_text: str, every_s: float,
-            resume: bool, inputs: dict[str, str] | None = None) -> bool:
+            resume: bool, inputs: dict[str, str] | None = None, changed_settings=None) -> bool:
         """Write checkpoints to `path`; with resume, continue from it if it exists. The
         checkpoint's identity is the scene's hash and `inputs` (Scene.input_digests: the
         bytes of the files the scene names): a damaged file, another scene or a changed input
-        file is a CheckpointError, and the file is left untouched. Returns True when a
+        file is a CheckpointError, and the file is left untouched. changed_settings(saved
+        text, this text) -> the run settings in which they differ, or None when they are
+        another scene (None: any other hash is another scene). Returns True when a
         checkpoint was loaded."""
         inputs = dict(inputs or {})
         self.path, self.scene_hash, self.scene_text = path, scene_hash, scene_text
@@ -186,7 +186,8 @@ class Checkpointer:
             return False
         ck = read_checkpoint(path)
         a = ck["attrs"]
-        changed = [] if a["scene_hash"] == scene_hash else changed_settings(ck["scene_text"], scene_text)
+        changed = [] if a["scene_hash"] == scene_hash else (
+            changed_settings(ck["scene_text"], scene_text) if changed_settings is not None else None)
         if changed is None:
             raise CheckpointError(f"{path}: the checkpoint belongs to another scene (scene hash "
                                   f"{a['scene_hash'][:12]}..., this scene {scene_hash[:12]}...); "

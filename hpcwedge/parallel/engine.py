@@ -27,10 +27,11 @@ import signal
 import socket
 import time
 
-from . import mpi
-from .checkpoint import Checkpointer, CheckpointError
-from .jobs import TaskJob
-from .tasks import TICK_EVERY_S, Interrupted, TaskCancelled, handler_for, run_cancellable
+from hpcwedge.errors import Interrupted, UserError
+from hpcwedge.parallel import mpi
+from hpcwedge.parallel.cancel import TICK_EVERY_S, TaskCancelled, run_cancellable
+from hpcwedge.parallel.checkpoint import Checkpointer, CheckpointError
+from hpcwedge.parallel.jobs import TaskJob
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
 EXIT_INTERRUPTED = 75
@@ -116,7 +117,7 @@ class Master:
     def send_task(self, w: int, job_id: int, job, payload) -> None:
         fresh = self._ctx_sent.get(w) != job_id
         self._ctx_sent[w] = job_id
-        self.comm.send((job_id, job.kind, payload, fresh, job.context if fresh else None), dest=w, tag=mpi.TASK)
+        self.comm.send((job_id, payload, (job.kind, job.handler, job.context) if fresh else None), dest=w, tag=mpi.TASK)
 
     def stop(self, waiting, timeout: float, on_answer) -> None:
         """Once: stop every worker, hand the answers of `waiting` to on_answer (mpi.stop_workers)."""
@@ -179,14 +180,14 @@ class Engine:
     # ---- checkpoints
 
     def use_checkpoint(self, path: str, scene_hash: str, scene_text: str, every_s: float,
-                       resume: bool, inputs: dict[str, str] | None = None) -> bool:
+                       resume: bool, inputs: dict[str, str] | None = None, changed_settings=None) -> bool:
         """Write checkpoints to `path`; with resume, continue from it if it exists
         (Checkpointer.use). Returns True when a checkpoint was loaded. A SIGTERM/SIGINT while
         it is read (seconds for a large one) acts once it is loaded: Interrupted then, with
         the loaded state to save, never an empty one over it."""
         held, self.signals.defer = self.signals.defer, True
         try:
-            loaded = self.checkpoints.use(path, scene_hash, scene_text, every_s, resume, inputs)
+            loaded = self.checkpoints.use(path, scene_hash, scene_text, every_s, resume, inputs, changed_settings)
         finally:
             self.signals.defer = held
         if self.signals.stop_reason():
@@ -291,7 +292,7 @@ class Engine:
         return job
 
     def _run_serial(self, job) -> None:
-        handler = handler_for(job.kind)
+        handler = job.handler
         last_note = time.monotonic()
         while True:
             self._safe_point()
@@ -349,8 +350,7 @@ class Engine:
             return
         self.tasks_per_rank[w] += 1
         if tag == mpi.ERROR and isinstance(msg, mpi.UserFailure):
-            from ..scene import SceneError
-            raise SceneError(msg.line)
+            raise UserError(msg.line)
         if tag == mpi.ERROR:
             # the worker's exception (its traceback's last line) on the first line, which is
             # all the command line prints; the whole traceback after it (HPCWEDGE_DEBUG=1)
@@ -381,7 +381,7 @@ class Engine:
                                 f"open tasks after {job.counters.get('tasks', 0)} tasks")
         if self.progress is None or now - last < self.progress_every_s:
             return last
-        from ..progress import eta
+        from hpcwedge.progress import eta
         done = job.counters.get("tasks", 0)
         left = ""
         if isinstance(job, TaskJob):           # a fixed list of tasks: the time left at this session's rate
@@ -420,10 +420,12 @@ def _state(job, in_flight, finished: bool) -> dict:
     return st
 
 
-def run_tasks(kind: str, context, payloads: list, engine: Engine | None = None, name: str | None = None,
-              layout=None, payloads_for=None) -> list:
-    """Results of independent tasks of a registered kind (e.g. "face"), in order.
+def run_tasks(handler, context, payloads: list, engine: Engine | None = None, name: str | None = None,
+              layout=None, payloads_for=None, kind: str | None = None) -> list:
+    """Results of independent tasks of `handler` (a module-level callable), in order.
     Results must be dicts of numbers/bools/arrays (so that checkpoints can hold them).
     layout, payloads_for: see TaskJob (a resumed run keeps the saved layout)."""
     engine = engine or Engine()
-    return engine.run(TaskJob(name or kind, kind, context, payloads, layout, payloads_for)).output()
+    job = TaskJob(name or kind or handler.__name__, handler, context, payloads, kind=kind, layout=layout,
+                  payloads_for=payloads_for)
+    return engine.run(job).output()

@@ -1,190 +1,24 @@
-"""The jobs the engine runs and their checkpoint encoding (SPEC §5).
+"""The generic job of the engine: a fixed list of independent tasks (`TaskJob`).
 
-A *job* is a pool of tasks and the merge of their results, with save(in_flight)
-/ load(state) to and from plain arrays and attributes (checkpoint.py writes them):
-``SubtreeJob`` (branch and bound: a task explores a subtree with a node budget
-and gives back the subtrees it left open, which return to the pool) and
-``TaskJob`` (a fixed list of independent tasks: mu^c, faces; a face split
-depends on the rank count, so its job saves the split and a resumed run keeps
-it). Both offer pending(), take(n_workers) -> (token, payload) | None,
-merge(token, result), output().
-
-Budgets (after mplrs): a subtree task gets ``budget`` tree nodes while the
-pool is short (fewer than 2 tasks per worker), so work is split and handed
-back as open subtrees; ``budget * BUDGET_SCALE`` when the pool is long. Tasks
-are always bounded, so a checkpoint never waits long and loses little.
+A *job* is a pool of tasks and the merge of their results: ``name``, ``kind`` (a label
+its checkpoint keeps), ``handler`` (a module-level callable ``handler(context, payload) ->
+result``, sent to the workers by reference, as mpi4py.futures does), ``context`` (the
+job's shared read-only data, sent once to each worker), ``counters``, and pending(),
+take(n_workers) -> (token, payload) | None, merge(token, result), save(in_flight) /
+load(state) to and from plain arrays and attributes (checkpoint.py writes them),
+progress() and output(). The engine knows nothing else of a job.
 """
 from __future__ import annotations
 
-import heapq
 import json
-import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..nodesets import bits_to_words, pattern_key, words_to_bits
-from .checkpoint import CheckpointError
-
-#: budget multiplier when the pool holds enough tasks for every worker
-BUDGET_SCALE = 16
-#: default node budget of a subtree task (scene key run.task_budget)
-DEFAULT_BUDGET = 64
-
-
-class SubtreeJob:
-    """The sign-pattern trees of every mu, explored by budgeted subtree tasks.
-
-    An open subtree travels with its root's witness (the parent's point that proves
-    it feasible, or None), so that the tree, and every counter of it (nodes, solves,
-    skipped, undecided, solver statuses), is the same for every split of the work:
-    plain, resumed, any budget or rank count.
-
-    Checkpoint data: mus, m; found_mu, found_depth, found_contact, found_gap,
-    found_undecided (one row per found pattern); open_mu, open_depth,
-    open_contact, open_gap, open_has_x, open_x (the pool and the tasks in flight;
-    open_x: (rows, d) float64, rows without a witness zero). Bit sets are
-    (rows, ceil(m/64)) uint64 words, bit i of word w = node 64 w + i."""
-
-    kind = "subtree"
-
-    def __init__(self, name: str, make_tree, mus, budget: int = DEFAULT_BUDGET):
-        from ..patterns import STAT_KEYS, PatternContext     # patterns imports this package
-        self.name, self.mus, self.budget = name, [float(v) for v in mus], int(budget)
-        self.context = PatternContext(make_tree, self.mus)
-        trees = [self.context.tree(i) for i in range(len(self.mus))]
-        self.m = trees[0].m if trees else 0
-        #: the trees find orbit representatives (a symmetry), expanded at the end
-        self._representatives = any(getattr(t, "symmetry", None) is not None for t in trees)
-        self.found = [[] for _ in self.mus]
-        self.undecided = [[] for _ in self.mus]
-        self.counters = {"tasks": 0, "handed_back": 0, **{k: 0 for k in STAT_KEYS}}
-        self._pool: list = []
-        self._seq = 0
-        for i, tree in enumerate(trees):
-            self._push(i, tree.root())
-
-    def _push(self, i, subtree, x=None):
-        heapq.heappush(self._pool, (subtree.depth, self._seq, i, subtree, x))
-        self._seq += 1
-
-    def pending(self) -> int:
-        return len(self._pool)
-
-    def progress(self) -> str:
-        """What the engine's progress line adds for this job: patterns found so far (the
-        orbit representatives where a tree has a symmetry, expanded at the end) and tree
-        nodes visited."""
-        what = "pattern representatives" if self._representatives else "patterns"
-        return (f", {sum(map(len, self.found))} {what} found, "
-                f"{self.counters.get('nodes', 0)} tree nodes")
-
-    def take(self, n_workers: int):
-        if not self._pool:
-            return None
-        _, _, i, subtree, x = heapq.heappop(self._pool)
-        budget = self.budget if len(self._pool) < 2 * n_workers else self.budget * BUDGET_SCALE
-        return (i, subtree, x), (i, subtree, budget, x)
-
-    def merge(self, token, result) -> None:
-        i = token[0]
-        found, open_, stats, undecided, open_x = result
-        self.found[i].extend(found)
-        self.undecided[i].extend(undecided)
-        for s, x in zip(open_, open_x, strict=True):
-            self._push(i, s, x)
-        self.counters["tasks"] += 1
-        self.counters["handed_back"] += len(open_)
-        for k, v in stats.items():
-            self.counters[k] = self.counters.get(k, 0) + v
-
-    def save(self, in_flight) -> dict:
-        words = max(1, math.ceil(self.m / 64))
-        doubt = [set(u) for u in self.undecided]
-        found = [(i, s) for i, lst in enumerate(self.found) for s in lst]
-        opens = [(i, s, x) for _, _, i, s, x in self._pool] + [tuple(t) for t in in_flight]
-        xs = [x for _, _, x in opens]
-        d = next((len(x) for x in xs if x is not None), 0)
-        data = {"mus": np.array(self.mus, dtype=float),
-                "found_mu": np.array([i for i, _ in found], dtype=np.int32),
-                "found_depth": np.array([s.depth for _, s in found], dtype=np.int32),
-                "found_contact": bits_to_words([s.contact for _, s in found], words),
-                "found_gap": bits_to_words([s.gap for _, s in found], words),
-                "found_undecided": np.array([s in doubt[i] for i, s in found], dtype=bool),
-                "open_mu": np.array([i for i, _, _ in opens], dtype=np.int32),
-                "open_depth": np.array([s.depth for _, s, _ in opens], dtype=np.int32),
-                "open_contact": bits_to_words([s.contact for _, s, _ in opens], words),
-                "open_gap": bits_to_words([s.gap for _, s, _ in opens], words),
-                "open_has_x": np.array([x is not None for x in xs], dtype=bool),
-                "open_x": np.array([np.zeros(d) if x is None else np.asarray(x, dtype=np.float64) for x in xs],
-                                   dtype=np.float64).reshape(len(xs), d)}
-        return {"attrs": {"m": self.m, "budget": self.budget}, "data": data}
-
-    def load(self, state: dict) -> None:
-        from ..patterns import Subtree     # patterns imports this package
-        a, d = state["attrs"], state["data"]
-        if int(a["m"]) != self.m or list(np.asarray(d["mus"], dtype=float)) != self.mus:
-            raise CheckpointError(f"job {self.name!r}: the checkpoint was taken on other mu values or m")
-        self.found = [[] for _ in self.mus]
-        self.undecided = [[] for _ in self.mus]
-        for i, depth, c, g, u in zip(d["found_mu"], d["found_depth"], words_to_bits(d["found_contact"]),
-                                     words_to_bits(d["found_gap"]), d["found_undecided"]):
-            s = Subtree(int(depth), c, g)
-            self.found[int(i)].append(s)
-            if u:
-                self.undecided[int(i)].append(s)
-        self._pool, self._seq = [], 0
-        n = len(d["open_mu"])
-        has_x = d.get("open_has_x", np.zeros(n, dtype=bool))
-        xs = d.get("open_x", np.zeros((n, 0)))
-        for i, depth, c, g, h, x in zip(d["open_mu"], d["open_depth"], words_to_bits(d["open_contact"]),
-                                        words_to_bits(d["open_gap"]), has_x, xs):
-            self._push(int(i), Subtree(int(depth), c, g), np.array(x, dtype=np.float64) if h else None)
-
-    def output(self) -> "Patterns":
-        key = lambda s: pattern_key(s.contact)
-        return Patterns(mus=self.mus, m=self.m,
-                        found=[sorted(lst, key=key) for lst in self.found],
-                        undecided=[sorted(lst, key=key) for lst in self.undecided],
-                        counters=dict(self.counters))
-
-
-@dataclass
-class Patterns:
-    """run_patterns' answer: per mu (in the given order) the feasible full
-    patterns (patterns.Subtree, depth m) in canonical order, the ones among
-    them no solver decided, and the job's counters: nodes (tree nodes visited),
-    solves, skipped, pruned, undecided and status_* (how each solve was decided)
-    are the same for every split, rank count or resume (open subtrees carry their
-    witness; PatternTree learns no cores by default); tasks and handed_back depend
-    on the schedule (the pipeline reports them under stats.parallel only)."""
-
-    mus: list
-    m: int
-    found: list
-    undecided: list
-    counters: dict = field(default_factory=dict)
-
-
-
-def encode_rays(X: np.ndarray) -> np.ndarray:
-    """Rays as a checkpoint holds them: float rays as they are; exact ones (object ints)
-    as decimal strings."""
-    if X.dtype != object:
-        return X
-    return X.astype(str).astype("S") if X.size else np.zeros(X.shape, dtype="S1")
-
-
-def decode_rays(X: np.ndarray) -> np.ndarray:
-    """encode_rays undone: decimal strings back to exact (object int) rays."""
-    X = np.asarray(X)
-    if X.dtype.kind != "S":
-        return X
-    return np.frompyfunc(int, 1, 1)(X).astype(object)
+from hpcwedge.parallel.checkpoint import CheckpointError
 
 
 class TaskJob:
-    """A fixed list of independent tasks of one kind; results are dicts whose
+    """A fixed list of independent tasks run by one handler; results are dicts whose
     values are numbers/bools (stored as one column per key) or arrays (stored
     concatenated along axis 0, with <key>_offsets). Checkpoint data: done (the
     indices whose result is in), the result columns.
@@ -196,8 +30,10 @@ class TaskJob:
     differing layout is a CheckpointError). Results should then say which task they
     answer: their order follows the adopted payloads."""
 
-    def __init__(self, name: str, kind: str, context, payloads: list, layout=None, payloads_for=None):
-        self.name, self.kind, self.context = name, kind, context
+    def __init__(self, name: str, handler, context, payloads: list, *, kind: str | None = None,
+                 layout=None, payloads_for=None):
+        self.name, self.handler, self.context = name, handler, context
+        self.kind = kind or handler.__name__
         self.layout, self.payloads_for = _json_value(layout), payloads_for
         self.payloads = list(payloads)
         self.results: list = [None] * len(self.payloads)

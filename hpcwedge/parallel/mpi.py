@@ -17,6 +17,8 @@ import os
 import time
 from dataclasses import dataclass
 
+from hpcwedge.errors import UserError
+
 #: longest sleep between two probes of an idle worker / of the master (seconds);
 #: a rank that has waited t seconds sleeps min(cap, POLL_FRACTION * t), so a
 #: result is noticed within ~10% of the task's duration
@@ -36,7 +38,7 @@ TASK, RESULT, ERROR, STOP, HELLO, CANCELLED = 1, 2, 3, 4, 5, 6
 MPI_ENV = ("OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK", "PMI_SIZE", "MPI_LOCALNRANKS")
 
 
-class ParallelError(RuntimeError):
+class ParallelError(UserError):
     """A launch problem the user must fix (one line; exit status 2)."""
 
 

@@ -2,18 +2,22 @@
 says stop, and answer each with its result, a cancellation or an error."""
 from __future__ import annotations
 
+import importlib
 import os
 import signal
 import socket
 import time
 import traceback
 
-from . import mpi
-from .tasks import TICK_EVERY_S, TaskCancelled, handler_for, run_cancellable, warm_up
+from hpcwedge.errors import UserError
+from hpcwedge.parallel import mpi
+from hpcwedge.parallel.cancel import TICK_EVERY_S, TaskCancelled, run_cancellable
 
 
-def serve(comm, tick_every_s: float = TICK_EVERY_S) -> None:
-    """Worker loop (ranks >= 1): run tasks until the master says stop.
+def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_S) -> None:
+    """Worker loop (ranks >= 1): run tasks until the master says stop. warm_up: modules to
+    import first (the task handlers' heavy imports: while the master condenses, not at
+    the first task).
 
     SIGUSR1, SIGTERM and SIGINT are ignored: the master acts on them. (mpirun
     forwards SIGUSR1 to every rank, whose default action is to die. On
@@ -28,8 +32,9 @@ def serve(comm, tick_every_s: float = TICK_EVERY_S) -> None:
     for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, signal.SIG_IGN)
     ppid = os.getppid()
-    warm_up()                      # while the master condenses, not at the first task
-    ctx_id, ctx = None, None
+    for name in warm_up:
+        importlib.import_module(name)
+    ctx_id, kind, handler, ctx = None, None, None, None
     status = MPI.Status()
     master_pid, host = None, socket.gethostname()
     while True:
@@ -48,23 +53,22 @@ def serve(comm, tick_every_s: float = TICK_EVERY_S) -> None:
         if tag == mpi.HELLO:
             master_pid = msg[1] if msg[0] == host else None
             continue
-        job_id, kind, payload, fresh, new_ctx = msg
-        if fresh:
-            ctx_id, ctx = job_id, new_ctx
+        job_id, payload, fresh = msg
+        if fresh is not None:
+            ctx_id, (kind, handler, ctx) = job_id, fresh
         try:
             if ctx_id != job_id:
                 raise RuntimeError(f"task of job {job_id} without its context")
-            result = run_cancellable(handler_for(kind), ctx, payload,
+            result = run_cancellable(handler, ctx, payload,
                                      lambda: mpi.probe(comm, 0, mpi.STOP, status), tick_every_s)
         except TaskCancelled:
             comm.send(None, dest=0, tag=mpi.CANCELLED)     # the stop is read next
         except MemoryError:
-            from ..progress import out_of_memory
+            from hpcwedge.progress import out_of_memory
             comm.send(mpi.UserFailure(str(out_of_memory(f"a {kind!r} task on rank {comm.rank}"))),
                       dest=0, tag=mpi.ERROR)
         except Exception as e:          # noqa: BLE001  (the master reports it)
-            from ..scene import SceneError
-            comm.send(mpi.UserFailure(str(e)) if isinstance(e, SceneError) else traceback.format_exc(),
+            comm.send(mpi.UserFailure(str(e)) if isinstance(e, UserError) else traceback.format_exc(),
                       dest=0, tag=mpi.ERROR)
         else:
             comm.send(result, dest=0, tag=mpi.RESULT)

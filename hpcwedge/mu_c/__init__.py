@@ -1,0 +1,10 @@
+"""The critical friction coefficient mu^c (SPEC §2): of one cone or pattern, and global.
+
+- critical.py: mu^c of one pattern (`MuC`), the mu^c tasks.
+- bracket.py: bisection on feasibility, and the 2D route.
+- dinkelbach.py, kkt.py: a 3D pattern's mu^c, and its KKT Newton certificate.
+- exact_2d.py: a 2D pattern's mu^c certified in rational arithmetic.
+- global_search.py: the least mu at which any pattern is feasible.
+"""
+
+__all__ = ["critical", "bracket", "dinkelbach", "kkt", "exact_2d", "global_search"]

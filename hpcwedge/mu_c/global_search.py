@@ -1,0 +1,309 @@
+"""The global mu^c: the least mu at which any sign pattern has a solution (2D and 3D),
+without enumerating the patterns: a bracket by the pattern tree with an incumbent, or
+(2D, large m) by MILPs (milp.wedge_milp), then every pattern near the bracket settled by
+its certified mu^c (mu_critical.py)."""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from hpcwedge.contact.problem import Parametrization
+from hpcwedge.mu_c.critical import MuC, add_counts, mu_critical, run_mu_c
+from hpcwedge.parallel.cancel import TaskCancelled, task_tick
+from hpcwedge.parallel.engine import Engine, run_tasks
+from hpcwedge.patterns.job import DEFAULT_BUDGET, run_patterns
+from hpcwedge.patterns.symmetry import Symmetry
+from hpcwedge.patterns.tree import STAT_KEYS, BnBStats, PatternTree, Subtree, solver_statuses
+from hpcwedge.solvers.feasibility import DEFAULT_OPTIONS, decide
+from hpcwedge.solvers.milp import WedgeMilp, wedge_milp
+from hpcwedge.solvers.rows import Status, count, pattern_rows, problem_dim
+
+#: 2D MILP route (global_bracket_milp): the relative steps below the best mu^c found at
+#: which the MILP is asked again; the last is HiGHS's MIP feasibility tolerance
+MILP_STEPS = (1e-2, 1e-4, 1e-6)
+#: tree route: the next bound is best (1 - TREE_STEP). Every pattern between it and best is
+#: settled by the final enumeration at best (1 + 1e-9), so the step sets the work, not the
+#: answer. The last dive's problems lie a step from their boundary: at 1e-7 within
+#: Clarabel's tolerance on plug3d 4 x 6 at 10 deg (6 undecided, 16 s; 1e-5: none, 6.7 s),
+#: at 1e-5 at a 0.01 deg taper (plug3d 3 x 6: 70 s; 1e-2: 7 s) and at 1e-3 at 0.001 deg
+#: (87 s; 1e-2: 4.5 s). Fewer, longer steps also mean fewer dives and mu^c computations:
+#: random 3D bodies, m = 7, 2,934 tree nodes at 1e-5, 2,725 at 1e-2
+TREE_STEP = 1e-2
+#: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
+DIVE_NODES = 2
+#: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
+#: which sees every pattern within 1e-9 of the answer (the MILP route can miss one within
+#: ~1e-6 below it, HiGHS's tolerance) and finishes in seconds there (m = 20: ~6 s)
+MILP_FROM_M = 25
+
+
+def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: str = "accurate",
+                       tol: float = 1e-6, stats: BnBStats | None = None,
+                       symmetry: Symmetry | None = None,
+                       scale: float | None = None, route: str = "auto",
+                       certify=None, engine: Engine | None = None,
+                       budget: int = DEFAULT_BUDGET) -> tuple[float | None, str]:
+    """Least mu with any solution (2D and 3D alike; with a symmetry, over orbit
+    representatives). scale: passed to mu_critical (2D balanced coordinates).
+
+    Two stages. The bracket: an upper value `best` (the certified mu^c of a pattern) with no
+    pattern feasible below best (1 - TREE_STEP), found by
+      route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D);
+      route "milp" (2D; 3D runs the tree): `global_bracket_milp`, per step a short dive of
+        the tree and, where it does not settle the step, one MILP (HiGHS); each pattern
+        it returns checked by our LP and its mu^c computed by our certified route; any doubt
+        (an undecided MILP, a pattern our LP rejects at every mu, no wedge at all) falls back
+        to the tree;
+      route "auto": "milp" in 2D from MILP_FROM_M contact nodes on, else "tree".
+    The tree route then settles: every pattern (one per orbit) feasible at best (1 + 1e-9)
+    gets its certified mu^c; the least is the answer. The MILP route skips that enumeration
+    (exponential in m: 635 tree nodes on plug2d m = 16): its answer is the certified mu^c of
+    the last pattern it found, the least to the MILP's tolerance (a pattern whose mu^c lies
+    within ~1e-6 relative below it can go unseen). stats.extra["route"] says which route
+    ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"];
+    stats.extra["mu_c_unsettled"] the settled patterns whose mu^c no solve decided (the
+    answer is certified when it is 0 and every value is polished).
+
+    The stages run as three jobs of `engine` (in-process by default; the master under
+    mpirun): "global_bracket" (one task: the bracket), "global_patterns" (the settling tree
+    as budgeted subtree tasks of `budget` nodes, shared by the workers) and "global_mu_c"
+    (one mu^c task per pattern it found). A stop keeps the finished jobs and the tree's
+    open subtrees in the checkpoint; the answer and every count are the same for every
+    budget, rank count or resume.
+
+    certify(zero_u, zero_r, mu_c): the least pattern's value certified another way (2D: in
+    exact arithmetic, exact_mu_c), or None to keep it.
+
+    Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
+    r_t free has no solution) or "none_up_to_mu_max".
+    """
+    if route not in ("auto", "tree", "milp"):
+        raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
+    stats = stats if stats is not None else BnBStats()
+    engine = engine or Engine()
+    search = GlobalSearch(param, m, mu_max, method, tol, symmetry, scale, route)
+    got = run_tasks(bracket_task, search, [0], engine=engine, kind="global_bracket")[0]
+    best = None if math.isnan(got["best"]) else float(got["best"])
+    status = BRACKET_STATUS[int(got["status"])]
+    _absorb_json(stats, got["stats"])
+    pattern_of: dict = {}           # each value computed -> its pattern (for certify)
+    if best is not None:
+        pattern_of[best] = (np.asarray(got["zero_u"], dtype=bool), np.asarray(got["zero_r"], dtype=bool))
+    if status == "settle":
+        # patterns whose mu^c lies within the last step below `best`: settle them all
+        # (one per orbit: mu^c is invariant under the symmetry)
+        top = best * (1 + 1e-9)
+        make_tree = partial(PatternTree, param, m, symmetry=symmetry, options=DEFAULT_OPTIONS)
+        pats = run_patterns(make_tree, [top], engine=engine, budget=budget, name="global_patterns")
+        c = pats.counters
+        for k in STAT_KEYS:
+            setattr(stats, k, getattr(stats, k) + c.get(k, 0))
+        for k, v in solver_statuses(c).items():
+            stats.statuses[k] = stats.statuses.get(k, 0) + v
+        items = [(*s.masks(m), top) for s in pats.found[0]]
+        for (zu, zr, _), r in zip(items, run_mu_c(search.solve, items, engine=engine, name="global_mu_c")):
+            _absorb(stats, r)
+            if r.mu_c is None and r.undecided:
+                # feasible at top (or left undecided by the tree) and no value: its mu^c may
+                # lie below best
+                stats.extra["mu_c_unsettled"] = stats.extra.get("mu_c_unsettled", 0) + 1
+            if r.mu_c is not None:
+                pattern_of.setdefault(r.mu_c, (zu, zr))
+                best = min(best, r.mu_c)
+        status = "found"
+    if certify is not None and best in pattern_of:
+        exact = certify(*pattern_of[best], best)
+        if exact is not None:
+            best = exact
+    return best, status
+
+
+#: the bracket task's outcome: "settle" (tree route: best is an upper value, the settling
+#: tree follows), "found" (MILP route: best is the answer), or no wedge
+BRACKET_STATUS = ("settle", "found", "none_at_any_mu", "none_up_to_mu_max")
+
+
+@dataclass(frozen=True)
+class GlobalSearch:
+    """The global search's problem and settings (global_mu_critical's arguments): the
+    context of its "global_bracket" task, sent once to a worker."""
+
+    param: Parametrization
+    m: int
+    mu_max: float
+    method: str
+    tol: float
+    symmetry: Symmetry | None
+    scale: float | None
+    route: str
+
+    @property
+    def solve(self):
+        """solve(zero_u, zero_r, mu_hi=...) -> MuC: the certified mu^c of one pattern."""
+        return partial(mu_critical, self.param, self.m, mu_max=self.mu_max, method=self.method, tol=self.tol,
+                       scale=self.scale)
+
+    def bracket(self, stats: BnBStats, pattern_of: dict) -> tuple[float | None, str]:
+        """(best, BRACKET_STATUS entry): the bracket stage (global_mu_critical's doc);
+        pattern_of[value] = the pattern of every value computed."""
+        param, m, mu_max = self.param, self.m, self.mu_max
+        solve = partial(_recorded, self.solve, pattern_of)
+        if (self.route == "milp" or (self.route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
+            best = global_bracket_milp(param, m, mu_max, solve, stats, self.scale)
+            if best is not None:
+                return best, "found"
+        stats.extra["route"] = "tree"
+
+        def first_leaf(mu: float, friction: bool = True):
+            # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
+            tree = PatternTree(param, m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS)
+            out = tree.explore(Subtree(0), first_only=True)
+            stats.add(out.stats)
+            if out.stopped:               # the engine is stopping: no answer from this dive
+                raise TaskCancelled()
+            return out.found[0].masks(m) if out.found else None
+
+        if first_leaf(np.inf, friction=False) is None:
+            return None, "none_at_any_mu"
+        best, bound = None, mu_max
+        while True:
+            leaf = first_leaf(bound)
+            if leaf is None:
+                break
+            r = solve(*leaf, mu_hi=bound)
+            _absorb(stats, r)
+            if r.mu_c is None or (best is not None and r.mu_c >= best):
+                break
+            best = r.mu_c
+            bound = best * (1 - TREE_STEP)
+        return (None, "none_up_to_mu_max") if best is None else (best, "settle")
+
+
+def bracket_task(search: GlobalSearch, payload) -> dict:
+    """Task "global_bracket": the bracket of `search` (GlobalSearch.bracket) -> best (NaN:
+    none), status (index into BRACKET_STATUS), the pattern of best (zero_u, zero_r masks;
+    all False without one) and the search's counts (stats: JSON of a BnBStats)."""
+    stats, pattern_of = BnBStats(), {}
+    best, status = search.bracket(stats, pattern_of)
+    none = np.zeros(search.m, dtype=bool)
+    zu, zr = pattern_of.get(best, (none, none))
+    counts = {**{k: getattr(stats, k) for k in ("solves", "skipped", "pruned", "undecided", "nodes", "lps")},
+              "extra": stats.extra, "statuses": stats.statuses}
+    return {"best": math.nan if best is None else float(best), "status": BRACKET_STATUS.index(status),
+            "zero_u": np.asarray(zu, dtype=bool), "zero_r": np.asarray(zr, dtype=bool),
+            "stats": json.dumps(counts, sort_keys=True).encode()}
+
+
+def _recorded(solve, pattern_of: dict, zero_u, zero_r, **kw):
+    """solve(zero_u, zero_r, **kw), its value's pattern kept in pattern_of[value]."""
+    r = solve(zero_u, zero_r, **kw)
+    if r.mu_c is not None:
+        pattern_of.setdefault(r.mu_c, (zero_u, zero_r))
+    return r
+
+
+def _absorb_json(stats: BnBStats, text) -> None:
+    """Add the counts of bracket_task's JSON `text` (bytes or str) to stats."""
+    counts = json.loads(text.decode() if isinstance(text, bytes) else text)
+    for k in ("solves", "skipped", "pruned", "undecided", "nodes", "lps"):
+        setattr(stats, k, getattr(stats, k) + int(counts[k]))
+    for k, v in counts["statuses"].items():
+        stats.statuses[k] = stats.statuses.get(k, 0) + v
+    for k, v in counts["extra"].items():
+        stats.extra[k] = v if isinstance(v, str) else stats.extra.get(k, 0) + v
+
+
+def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, stats: BnBStats,
+                        scale: float | None = None, dive: int = DIVE_NODES) -> float | None:
+    """2D global mu^c by MILPs (milp.wedge_milp, valid big-M): the least certified
+    pattern mu^c `best` found; None when in doubt (the caller runs the tree instead).
+    solve(zero_u, zero_r, mu_hi): the certified mu^c of one pattern (mu_critical).
+
+    The MILP decides feasibility only to HiGHS's tolerance (a pattern infeasible by ~1e-6
+    relative in mu can come back feasible, and then hide one feasible with margin), so
+    each step asks at best (1 - delta) with delta = MILP_STEPS in turn: a pattern returned
+    of lower certified mu^c replaces best (same delta again); none, or one no better
+    (blurred), moves to the next delta. The first pattern is the MILP's at mu = inf (r_t
+    free), whose mu^c, when finite, saves the MILP at mu_max (the slowest). Before each
+    MILP the tree dives for dive * m + 1 nodes (0: no dive), see `milp` below."""
+    s = 1.0 if scale is None else float(scale)
+    stats.extra["route"] = "milp"
+
+    def milp(mu: float) -> WedgeMilp:
+        # a short dive of the tree first: it settles most steps with a few LPs (a relaxed
+        # vertex that is complementary descends without a solve; an infeasible root proves
+        # none); the MILP only where the dive's budget runs out
+        if dive:
+            tree = PatternTree(param, m, 0.0 if np.isinf(mu) else mu, friction=not np.isinf(mu))
+            out = tree.explore(Subtree(0), budget=dive * m + 1, first_only=True)
+            stats.add(out.stats)
+            if out.found and not out.undecided:
+                count(stats.statuses, "dive_feasible")
+                zu, zr = out.found[0].masks(m)
+                return WedgeMilp(Status.FEASIBLE, math.nan, 0, zu, zr)
+            if not (out.found or out.open or out.stopped or out.stats.undecided):
+                count(stats.statuses, "dive_infeasible")
+                return WedgeMilp(Status.INFEASIBLE, 0.0, 0)
+        ans = wedge_milp(param, m, mu, s)
+        stats.extra["milp_solves"] = stats.extra.get("milp_solves", 0) + 1
+        stats.extra["milp_nodes"] = stats.extra.get("milp_nodes", 0) + ans.nodes
+        count(stats.statuses, "milp_" + ans.status)
+        return ans
+
+    seen: dict = {}
+
+    def certified(ans: WedgeMilp, bound: float) -> float | None:
+        key = (ans.zero_u.tobytes(), ans.zero_r.tobytes())
+        if key in seen:                   # a pattern met again (blurred): its value is known
+            count(stats.statuses, "milp_pattern_again")
+            return seen[key]
+        seen[key] = _certified(ans, bound)
+        return seen[key]
+
+    def _certified(ans: WedgeMilp, bound: float) -> float | None:
+        rows = pattern_rows(param, m, ans.zero_u, ans.zero_r)
+        stats.lps += 1
+        ok = np.isfinite(bound) and decide(rows, bound, counts=stats.statuses).status == Status.FEASIBLE
+        r = solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None)
+        _absorb(stats, r)
+        return r.mu_c
+
+    best = None
+    for mu in (np.inf, mu_max):
+        ans = milp(mu)
+        if ans.status != Status.FEASIBLE:
+            return None                   # no wedge, or undecided: the tree decides
+        best = certified(ans, mu)
+        if best is not None:
+            break
+    if best is None:
+        return None                       # the MILP's pattern at mu_max is no wedge: doubt
+    for delta in MILP_STEPS:
+        while True:
+            task_tick()
+            bound = best * (1 - delta)
+            ans = milp(bound)
+            if ans.status == Status.UNDECIDED:
+                return None
+            if ans.status == Status.INFEASIBLE:
+                break
+            mu = certified(ans, bound)
+            if mu is None:
+                return None
+            if mu >= best:
+                break
+            best = mu
+    return best
+
+
+def _absorb(stats: BnBStats, r: MuC) -> None:
+    """Count a mu^c computation (mu_critical.MuC) into the search statistics (its pyramid
+    LPs into stats.lps: the search's LPs are its trees' and its mu^c computations')."""
+    add_counts(stats, r)
+    stats.lps += r.statuses.get("lp_calls", 0)
+    key = "mu_c_polished" if r.polished else "mu_c_unpolished"
+    stats.extra[key] = stats.extra.get(key, 0) + 1

@@ -1,0 +1,455 @@
+"""Scenes (SPEC §3): TOML -> a validated, frozen Scene, and the plan of stages.
+
+Every error is a SceneError whose one-line message names the key and the
+reason; the command line turns it into exit status 2 with nothing written.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.util
+import inspect
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hpcwedge.errors import UserError
+from hpcwedge.models.library import BUILTIN_DIM, BUILTINS, WHOLE_MINIMUM  # the one table of built-ins
+
+KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
+
+TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact", "obstacle"}
+#: keys of a kind = "mesh" scene (values are checked when the mesh is read: models/mesh.py)
+MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs",
+                   "contact_patch", "contact_patch_kind"}
+MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
+#: the keys of the other kinds' [model] and [contact] tables (a built-in's model keys are its
+#: generator's parameters; stiffness and built-in scenes have no [contact] keys)
+STIFFNESS_MODEL_KEYS = {"K", "file", "null_space"}
+TRUSS_MODEL_KEYS = {"nodes", "bars", "EA", "supports"}
+TRUSS_CONTACT_KEYS = {"nodes", "normals", "tangents"}
+COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
+                    "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
+                    "exact_fallback_max_m": 10}
+RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
+                "condense": "auto", "max_memory_gb": "auto", "screens": False}
+#: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
+CONDENSE_MODES = ("auto", "serial", "distributed")
+#: friction coefficients (friction.mu, compute.mu_max) outside this range overflow or
+#: underflow the cone constraints (mu = 1e300, 1e-300: NaN rays, "cone not pointed")
+MU_RANGE = (1e-6, 1e6)
+#: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
+MU_C_TOL_MIN = 1e-15
+
+
+class SceneError(UserError):
+    """Bad input: the message is one line naming the key and the reason."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Which stages a scene needs (the one place that decides what to skip)."""
+
+    condense: bool       # a model to assemble and condense (not a raw K)
+    rays: bool           # 2D: complementary extreme rays per listed mu
+    cones: bool          # 2D: cross-complementarity cliques
+    patterns: bool       # 3D (2D with enumerate = "patterns"): feasible sign patterns per listed mu
+    mu_c_cones: bool     # mu^c of every cone / pattern
+    mu_c_global: bool
+
+    def steps(self) -> tuple[str, ...]:
+        """The stages after condensation, in order (pipeline.run_scene loops over them; every
+        scene is condensed first: `condense` says whether a model is, else a raw K is read):
+        "rays", "cones", "patterns", "mu_c" (per cone / pattern: of every listed mu with
+        mu_c_cones, else of the first that lists any, for the global value), "global_mu_c"."""
+        wanted = (self.rays, self.cones, self.patterns, self.mu_c_cones or self.mu_c_global, self.mu_c_global)
+        return tuple(name for name, on in zip(STEPS, wanted) if on)
+
+
+#: every stage a plan can hold after condensation, in the order they run (Plan.steps)
+STEPS = ("rays", "cones", "patterns", "mu_c", "global_mu_c")
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    dim: int
+    kind: str
+    model: dict
+    contact: dict
+    mu: tuple[float, ...]
+    enumerate: bool | str
+    mu_c: str
+    mu_c_method: str
+    mu_c_tol: float
+    mu_max: float
+    exact: bool
+    checkpoint_every_s: float
+    text: str = field(repr=False, default="")
+    base_dir: str = "."
+    task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel/)
+    symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
+    screens: bool = False          # run.screens: 3D tree, LP screens before deep SOCPs (screens.py)
+    face_split: int | str = "auto"  # run.face_split: branching nodes of the 2D DD split (faces.branching_nodes)
+    condense: str = "auto"         # run.condense: auto | serial | distributed (under mpirun)
+    obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
+    obstacle_key: str = "obstacle"  # where they came from, for messages
+    #: compute.exact_fallback_max_m: a 2D float enumeration whose decisions were too close to
+    #: call is redone in exact arithmetic when m is at most this (0: never; pipeline.py)
+    exact_fallback_max_m: int = 10
+    #: run.max_memory_gb: memory a run may use ("auto": from the machine's; progress.MemoryGuard)
+    max_memory_gb: float | str = "auto"
+
+    @property
+    def hash(self) -> str:
+        return hashlib.sha256(self.text.encode()).hexdigest()
+
+    @property
+    def input_files(self) -> tuple[str, ...]:
+        """Absolute paths of the data files the scene names (model.file of a stiffness or mesh
+        model), in a fixed order; the scene file itself is not among them."""
+        f = self.model.get("file") if self.kind in ("stiffness", "mesh") else None
+        return (os.path.abspath(os.path.join(self.base_dir, f)),) if isinstance(f, str) and f else ()
+
+    @functools.cached_property
+    def input_digests(self) -> dict[str, str]:
+        """{"model.file k.npz": SHA-256 (hex) of the file's bytes} for every file in
+        input_files, read once (the first use): with `hash` (the text), the identity of what a
+        run depends on, kept in checkpoints and results. SceneError when a file is missing or
+        unreadable."""
+        out = {}
+        for path in self.input_files:
+            key, name = next(((f"model.{k}", v) for k, v in self.model.items() if isinstance(v, str)
+                              and os.path.abspath(os.path.join(self.base_dir, v)) == path), ("file", path))
+            h = hashlib.sha256()
+            try:
+                with open(path, "rb") as fh:
+                    while chunk := fh.read(8 << 20):
+                        h.update(chunk)
+            except FileNotFoundError:
+                raise SceneError(f"{key}: {name} not found") from None
+            except OSError as e:
+                raise SceneError(f"{key}: cannot read {name} ({e.strerror or type(e).__name__})") from None
+            out[f"{key} {name}"] = h.hexdigest()
+        return out
+
+    def plan(self) -> Plan:
+        enum = self.enumerate is not False
+        patterns = enum and (self.dim == 3 or self.enumerate == "patterns")
+        rays = self.dim == 2 and enum and not patterns
+        return Plan(condense=self.kind != "stiffness",
+                    rays=rays,
+                    cones=rays and self.enumerate != "rays",
+                    patterns=patterns,
+                    mu_c_cones=self.mu_c == "cones",
+                    mu_c_global=self.mu_c in ("global", "cones"))
+
+    # the public API's constructors (api.py: a scene table, then parse_scene, the one validator)
+    @classmethod
+    def load(cls, path: str) -> Scene:
+        """The scene of a TOML file (load_scene)."""
+        return load_scene(path)
+
+    @classmethod
+    def from_dict(cls, data: dict, **options) -> Scene:
+        """The scene of a scene table given as a dict: constructors.scene_from_dict."""
+        from hpcwedge.scene.constructors import scene_from_dict
+        return scene_from_dict(data, **options)
+
+    @classmethod
+    def builtin(cls, kind: str, **options) -> Scene:
+        """The scene of a built-in model: constructors.builtin_scene."""
+        from hpcwedge.scene.constructors import builtin_scene
+        return builtin_scene(kind, **options)
+
+    @classmethod
+    def from_stiffness(cls, K, **options) -> Scene:
+        """The scene of a condensed stiffness array: constructors.stiffness_scene."""
+        from hpcwedge.scene.constructors import stiffness_scene
+        return stiffness_scene(K, **options)
+
+    @classmethod
+    def from_truss(cls, nodes, bars, **options) -> Scene:
+        """The scene of a truss given as arrays: constructors.truss_scene."""
+        from hpcwedge.scene.constructors import truss_scene
+        return truss_scene(nodes, bars, **options)
+
+
+def load_scene(path: str) -> Scene:
+    """Read and validate a scene file."""
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read ({e.strerror})") from None
+    try:
+        text = raw.decode("utf-8-sig")        # a byte-order mark (Windows editors) is dropped
+    except UnicodeDecodeError as e:
+        line = raw[:e.start].count(b"\n") + 1
+        raise SceneError(f"{path}: not UTF-8 text (byte 0x{raw[e.start]:02x} on line {line}): save it "
+                         f"as UTF-8") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{path}: not valid TOML ({e})") from None
+    return parse_scene(data, text=text, base_dir=os.path.dirname(os.path.abspath(path)))
+
+
+def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
+    _unknown(data, TOP_KEYS, "")
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        raise SceneError("name: required, a non-empty string")
+    dim = data.get("dim")
+    if isinstance(dim, bool) or not isinstance(dim, int) or dim not in (2, 3):
+        raise SceneError(f"dim: must be 2 or 3, got {dim!r}")
+    model = _table_with(data, "model", "kind")
+    kind = model["kind"]
+    if kind not in KINDS:
+        raise SceneError(f"model.kind: unknown kind {kind!r} (one of {', '.join(KINDS)})")
+    if kind in BUILTIN_DIM and BUILTIN_DIM[kind] != dim:
+        raise SceneError(f"dim: {kind} is a {BUILTIN_DIM[kind]}D model, scene says dim = {dim}")
+    friction = _table_with(data, "friction", "mu", " (one value or a list)")
+    _unknown(friction, {"mu"}, "friction.")
+    mus = friction["mu"] if isinstance(friction["mu"], list) else [friction["mu"]]
+    if not mus:
+        raise SceneError("friction.mu: empty list")
+    for v in mus:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise SceneError(f"friction.mu: every value must be a finite number > 0, got {v!r}")
+        if not MU_RANGE[0] <= v <= MU_RANGE[1]:
+            raise SceneError(f"friction.mu: every value must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {v!r}")
+    values = sorted(map(float, mus))
+    twice = next((a for a, b in zip(values, values[1:]) if a == b), None)
+    if twice is not None:
+        # each value is one run: a repeated one would be computed again for the same answer
+        raise SceneError(f"friction.mu: {twice!r} is listed twice (each value is one run)")
+    compute = dict(COMPUTE_DEFAULTS)
+    given = data.get("compute", {})
+    _unknown(given, set(COMPUTE_DEFAULTS), "compute.")
+    compute.update(given)
+    if not isinstance(compute["enumerate"], (bool, str)) or compute["enumerate"] not in (True, False, "rays",
+                                                                                       "patterns"):
+        raise SceneError(f"compute.enumerate: true, false, \"rays\" or \"patterns\", "
+                         f"got {compute['enumerate']!r}")
+    if compute["mu_c"] not in ("none", "global", "cones"):
+        raise SceneError(f"compute.mu_c: \"none\", \"global\" or \"cones\", got {compute['mu_c']!r}")
+    if compute["mu_c_method"] not in ("accurate", "bisection"):
+        raise SceneError(f"compute.mu_c_method: \"accurate\" or \"bisection\", got {compute['mu_c_method']!r}")
+    for key in ("mu_c_tol", "mu_max"):
+        v = compute[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise SceneError(f"compute.{key}: must be a finite number > 0, got {v!r}")
+    if not MU_RANGE[0] <= compute["mu_max"] <= MU_RANGE[1]:
+        raise SceneError(f"compute.mu_max: must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {compute['mu_max']!r}")
+    if not MU_C_TOL_MIN <= compute["mu_c_tol"] < 1:
+        raise SceneError(f"compute.mu_c_tol: a relative tolerance in [{MU_C_TOL_MIN:g}, 1), "
+                         f"got {compute['mu_c_tol']!r}")
+    if not isinstance(compute["exact"], bool):
+        raise SceneError(f"compute.exact: true or false, got {compute['exact']!r}")
+    v = compute["exact_fallback_max_m"]
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise SceneError(f"compute.exact_fallback_max_m: must be a whole number >= 0, got {v!r}")
+    if compute["exact"] and dim == 3:
+        raise SceneError("compute.exact: exact arithmetic is for 2D scenes (3D problems are conic)")
+    given = data.get("run", {})
+    _unknown(given, set(RUN_DEFAULTS), "run.")
+    run = dict(RUN_DEFAULTS)
+    run.update(given)
+    v = run["checkpoint_every_s"]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise SceneError(f"run.checkpoint_every_s: must be a finite number > 0, got {v!r}")
+    v = run["task_budget"]
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
+    for key in ("symmetry", "screens"):
+        if not isinstance(run[key], bool):
+            raise SceneError(f"run.{key}: true or false, got {run[key]!r}")
+    if run["screens"] and importlib.util.find_spec("cylp") is None:
+        raise SceneError("run.screens: needs COIN-OR CLP, which is not installed (pip install cylp)")
+    v = run["face_split"]
+    if v != "auto" and (isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 8):
+        raise SceneError(f"run.face_split: \"auto\" or a whole number 0..8 (branching nodes), got {v!r}")
+    v = run["max_memory_gb"]
+    if v != "auto" and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf")):
+        raise SceneError(f"run.max_memory_gb: \"auto\" or a number of GB > 0, got {v!r}")
+    if run["condense"] not in CONDENSE_MODES:
+        raise SceneError(f"run.condense: one of {', '.join(CONDENSE_MODES)}, got {run['condense']!r}")
+    contact = data.get("contact", {})
+    if not isinstance(contact, dict):
+        raise SceneError(f"contact: must be a table, got {contact!r}")
+    params = {k: v for k, v in model.items() if k != "kind"}
+    _no_booleans(params, "model.")
+    _no_booleans(contact, "contact.")
+    if kind in BUILTINS:
+        _check_builtin(kind, params)
+        _unknown(contact, set(), "contact.")
+    elif kind == "stiffness":
+        _unknown(params, STIFFNESS_MODEL_KEYS, "model.")
+        _unknown(contact, set(), "contact.")
+        if "file" in params and (not isinstance(params["file"], str) or not params["file"]):
+            raise SceneError(f"model.file: a file name (relative to the scene file), got {params['file']!r}")
+    elif kind == "truss":
+        _unknown(params, TRUSS_MODEL_KEYS, "model.")
+        _unknown(contact, TRUSS_CONTACT_KEYS, "contact.")
+    obstacles, obstacle_key = None, "obstacle"
+    if "obstacle" in data or (kind == "mesh" and "obstacle" in contact):
+        if kind != "mesh":
+            raise SceneError("obstacle: obstacle surfaces are for kind = \"mesh\" (give contact.normals)")
+        if "obstacle" in data and "obstacle" in contact:
+            raise SceneError("obstacle: give [[obstacle]] tables or contact.obstacle, not both")
+        obstacle_key = "obstacle" if "obstacle" in data else "contact.obstacle"
+        obstacles = data["obstacle"] if "obstacle" in data else contact["obstacle"]
+        from hpcwedge.models.obstacle import parse_obstacles
+        try:
+            parse_obstacles(obstacles, dim, obstacle_key)
+        except ValueError as e:
+            raise SceneError(str(e)) from None
+    if kind == "mesh":
+        _check_mesh(params, contact, dim, obstacles is not None)
+    return Scene(name=name, dim=dim, kind=kind, model=params, contact=contact,
+                 mu=tuple(values), enumerate=compute["enumerate"],
+                 mu_c=compute["mu_c"], mu_c_method=compute["mu_c_method"],
+                 mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
+                 exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
+                 text=text, base_dir=base_dir, task_budget=run["task_budget"],
+                 symmetry=run["symmetry"], screens=run["screens"], face_split=run["face_split"], condense=run["condense"],
+                 obstacles=obstacles, obstacle_key=obstacle_key,
+                 exact_fallback_max_m=compute["exact_fallback_max_m"], max_memory_gb=run["max_memory_gb"])
+
+
+def _table_with(data: dict, name: str, key: str, hint: str = "") -> dict:
+    """data[name], a table that holds `key`; else a SceneError naming the table or the key."""
+    table = data.get(name)
+    if table is not None and not isinstance(table, dict):
+        raise SceneError(f"{name}: must be a table, got {table!r}")
+    if table is None or key not in table:
+        raise SceneError(f"{name}.{key}: required{hint}")
+    return table
+
+
+def _unknown(table, allowed, prefix):
+    if not isinstance(table, dict):
+        raise SceneError(f"{prefix.rstrip('.') or 'scene'}: must be a table")
+    for k in table:
+        if k not in allowed:
+            raise SceneError(f"{prefix}{k}: unknown key (allowed: {', '.join(sorted(allowed))})" if allowed
+                             else f"{prefix}{k}: unknown key (this table takes no keys here)")
+
+
+#: the types of plain numbers in a table (bool, a subclass of int, is not one)
+NUMBER_TYPES = frozenset({int, float})
+
+
+def _no_booleans(value, key: str) -> None:
+    """SceneError naming the key of the first true/false inside `value` (a model or contact
+    table: none of their keys takes a boolean, and numpy would read one as 1.0 or 0.0)."""
+    if isinstance(value, bool):
+        raise SceneError(f"{key}: a number or a name expected, got {str(value).lower()}")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _no_booleans(v, f"{key}{k}" if key.endswith(".") else f"{key}.{k}")
+    elif isinstance(value, list) and not set(map(type, value)) <= NUMBER_TYPES:     # else: a row of numbers
+        for i, v in enumerate(value):
+            _no_booleans(v, f"{key}[{i}]")
+
+
+def _check_builtin(kind: str, params: dict) -> None:
+    sig = inspect.signature(BUILTINS[kind])
+    for k, v in params.items():
+        if k not in sig.parameters:
+            raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(sig.parameters)})")
+        default = sig.parameters[k].default
+        if isinstance(default, str):
+            continue                  # a choice (contact_patch_kind): checked in _check_patch
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SceneError(f"model.{k}: must be a finite number, got {v!r}")
+        if isinstance(default, int) and not isinstance(default, bool):
+            lo = WHOLE_MINIMUM[kind][k]
+            if not isinstance(v, int) or v < lo:
+                raise SceneError(f"model.{k}: must be a whole number >= {lo}, got {v!r}")
+    _check_patch(params)
+
+
+def _check_patch(params: dict) -> None:
+    """model.contact_patch, if given: a length >= 0; model.contact_patch_kind: one of
+    models.patch.KINDS (models/patch.py)."""
+    from hpcwedge.models.patch import KINDS, check_patch_size
+    if "contact_patch" in params:
+        try:
+            check_patch_size(params["contact_patch"])
+        except ValueError as e:
+            raise SceneError(str(e)) from None
+    if "contact_patch_kind" in params and params["contact_patch_kind"] not in KINDS:
+        raise SceneError(f"model.contact_patch_kind: one of {', '.join(repr(k) for k in KINDS)}, "
+                         f"got {params['contact_patch_kind']!r}")
+
+
+def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> None:
+    """Keys and value types of a kind = "mesh" scene; the values against the mesh are
+    checked when it is read (models/mesh.py)."""
+    _unknown(params, MESH_MODEL_KEYS, "model.")
+    _unknown(contact, MESH_CONTACT_KEYS, "contact.")
+    if not isinstance(params.get("file"), str) or not params["file"]:
+        raise SceneError("model.file: required for a mesh, a file name (relative to the scene file)")
+    if dim == 3 and "thickness" in params:
+        raise SceneError("model.thickness: only for 2D (plane stress) meshes")
+    _check_patch(params)
+    for k in ("E", "nu", "thickness"):
+        v = params.get(k, 1.0)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SceneError(f"model.{k}: must be a finite number, got {v!r}")
+    for k, where in (("support_group", "model."), ("group", "contact.")):
+        table = params if where == "model." else contact
+        v = table.get(k)
+        names = [v] if isinstance(v, str) else v
+        if v is not None and (not isinstance(names, list) or not names
+                              or not all(isinstance(g, str) and g for g in names)):
+            raise SceneError(f"{where}{k}: a group name or a list of group names, got {v!r}")
+    if ("group" in contact) == ("nodes" in contact):
+        raise SceneError("contact.group / contact.nodes: give exactly one (a group of the mesh, or node ids)")
+    if ("normals" in contact) == has_obstacle:
+        raise SceneError("contact.normals / obstacle: give exactly one (normals per contact node, "
+                         "or [[obstacle]] surfaces)")
+    if "tangents" in contact and "normals" not in contact:
+        raise SceneError("contact.tangents: only with contact.normals")
+    v = contact.get("tolerance", 1.0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise SceneError(f"contact.tolerance: must be a finite number > 0, got {v!r}")
+
+
+def array(value, key: str, ndim: int | None = None) -> np.ndarray:
+    """A finite float array from a scene value, or a SceneError naming key."""
+    from hpcwedge.models.record import as_float_array
+    try:
+        return as_float_array(value, key, ndim)
+    except ValueError as e:
+        raise SceneError(str(e)) from None
+
+
+#: [run] keys that change neither the answers nor their bits (SPEC §5), only how the run goes:
+#: a checkpoint resumes, and a complete result stands, under other values of them
+SETTINGS = ("max_memory_gb", "checkpoint_every_s")
+
+
+def changed_settings(saved: str, now: str) -> list[str] | None:
+    """The SETTINGS keys ("run.<key>") in which two scene texts differ when they differ in
+    nothing else, parsed (comments and layout aside: [] when only those differ); None when
+    they are other scenes (or either is not TOML). The one rule of "the same scene" for
+    checkpoints and results."""
+    try:
+        old, new = tomllib.loads(saved.lstrip("\ufeff")), tomllib.loads(now.lstrip("\ufeff"))
+    except tomllib.TOMLDecodeError:
+        return None
+    changed = []
+    for key in SETTINGS:
+        a, b = old.get("run", {}).pop(key, None), new.get("run", {}).pop(key, None)
+        if a != b:
+            changed.append(f"run.{key}")
+    for scene in (old, new):
+        if scene.get("run") == {}:
+            del scene["run"]
+    return changed if old == new else None

@@ -1,0 +1,31 @@
+"""Cancellation (hpcwedge.parallel.cancel): run_cancellable's tick, and the module (as every
+engine sees it) loads no MPI and no HDF5."""
+import subprocess
+import sys
+
+import pytest
+from mpi_helpers import env
+
+from hpcwedge.parallel import cancel
+
+
+def test_run_cancellable_ticks_and_stops():
+    seen = []
+
+    def handler(ctx, payload):
+        assert cancel.task_stopping() is False      # first look: check() says go on
+        cancel.task_tick()
+        return payload
+
+    assert cancel.run_cancellable(handler, None, 7, lambda: seen.append(1) or False, tick_every_s=0.0) == 7
+    assert seen and cancel.task_stopping() is False    # outside a task: never stopping
+    with pytest.raises(cancel.TaskCancelled):
+        cancel.run_cancellable(lambda ctx, p: cancel.task_tick(), None, None, lambda: True, tick_every_s=0.0)
+
+
+def test_engines_import_no_mpi_and_no_hdf5():
+    code = ("import sys, hpcwedge.patterns.tree, hpcwedge.mu_c.critical, hpcwedge.rays.faces, "
+            "hpcwedge.parallel.cancel; print('mpi4py' in sys.modules, 'h5py' in sys.modules)")
+    p = subprocess.run([sys.executable, "-c", code], env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "False False"

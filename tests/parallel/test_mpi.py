@@ -1,0 +1,43 @@
+"""MPI plumbing (hpcwedge/parallel/mpi.py) under the real mpirun: idle ranks sleep (CPU time
+from /proc), a launch that does not match SLURM's task count is one clear error."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+from mpi_helpers import MPIRUN, ROOT, env, needs_mpirun, write_scene
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_idle_ranks_do_not_spin():
+    """CPU time from /proc/PID/stat over 2 s in which (A) the master computes and
+    no worker has a task, (B) one worker runs the only task. Control (C): a
+    worker in a plain blocking comm.recv burns CPU, so the measure sees spinning."""
+    period = 2.0
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
+                        sys.executable, os.path.join(ROOT, "tests", "engine_driver.py"), str(period)],
+                       env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    a, b, c = got["master_busy"], got["one_task"], got["blocking_recv"]
+    print(json.dumps(got))
+    idle = [a["cpu"][1], a["cpu"][2], b["cpu"][2]]
+    assert max(idle) <= 0.03 * period, got            # idle workers: < 3% of a core
+    assert b["cpu"][0] <= 0.05 * period, got          # the waiting master: < 5%
+    assert min(c["cpu"][1:]) >= 0.1 * c["seconds"], got   # control: a blocking recv spins
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_slurm_ntasks_mismatch_fails_clearly(tmp_path):
+    scene = write_scene(tmp_path)
+    out = tmp_path / "r.h5"
+    e = env()
+    e["SLURM_NTASKS"] = "3"
+    p = subprocess.run([sys.executable, "-m", "hpcwedge", "run", scene, "-o", str(out)], env=e,
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert "SLURM_NTASKS=3" in p.stderr and "srun" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    assert not out.exists()

@@ -1,0 +1,63 @@
+"""Jobs and their checkpoint state (hpcwedge/parallel/jobs.py; tests/test_jobs.py is about the
+batch scripts in jobs/): a job saved with tasks in flight and loaded afresh finishes with
+the answers of one pass."""
+import numpy as np
+from instances import tree_factory
+
+from hpcwedge.parallel.engine import Engine
+from hpcwedge.parallel.jobs import TaskJob
+from hpcwedge.patterns.job import SubtreeJob, run_patterns
+
+
+def _task(ctx, payload):
+    return {}
+
+
+def test_subtree_job_checkpoint_state_round_trip():
+    """Stop a job half-way with tasks 'in flight', save, load into a fresh job,
+    finish: the same patterns and node count as one pass."""
+    make, _ = tree_factory(31, m=6)
+    mus = [1.0, 4.0]
+    ref = run_patterns(make, mus, budget=2)
+    job = SubtreeJob("p", make, mus, budget=2)
+    handler = job.handler
+    in_flight = []
+    for _ in range(7):
+        token, payload = job.take(1)
+        job.merge(token, handler(job.context, payload))
+    for _ in range(2):                                    # taken, never merged
+        token, _ = job.take(1)
+        in_flight.append(token)
+    state = job.save(in_flight)
+    again = SubtreeJob("p", make, mus, budget=2)
+    again.load(state)
+    again.counters.update({k: v for k, v in job.counters.items()})
+    out = Engine().run(again).output()
+    assert out.found == ref.found
+    assert out.counters["nodes"] == ref.counters["nodes"]
+
+
+def test_task_job_state_round_trip_with_arrays():
+    job = TaskJob("t", _task, None, list(range(5)))
+    for k, res in [(0, {"a": 1.5, "v": np.arange(3.0)}), (3, {"a": -2.0, "v": np.zeros((0,))}),
+                   (4, {"a": 7.0, "v": np.ones(2)})]:
+        job.merge(k, res)
+    again = TaskJob("t", _task, None, list(range(5)))
+    again.load({"attrs": job.save([])["attrs"], "data": job.save([])["data"]})
+    assert again.pending() == 2 and [again.take(1)[0], again.take(1)[0]] == [1, 2]
+    assert again.results[0]["a"] == 1.5 and again.results[0]["v"].tolist() == [0, 1, 2]
+    assert again.results[3]["v"].tolist() == [] and again.results[4]["v"].tolist() == [1, 1]
+
+
+def test_task_job_resumed_from_results_with_fewer_keys_saves_the_common_ones():
+    """A task job resumed from an older version's checkpoint (its mu_c results lack
+    "pyramid_lps") whose first done task is a new one: the next save keeps the keys every
+    result has, where it raised KeyError on the old result."""
+    old = TaskJob("t", _task, None, list(range(3)))
+    old.merge(2, {"mu_c": 0.5, "lps": 3})
+    resumed = TaskJob("t", _task, None, list(range(3)))
+    resumed.load(old.save([]))
+    resumed.merge(0, {"mu_c": 0.25, "lps": 4, "pyramid_lps": 2})
+    again = TaskJob("t", _task, None, list(range(3)))
+    again.load(resumed.save([]))
+    assert again.results[0] == {"mu_c": 0.25, "lps": 4} and again.results[2] == {"mu_c": 0.5, "lps": 3}

@@ -1,0 +1,223 @@
+"""Sign-pattern branch and bound: exploring by subtrees with a node budget
+finds exactly what one uninterrupted depth-first search finds."""
+import numpy as np
+import pytest
+from instances import brute_3d, random_problem, tree_factory
+
+from hpcwedge.contact.problem import parametrize
+from hpcwedge.nodesets import pattern_key, to_bits
+from hpcwedge.patterns.job import run_patterns
+from hpcwedge.patterns.tree import PatternTree, Subtree
+from hpcwedge.reference import patterns_of_supports
+from hpcwedge.run.pipeline import run_scene
+from hpcwedge.scene.parse import parse_scene
+
+
+@pytest.mark.parametrize("seed", range(8))
+@pytest.mark.parametrize("budget", [1, 3, 7])
+def test_budgeted_exploration_equals_one_pass(seed, budget):
+    rng = np.random.default_rng(900 + seed)
+    m = 4
+    prob = random_problem(rng, m, free=bool(seed % 2))
+    tree = PatternTree(parametrize(prob), m, mu=3.0)
+    whole = tree.explore(tree.root())
+    assert whole.open == []
+    queue, found, calls = [tree.root()], [], 0
+    while queue:
+        out = tree.explore(queue.pop(), budget)
+        assert out.stats.nodes <= budget
+        found += out.found
+        queue += out.open
+        calls += 1
+    key = lambda s: (s.contact, s.gap)
+    assert sorted(found, key=key) == sorted(whole.found, key=key)
+    assert all(s.depth == m and s.contact | s.gap == (1 << m) - 1 for s in found)
+    assert calls > 1
+
+
+def test_subtree_masks():
+    zu, zr = Subtree(3, contact=0b101, gap=0b010).masks(4)
+    assert zu.tolist() == [True, False, True, False]
+    assert zr.tolist() == [False, True, False, False]
+    # both masks come from one unpacking: neither may read the other's bits, on any m
+    rng = np.random.default_rng(1)
+    for m in (1, 7, 8, 9, 18, 64, 65):
+        for _ in range(20):
+            contact, gap = (int.from_bytes(rng.bytes(m // 8 + 1), "little") & ((1 << m) - 1) for _ in "cg")
+            zu, zr = Subtree(0, contact, gap).masks(m)
+            assert zu.tolist() == [bool(contact >> i & 1) for i in range(m)]
+            assert zr.tolist() == [bool(gap >> i & 1) for i in range(m)]
+
+
+# ------------------------------------------------------------------ 2D vs rays
+from instances import random_problem_3d  # noqa: E402
+
+from hpcwedge.contact.problem import friction_rows_2d  # noqa: E402
+from hpcwedge.patterns.tree import sign_patterns  # noqa: E402
+from hpcwedge.rays.dd import complementary_rays  # noqa: E402
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_2d_patterns_are_the_ones_the_rays_imply(seed):
+    """SPEC §2: (C, G) is feasible iff some wedged ray has supp(r_n) ⊆ C and
+    supp(u_n) ⊆ G — the branch and bound (LPs) against the double description."""
+    rng = np.random.default_rng(4000 + seed)
+    m = [2, 3, 4, 5][seed % 4]
+    prob = random_problem(rng, m, free=bool(seed % 2))
+    mu = float(np.exp(rng.uniform(np.log(1.0), np.log(20.0))))
+    p = parametrize(prob)
+    dd = complementary_rays(friction_rows_2d(p, mu, m), m)
+    w = dd.wedged()
+    loaded, lifted = ~dd.zero_r()[w], ~dd.zero_u()[w]          # supp(r_n), supp(u_n) per wedged ray
+    implied = patterns_of_supports(loaded, lifted, m)
+    got = {int(sum(1 << i for i in range(m) if zu[i])) for zu, _ in sign_patterns(p, m, mu)}
+    assert got == implied
+
+
+# ------------------------------------------------------------------ 3D tree
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("budget", [1, 4])
+def test_3d_budgeted_exploration_equals_one_pass(seed, budget):
+    rng = np.random.default_rng(950 + seed)
+    m = 4
+    tree = PatternTree(parametrize(random_problem_3d(rng, m, free=bool(seed % 2))), m, mu=2.0)
+    assert tree.dim == 3
+    whole = tree.explore(tree.root())
+    queue, found = [tree.root()], []
+    while queue:
+        out = tree.explore(queue.pop(), budget)
+        assert out.stats.nodes <= budget
+        found += out.found
+        queue += out.open
+    key = lambda s: (s.contact, s.gap)
+    assert sorted(found, key=key) == sorted(whole.found, key=key)
+
+
+def test_3d_skip_rule_and_steering_save_solves():
+    """plug3d, m = 10, mu = 1, static order: fewer SOCPs than tree nodes and than
+    2^m, every pattern found; dynamic branching (the default): the same patterns
+    with fewer SOCPs still."""
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.scene.parse import parse_scene
+    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d"}, "friction": {"mu": [1.0]}})
+    p = parametrize(contact_problem(sc))
+    tree = PatternTree(p, 10, 1.0, order=list(range(9, -1, -1)))
+    assert not tree.dynamic
+    out = tree.explore(tree.root())
+    assert len(out.found) == 131
+    s = out.stats
+    assert s.skipped > 0 and s.statuses.get("contact_child_infeasible_by_parent", 0) > 0
+    assert s.solves < 1024 and s.solves + s.skipped + s.pruned == s.nodes
+    dyn = PatternTree(p, 10, 1.0)
+    assert dyn.dynamic
+    out2 = dyn.explore(dyn.root())
+    key = lambda t: (t.contact, t.gap)
+    assert sorted(out2.found, key=key) == sorted(out.found, key=key)
+    assert out2.stats.solves < s.solves
+
+
+# ---------------------------------------------------------------- symmetry (learnt cores: test_cores.py)
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_orbital_branching_finds_every_orbit(seed):
+    """Planted cyclic symmetry (free and supported, m = 3..6, random mu): the tree
+    with the symmetry, expanded over the group, finds exactly the brute force's
+    patterns; it visits fewer leaves than there are patterns whenever some orbit
+    has more than one pattern."""
+    from instances import symmetric_problem_3d
+
+    from hpcwedge.patterns.symmetry import node_symmetries
+    rng = np.random.default_rng(seed)
+    m = 3 + seed % 4
+    prob = symmetric_problem_3d(rng, m, free=bool(seed % 2))
+    mu = float(np.exp(rng.uniform(np.log(0.3), np.log(3.0))))
+    p = parametrize(prob)
+    G = node_symmetries(prob.K, 3)
+    assert G.order >= m
+    tree = PatternTree(p, m, mu, symmetry=G)
+    out = tree.explore(tree.root())
+    got = tree.expand(out.found)
+    assert {s.contact for s in got} == brute_3d(p, m, mu)
+    assert all(s.depth == m and s.contact | s.gap == (1 << m) - 1 and not s.contact & s.gap for s in got)
+    if any(len(G.expand([(s.contact, s.gap)])) > 1 for s in got):
+        assert len(out.found) < len(got)
+
+
+def test_symmetry_saves_solves_on_plug3d_and_changes_no_pattern():
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.patterns.symmetry import node_symmetries
+    from hpcwedge.scene.parse import parse_scene
+    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d", "ring": 5}, "friction": {"mu": 1.0}})
+    prob = contact_problem(sc)
+    p, G = parametrize(prob), node_symmetries(prob.K, 3)
+    plain, sym = PatternTree(p, 10, 1.0), PatternTree(p, 10, 1.0, symmetry=G)
+    a, b = plain.explore(plain.root()), sym.explore(sym.root())
+    key = lambda t: (t.contact, t.gap)
+    assert sorted(a.found, key=key) == sym.expand(b.found) and len(a.found) == 131
+    assert 2 * b.stats.solves < a.stats.solves
+
+
+def test_orbital_fixing_drops_no_orbit_and_saves_solves():
+    """plug3d 2 x 4 at mu = 1 (m = 8, dihedral group of order 8): the tree with orbital
+    fixing, expanded over the group, gives the brute force's 77 patterns, as the tree
+    without it does, from fewer leaves and fewer SOCPs (81 and 103 measured)."""
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.patterns.symmetry import node_symmetries
+    from hpcwedge.scene.parse import parse_scene
+    sc = parse_scene({"name": "p", "dim": 3, "model": {"kind": "plug3d", "ring": 4}, "friction": {"mu": 1.0}})
+    prob = contact_problem(sc)
+    p, G = parametrize(prob), node_symmetries(prob.K, 3)
+    fixed, plain = (PatternTree(p, 8, 1.0, symmetry=G, orbital_fixing=f) for f in (True, False))
+    a, b = fixed.explore(fixed.root()), plain.explore(plain.root())
+    want = brute_3d(p, 8, 1.0)
+    assert {s.contact for s in fixed.expand(a.found)} == want == {s.contact for s in plain.expand(b.found)}
+    assert len(want) == 77
+    assert len(a.found) < len(b.found) and a.stats.solves < b.stats.solves
+
+
+@pytest.mark.parametrize("seed,budget", [(0, 1), (1, 3), (2, 1000)])
+def test_run_patterns_equals_serial_search(seed, budget):
+    make, prob = tree_factory(700 + seed, free=bool(seed % 2))
+    mus = [0.5, 2.0, 8.0]
+    out = run_patterns(make, mus, budget=budget)
+    for k, mu in enumerate(mus):
+        tree = make(mu)
+        whole = tree.explore(tree.root())
+        # the engine's order is the one canonical order (nodesets.pattern_key), whatever the split
+        assert out.found[k] == sorted(whole.found, key=lambda s: pattern_key(s.contact))
+        masks = [s.masks(tree.m) for s in out.found[k]]
+        ref = sorted(sign_patterns(tree.param, tree.m, mu), key=lambda ab: pattern_key(to_bits(np.flatnonzero(ab[0]))))
+        assert [(a.tolist(), b.tolist()) for a, b in masks] == [(a.tolist(), b.tolist()) for a, b in ref]
+    # every tree node is visited exactly once, however the work is split
+    nodes = sum(make(mu).explore(make(mu).root()).stats.nodes for mu in mus)
+    assert out.counters["nodes"] == nodes
+    if budget == 1:
+        assert out.counters["handed_back"] > 0
+
+
+@pytest.mark.parametrize("rows,taper,mus", [(2, 10.0, [0.2, 0.65]), (3, 10.0, [0.65]),
+                                            (3, 31.0, [0.62, 2.0]), (4, 20.0, [0.5])])
+def test_2d_patterns_agree_with_rays(rows, taper, mus):
+    """SPEC §2: (C, G) is feasible iff some wedged ray has supp(r_n) in C and
+    supp(u_n) in G — the engine's patterns against the double description's rays."""
+    from hpcwedge.reference import patterns_of_supports
+
+    def scene(enum):
+        return parse_scene({"name": "t", "dim": 2, "model": {"kind": "plug2d", "rows": rows, "taper_deg": taper},
+                            "friction": {"mu": mus}, "compute": {"enumerate": enum, "mu_c": "cones"},
+                            "run": {"task_budget": 3}})
+    pat, ray = run_scene(scene("patterns")), run_scene(scene(True))
+    m = pat.m
+    assert pat.stages == ["condense", "enumerate", "mu_c"]
+    assert abs(pat.mu_c - ray.mu_c) <= 1e-9 * ray.mu_c
+    for rp, rr in zip(pat.runs, ray.runs):
+        assert rp.rays is None and rp.cones is None and rr.patterns is None
+        un, rn = rr.rays[:, :m], rr.rays[:, 2 * m:3 * m]
+        scale = np.abs(rr.rays).max(axis=1, keepdims=True)
+        supp_u, supp_r = np.abs(un) > 1e-9 * scale, np.abs(rn) > 1e-9 * scale
+        want = [[i for i in range(m) if bits >> i & 1]                   # canonical: by contact bits
+                for bits in sorted(patterns_of_supports(supp_r, supp_u, m))]
+        assert [p["contact"] for p in rp.patterns] == want
+        for p in rp.patterns:               # a pattern's mu^c: at most the run's mu, at least the global one
+            assert ray.mu_c * (1 - 1e-9) <= p["mu_c"] <= rp.mu * (1 + 1e-9)

@@ -1,0 +1,98 @@
+"""lp.py: LP feasibility by HiGHS — the pyramids sandwich the cone (inscribed feasible =>
+SOCP feasible => circumscribed feasible) — and the violation of a point (lp_violation)."""
+import numpy as np
+from instances import random_partial_rows, random_problem
+
+from hpcwedge.contact.problem import parametrize
+from hpcwedge.solvers.feasibility import decide
+from hpcwedge.solvers.lp import lp_feasible, lp_violation
+from hpcwedge.solvers.rows import Status, pattern_rows, pyramid_rows
+
+
+def test_pyramids_sandwich_the_cone():
+    """inner feasible => SOCP feasible => outer feasible, on random partial patterns."""
+    rng = np.random.default_rng(7)
+    n_checked = 0
+    for _ in range(40):
+        rows = random_partial_rows(rng)
+        for mu in (0.5, 1.5):
+            s = decide(rows, mu).status
+            si = lp_feasible(pyramid_rows(rows, 8, inner=True), mu)[0]
+            so = lp_feasible(pyramid_rows(rows, 8, inner=False), mu)[0]
+            if si == Status.FEASIBLE:
+                assert s == Status.FEASIBLE
+            if s == Status.FEASIBLE:
+                assert so == Status.FEASIBLE
+            n_checked += 1
+    assert n_checked == 80
+
+
+def test_lp_point_meets_its_rows_and_violation_measures_a_wrong_one():
+    """A HiGHS point of a feasible 2D pattern meets every row to its tolerance (lp_violation
+    ~ 1e-10); infeasible patterns return no point; a point that breaks a row is measured
+    by the largest violation relative to ||x||."""
+    n_feasible = n_infeasible = 0
+    for seed in range(20):
+        p = parametrize(random_problem(np.random.default_rng(seed), 3, bool(seed % 2)))
+        zu = np.array([bool(seed & 1), bool(seed & 2), True])
+        rows = pattern_rows(p, 3, zu, ~zu)
+        for mu in (0.3, 3.0):
+            status, x = lp_feasible(rows, mu)
+            if status == Status.INFEASIBLE:
+                assert x is None
+                n_infeasible += 1
+                continue
+            assert status == Status.FEASIBLE and abs(rows.norm @ x - 1) <= 1e-9
+            assert lp_violation(rows, mu, x) <= 1e-8
+            assert lp_violation(rows, mu, -x) > 1e-3            # sum r_n = -1: some row broken
+            n_feasible += 1
+    assert n_feasible >= 5 and n_infeasible >= 5
+
+
+def _x_space_lp(rows, mu):
+    """The pattern LP as written (x in R^d, equality rows kept), by HiGHS through
+    scipy.optimize.linprog with presolve: the independent route lp_feasible's
+    elimination must agree with."""
+    from scipy.optimize import linprog
+    A = rows.a0 + mu * rows.a1
+    A = A / np.linalg.norm(A, axis=1)[:, None]
+    E, d = rows.eq, A.shape[1]
+    A_eq = np.vstack([A[E], rows.norm[None, :]])
+    b_eq = np.zeros(A_eq.shape[0])
+    b_eq[-1] = 1.0
+    res = linprog(np.zeros(d), A_ub=-A[~E], b_ub=np.zeros((~E).sum()), A_eq=A_eq, b_eq=b_eq,
+                  bounds=[(None, None)] * d, method="highs-ds",
+                  options={"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10})
+    return {0: Status.FEASIBLE, 2: Status.INFEASIBLE}.get(res.status, Status.UNDECIDED)
+
+
+def test_eliminated_lp_agrees_with_the_x_space_lp():
+    """lp_feasible solves in the null space of the equalities; on random full and partial
+    2D patterns (nodes in both sets too: dependent equality rows) at mu away from every
+    pattern's mu^c it gives the x-space LP's answer, and a point on the equalities to
+    rounding (|eq x| <= 1e-12, sum r_n = 1) that meets every row (lp_violation), without
+    the x-space fallback but on rare near-recession points."""
+    rng = np.random.default_rng(11)
+    seen = {Status.FEASIBLE: 0, Status.INFEASIBLE: 0}
+    counts: dict = {}
+    for trial in range(60):
+        m = int(rng.integers(3, 7))
+        p = parametrize(random_problem(rng, m, bool(trial % 2)))
+        zu, zr = rng.random(m) < 0.4, rng.random(m) < 0.4
+        rows = pattern_rows(p, m, zu, zr)
+        for mu in (0.2, 1.0, 5.0, np.inf):
+            if not np.isfinite(mu):
+                rows_mu, mu = pattern_rows(p, m, zu, zr, friction=False), 0.0
+            else:
+                rows_mu = rows
+            status, x = lp_feasible(rows_mu, mu, counts=counts)
+            ref = _x_space_lp(rows_mu, mu)
+            assert status == ref, (trial, mu)
+            if status == Status.FEASIBLE:
+                A = rows_mu.a0 + mu * rows_mu.a1
+                assert np.abs(A[rows_mu.eq] @ x).max(initial=0.0) <= 1e-12 * max(1.0, np.linalg.norm(x))
+                assert abs(rows_mu.norm @ x - 1) <= 1e-9
+                assert lp_violation(rows_mu, mu, x) <= 1e-9
+            seen[status] += 1
+    assert min(seen.values()) >= 30
+    assert counts.get("lp_x_space", 0) <= 2            # the eliminated LP answered

@@ -1,0 +1,50 @@
+"""milp.py: the wedge MILP (HiGHS) of a 2D body — infeasible just below mu^c, feasible just
+above with a pattern our LP confirms — and HiGHS's debug prints kept off stdout. The global
+route that uses it: test_global_mu_c.py."""
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+from instances import global_run
+
+from hpcwedge.contact.problem import parametrize
+from hpcwedge.solvers.feasibility import decide
+from hpcwedge.solvers.milp import wedge_milp
+from hpcwedge.solvers.rows import Status, pattern_rows
+
+
+def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
+    res = global_run({"kind": "plug2d", "rows": 3, "taper_deg": 10.0})
+    p, m = parametrize(res.problem), res.m
+    mu_c = math.tan(math.radians(10.0))
+    assert wedge_milp(p, m, 0.99 * mu_c).status == Status.INFEASIBLE
+    ans = wedge_milp(p, m, 1.01 * mu_c)
+    assert ans.status == Status.FEASIBLE and ans.value > 0.5
+    assert np.array_equal(ans.zero_u, ~ans.zero_r)
+    assert decide(pattern_rows(p, m, ans.zero_u, ans.zero_r), 1.01 * mu_c).status == Status.FEASIBLE
+
+
+def test_highs_debug_prints_never_reach_stdout():
+    """HiGHS's MIP solver printf()s debug lines past its output_flag on these bodies (6 lines
+    without milp._stdout_silenced); stdout carries `hpcwedge run --json`."""
+    code = f"""
+import sys
+sys.path.insert(0, {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))!r})
+from functools import partial
+import numpy as np
+from instances import random_problem
+from hpcwedge.mu_c.critical import mu_critical
+from hpcwedge.mu_c.global_search import global_bracket_milp
+from hpcwedge.patterns.tree import BnBStats
+from hpcwedge.contact.problem import parametrize
+for seed in range(100, 106):
+    prob = random_problem(np.random.default_rng(seed), 6, free=seed % 2 == 0)
+    p = parametrize(prob)
+    global_bracket_milp(p, prob.m, 50.0, partial(mu_critical, p, prob.m, mu_max=50.0), BnBStats(), dive=0)
+print("done")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout == "done\n"
