@@ -32,7 +32,8 @@ from hpcwedge.files import FileError
 from hpcwedge.results.record import Result, Run
 from hpcwedge.run.pipeline import run_scene
 from hpcwedge.scene.constructors import DEFAULT_MU, builtin_scene, scene_from_dict, stiffness_scene, truss_scene
-from hpcwedge.scene.parse import Scene, SceneError, load_scene
+from hpcwedge.scene.parse import Scene, load_scene
+from hpcwedge.scene.values import SceneError
 
 __all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
            "plot", "export_vtu", "DEFAULT_MU", "scene_from_dict", "builtin_scene", "stiffness_scene", "truss_scene"]

@@ -209,7 +209,8 @@ def _run(args) -> int:
     from hpcwedge.progress import Progress
     from hpcwedge.results.hdf5 import result_state, write_result
     from hpcwedge.run.pipeline import release_workers, run_scene
-    from hpcwedge.scene.parse import SceneError, changed_settings, load_scene
+    from hpcwedge.scene.parse import changed_settings, load_scene
+    from hpcwedge.scene.values import SceneError
     progress = Progress(quiet=args.quiet)
     engine = Engine(comm, progress=None if args.quiet else progress)
     engine.install_signals()

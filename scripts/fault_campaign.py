@@ -1130,7 +1130,7 @@ def main(argv: list[str] | None = None) -> int:
            "cases": len(rows), "seconds": round(time.perf_counter() - t_all, 1), "by_category": summary,
            "rows": rows}
     with contextlib.suppress(ImportError):
-        from hpcwedge.environment import describe as environment
+        from hpcwedge.environment import environment
         doc["environment"] = environment()
     with open(args.out + ".json", "w") as f:
         json.dump(doc, f, indent=1)

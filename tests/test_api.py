@@ -88,7 +88,7 @@ def test_scene_text_reads_back_as_the_table_validated(data):
     another scene than the one solved."""
     import tomllib
 
-    from hpcwedge.scene.constructors import _plain
+    from hpcwedge.scene.tables import _plain
     back, plain = tomllib.loads(hw.Scene.from_dict(data).text), _plain(data, "")
 
     def typed(v):                   # the value with every leaf's type, -0.0 told from 0.0
@@ -283,7 +283,7 @@ def test_import_is_light_and_exports_resolve():
 def test_doctests():
     import hpcwedge.scene.constructors
     res = [doctest.testmod(hpcwedge.api),        # the constructors' examples solve through the API
-           doctest.testmod(hpcwedge.scene.constructors, extraglobs={"solve": hpcwedge.api.solve})]
+           doctest.testmod(hpcwedge.scene.constructors, extraglobs={"solve": hpcwedge.api.solve, "math": math})]
     assert sum(r.attempted for r in res) >= 20 and sum(r.failed for r in res) == 0
 
 

@@ -12,7 +12,8 @@ import sys
 
 import pytest
 
-from hpcwedge.scene.parse import SceneError, parse_scene
+from hpcwedge.scene.parse import parse_scene
+from hpcwedge.scene.values import SceneError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "scripts"))

@@ -2,7 +2,7 @@
 at import and around run_scene), the environment record (stats.environment), and the
 answers under other kernels of this machine — OpenBLAS core types, numpy without its
 AVX-512 code or on its baseline alone — which stand in for other x86-64 CPUs: tests/test_determinism.py,
-tests/run/test_numerics.py and tests/run/test_stress.py run again in subprocesses under each
+tests/rays/test_numerics.py and tests/rays/test_stress.py run again in subprocesses under each
 ("legs"; slow)."""
 import json
 import os
@@ -111,7 +111,7 @@ LEGS = {
 #: what each leg runs: the bit-for-bit tests, the float-against-exact checks and the
 #: numerical stress cases (three of which asserted more than the float path guarantees and
 #: failed under Sandybridge kernels only)
-LEG_TESTS = ["tests/test_determinism.py", "tests/run/test_numerics.py", "tests/run/test_stress.py"]
+LEG_TESTS = ["tests/test_determinism.py", "tests/rays/test_numerics.py", "tests/rays/test_stress.py"]
 
 PROBE = """
 import json

@@ -60,3 +60,136 @@ def test_readme_map_names_every_module_once():
     missing = [m for m in want if named.count(m) != 1]
     unknown = [m for m in named if m not in want and not m.endswith("/")]
     assert not missing and not unknown, f"missing or repeated: {missing}; not a module: {unknown}"
+
+
+# ---------------------------------------------------------------- the layers (issue 40)
+
+#: the package's layers, bottom first: a module imports only from its own layer or below,
+#: counting every import (inside functions and TYPE_CHECKING blocks too); within a layer,
+#: no cycle. The parallel engine sits below everything that knows of wedging.
+LAYERS = [
+    ["version", "errors"],
+    ["nodesets", "exact", "environment", "files", "progress"],
+    ["parallel"],
+    ["models"],
+    ["scene"],
+    ["contact"],
+    ["results"],
+    ["solvers"],
+    ["rays", "reference"],
+    ["patterns"],
+    ["mu_c"],
+    ["post"],
+    ["run"],
+    ["api"],
+    ["cli", "__main__", ""],
+]
+
+
+def _module(path: pathlib.Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the package modules it imports, every import statement counted."""
+    names = {_module(p): p for p in PACKAGE.rglob("*.py")}
+    graph = {}
+    for name, path in names.items():
+        package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        out = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                out |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(up + ([node.module] if node.module else []))
+                out |= {f"{base}.{a.name}" if f"{base}.{a.name}" in names else base for a in node.names}
+        graph[name] = {m for m in out if m in names and m != name}
+    return graph
+
+
+def layer_of(module: str) -> int:
+    top = module.split(".")[1] if "." in module else ""
+    return next(i for i, layer in enumerate(LAYERS) if top in layer)
+
+
+def back_edges(graph: dict[str, set[str]]) -> list[str]:
+    return sorted(f"{a} -> {b}" for a, bs in graph.items() for b in bs if layer_of(b) > layer_of(a))
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_every_module_has_a_layer():
+    assert all(layer_of(m) is not None for m in import_graph())
+
+
+def test_imports_go_down_the_layers():
+    assert back_edges(import_graph()) == []
+
+
+def test_no_import_cycle():
+    assert cycles(import_graph()) == []
+
+
+def test_layer_checks_can_fail():
+    """A solver importing the pipeline is a back edge; two modules importing each other a cycle."""
+    graph = import_graph()
+    graph["hpcwedge.solvers.lp"] = graph["hpcwedge.solvers.lp"] | {"hpcwedge.run.pipeline"}
+    assert back_edges(graph) == ["hpcwedge.solvers.lp -> hpcwedge.run.pipeline"]
+    assert any("hpcwedge.solvers.lp" in c for c in cycles(graph))
+
+
+def test_the_parallel_engine_imports_nothing_of_the_domain():
+    below = {"hpcwedge.version", "hpcwedge.errors", "hpcwedge.files", "hpcwedge.progress", "hpcwedge"}
+    for name, deps in import_graph().items():
+        if name.startswith("hpcwedge.parallel"):
+            assert {d for d in deps if not d.startswith("hpcwedge.parallel")} <= below, name
+
+
+SOLVER_MODULES = ["hpcwedge.solvers.conic", "hpcwedge.solvers.socp", "hpcwedge.solvers.lp",
+                  "hpcwedge.solvers.milp", "hpcwedge.solvers.screens", "hpcwedge.solvers.feasibility",
+                  "hpcwedge.mu_c.critical", "hpcwedge.mu_c.dinkelbach", "hpcwedge.mu_c.kkt",
+                  "hpcwedge.mu_c.global_search", "hpcwedge.patterns.tree", "hpcwedge.patterns.job",
+                  "hpcwedge.rays.faces", "hpcwedge.rays.dd"]
+
+
+@pytest.mark.parametrize("module", SOLVER_MODULES)
+def test_a_solver_module_loads_no_hdf5_mpi_or_petsc(module):
+    import subprocess
+    import sys
+    code = f"import sys, {module}; print(sorted(m for m in ('h5py', 'mpi4py', 'petsc4py') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

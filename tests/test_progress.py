@@ -13,7 +13,8 @@ import pytest
 from mpi_helpers import command, env, needs_mpirun
 
 from hpcwedge.progress import GB, MemoryGuard, MemoryLimit, Progress, eta, rss_bytes
-from hpcwedge.scene.parse import SceneError, parse_scene
+from hpcwedge.scene.parse import parse_scene
+from hpcwedge.scene.values import SceneError
 
 #: plug2d with 36 contact nodes: its rays outgrow any small memory within seconds
 RUNAWAY = """name = "runaway"

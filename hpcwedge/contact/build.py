@@ -15,7 +15,8 @@ from hpcwedge import exact as xq
 from hpcwedge.contact.problem import ContactProblem, stiffness_range
 from hpcwedge.models.record import Model
 from hpcwedge.progress import GB, MemoryGuard, physical_bytes, ranks_on_host
-from hpcwedge.scene.parse import Scene, SceneError, array
+from hpcwedge.scene.parse import Scene
+from hpcwedge.scene.values import SceneError, array
 
 SYM_RTOL = 1e-10      # symmetry of a raw K, relative to max |K|
 PSD_RTOL = 1e-10      # lambda_min >= -PSD_RTOL * lambda_max

@@ -21,7 +21,7 @@ import numpy as np
 from hpcwedge import exact as xq
 from hpcwedge.contact.problem import Parametrization, balanced
 from hpcwedge.mu_c.bracket import rows_at
-from hpcwedge.run.numerics import COND_T_SUSPECT
+from hpcwedge.rays.numerics import COND_T_SUSPECT
 from hpcwedge.solvers.feasibility import decide
 from hpcwedge.solvers.rows import Status, pattern_rows
 

@@ -86,7 +86,8 @@ def _scene(f, path: str):
     scene folder, else the result's), or None when it does not parse any more."""
     import tomllib
 
-    from hpcwedge.scene.parse import SceneError, parse_scene
+    from hpcwedge.scene.parse import parse_scene
+    from hpcwedge.scene.values import SceneError
     if "scene_text" not in f:
         return None
     try:

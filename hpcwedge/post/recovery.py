@@ -231,7 +231,8 @@ def rebuild_model(path: str, text: str, scene_dir: str | None, stored: dict | No
     (`inputs`, Scene.input_digests), else ConfigurationError (the mesh file changed since the run).
     """
     from hpcwedge.contact.build import build_model
-    from hpcwedge.scene.parse import SceneError, parse_scene
+    from hpcwedge.scene.parse import parse_scene
+    from hpcwedge.scene.values import SceneError
     result_dir = os.path.dirname(os.path.abspath(path))
     try:
         data = tomllib.loads(text)

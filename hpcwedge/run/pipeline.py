@@ -48,7 +48,7 @@ from hpcwedge.patterns.tree import BnBStats, PatternTree, expand_orbits, solver_
 from hpcwedge.progress import MemoryGuard, Progress, out_of_memory, ranks_on_host
 from hpcwedge.rays.faces import branching_nodes, run_faces
 from hpcwedge.results.record import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
-from hpcwedge.run.numerics import (
+from hpcwedge.rays.numerics import (
     NumericsReport,
     checked_rays_2d,
     drop_below_mu_c,
@@ -58,7 +58,8 @@ from hpcwedge.run.numerics import (
     settle_rays_2d,
 )
 from hpcwedge.run.stages import Condensed, Cones, Context, GlobalMuC, MuCValues, OrbitKey, PatternSets, Rays
-from hpcwedge.scene.parse import Plan, Scene, SceneError
+from hpcwedge.scene.parse import Plan, Scene
+from hpcwedge.scene.values import SceneError
 
 #: the engine job of the 2D rays stage (when split over faces)
 RAYS_JOB = "rays"

@@ -13,7 +13,7 @@ from hpcwedge.parallel.engine import Engine
 from hpcwedge.patterns.symmetry import Symmetry
 from hpcwedge.progress import Progress
 from hpcwedge.results.record import GlobalRouteStats, TreeStats
-from hpcwedge.run.numerics import NumericsReport
+from hpcwedge.rays.numerics import NumericsReport
 from hpcwedge.scene.parse import Scene
 
 OrbitKey = tuple[int, int]

@@ -14,10 +14,9 @@ import os
 import tomllib
 from dataclasses import dataclass, field
 
-import numpy as np
-
-from hpcwedge.errors import UserError
 from hpcwedge.models.library import BUILTIN_DIM, BUILTINS, WHOLE_MINIMUM  # the one table of built-ins
+from hpcwedge.scene import tables
+from hpcwedge.scene.values import COMPUTE_DEFAULTS, NUMBER_TYPES, RUN_DEFAULTS, SceneError
 
 KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
 
@@ -31,11 +30,6 @@ MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "toler
 STIFFNESS_MODEL_KEYS = {"K", "file", "null_space"}
 TRUSS_MODEL_KEYS = {"nodes", "bars", "EA", "supports"}
 TRUSS_CONTACT_KEYS = {"nodes", "normals", "tangents"}
-COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
-                    "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
-                    "exact_fallback_max_m": 10}
-RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
-                "condense": "auto", "max_memory_gb": "auto", "screens": False}
 #: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
 CONDENSE_MODES = ("auto", "serial", "distributed")
 #: friction coefficients (friction.mu, compute.mu_max) outside this range overflow or
@@ -43,10 +37,6 @@ CONDENSE_MODES = ("auto", "serial", "distributed")
 MU_RANGE = (1e-6, 1e6)
 #: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
 MU_C_TOL_MIN = 1e-15
-
-
-class SceneError(UserError):
-    """Bad input: the message is one line naming the key and the reason."""
 
 
 @dataclass(frozen=True)
@@ -154,28 +144,27 @@ class Scene:
         return load_scene(path)
 
     @classmethod
-    def from_dict(cls, data: dict, **options) -> Scene:
-        """The scene of a scene table given as a dict: constructors.scene_from_dict."""
-        from hpcwedge.scene.constructors import scene_from_dict
-        return scene_from_dict(data, **options)
+    def from_dict(cls, data: dict, base_dir: str | None = None) -> Scene:
+        """The scene of a scene table given as a dict (constructors.scene_from_dict)."""
+        table, text = tables.plain_table(data)
+        # the table as its TOML text reads back, without parsing it again (a 1,000 x 1,000 K:
+        # 6.5 s of tomllib)
+        return parse_scene(table, text=text, base_dir=os.path.abspath(base_dir or os.getcwd()))
 
     @classmethod
     def builtin(cls, kind: str, **options) -> Scene:
-        """The scene of a built-in model: constructors.builtin_scene."""
-        from hpcwedge.scene.constructors import builtin_scene
-        return builtin_scene(kind, **options)
+        """The scene of a built-in model (constructors.builtin_scene)."""
+        return cls.from_dict(tables.builtin_table(kind, **options))
 
     @classmethod
     def from_stiffness(cls, K, **options) -> Scene:
-        """The scene of a condensed stiffness array: constructors.stiffness_scene."""
-        from hpcwedge.scene.constructors import stiffness_scene
-        return stiffness_scene(K, **options)
+        """The scene of a condensed stiffness array (constructors.stiffness_scene)."""
+        return cls.from_dict(tables.stiffness_table(K, **options))
 
     @classmethod
     def from_truss(cls, nodes, bars, **options) -> Scene:
-        """The scene of a truss given as arrays: constructors.truss_scene."""
-        from hpcwedge.scene.constructors import truss_scene
-        return truss_scene(nodes, bars, **options)
+        """The scene of a truss given as arrays (constructors.truss_scene)."""
+        return cls.from_dict(tables.truss_table(nodes, bars, **options))
 
 
 def load_scene(path: str) -> Scene:
@@ -340,8 +329,7 @@ def _unknown(table, allowed, prefix):
                              else f"{prefix}{k}: unknown key (this table takes no keys here)")
 
 
-#: the types of plain numbers in a table (bool, a subclass of int, is not one)
-NUMBER_TYPES = frozenset({int, float})
+
 
 
 def _no_booleans(value, key: str) -> None:
@@ -419,15 +407,6 @@ def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> No
     v = contact.get("tolerance", 1.0)
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
         raise SceneError(f"contact.tolerance: must be a finite number > 0, got {v!r}")
-
-
-def array(value, key: str, ndim: int | None = None) -> np.ndarray:
-    """A finite float array from a scene value, or a SceneError naming key."""
-    from hpcwedge.models.record import as_float_array
-    try:
-        return as_float_array(value, key, ndim)
-    except ValueError as e:
-        raise SceneError(str(e)) from None
 
 
 #: [run] keys that change neither the answers nor their bits (SPEC §5), only how the run goes:

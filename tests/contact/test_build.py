@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from hpcwedge.contact.build import raw_stiffness, stiffness_exponent
-from hpcwedge.scene.parse import SceneError, parse_scene
+from hpcwedge.scene.parse import parse_scene
+from hpcwedge.scene.values import SceneError
 
 
 def sc(model, dim=2):

@@ -284,7 +284,8 @@ def test_run_condense_distributed_singular_exit_2_once(tmp_path):
 
 
 def test_run_condense_key_checked():
-    from hpcwedge.scene.parse import SceneError, parse_scene
+    from hpcwedge.scene.parse import parse_scene
+    from hpcwedge.scene.values import SceneError
     base = {"name": "p", "dim": 2, "model": {"kind": "plug2d"}, "friction": {"mu": 1.0}}
     assert parse_scene(base).condense == "auto"
     assert parse_scene({**base, "run": {"condense": "distributed"}}).condense == "distributed"

@@ -13,7 +13,8 @@ from hpcwedge.contact.build import build_model
 from hpcwedge.contact.condense import condense
 from hpcwedge.models import block2d
 from hpcwedge.run.pipeline import run_scene
-from hpcwedge.scene.parse import SceneError, load_scene
+from hpcwedge.scene.parse import load_scene
+from hpcwedge.scene.values import SceneError
 
 TAU = math.radians(10.0)
 

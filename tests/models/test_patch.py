@@ -13,7 +13,8 @@ from hpcwedge.models.mesh import MeshData, mesh_model
 from hpcwedge.models.rigid import rigid_motions
 from hpcwedge.post.recovery import whole_body
 from hpcwedge.run.pipeline import run_scene
-from hpcwedge.scene.parse import SceneError, parse_scene
+from hpcwedge.scene.parse import parse_scene
+from hpcwedge.scene.values import SceneError
 
 
 def _patches_brute(X, boundary, contact, a):

@@ -12,7 +12,7 @@ from hpcwedge.contact.build import contact_problem
 from hpcwedge.contact.problem import parametrize
 from hpcwedge.mu_c.critical import mu_critical
 from hpcwedge.mu_c.exact_2d import certified, exact_mu_c_2d, row_labels_2d, tight_rows
-from hpcwedge.run.numerics import NumericsReport
+from hpcwedge.rays.numerics import NumericsReport
 from hpcwedge.scene.constructors import builtin_scene
 from hpcwedge.solvers.rows import pattern_rows
 

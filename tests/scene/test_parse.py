@@ -1,7 +1,8 @@
 """Scene parsing and validation: every error is one line naming its key."""
 import pytest
 
-from hpcwedge.scene.parse import SceneError, parse_scene
+from hpcwedge.scene.parse import parse_scene
+from hpcwedge.scene.values import SceneError
 
 BASE = {"name": "s", "dim": 2, "model": {"kind": "stiffness", "K": [[2.0, 0.5], [0.5, 1.0]]},
         "friction": {"mu": [0.5]}}

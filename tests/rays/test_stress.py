@@ -25,7 +25,7 @@ from hpcwedge.progress import Progress
 from hpcwedge.rays.cones import implied_patterns
 from hpcwedge.rays.dd import complementary_rays
 from hpcwedge.run.pipeline import run_scene
-from hpcwedge.scene.parse import SceneError
+from hpcwedge.scene.values import SceneError
 
 _spec = importlib.util.spec_from_file_location(
     "stress_grid", os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "..", "scripts", "stress.py"))
@@ -241,7 +241,7 @@ def test_face_dd_starts_from_a_well_conditioned_basis():
     from hpcwedge.contact.build import build_model, contact_problem
     from hpcwedge.rays.dd import CLOSE_CALL_FACTOR, FLOAT_ZERO_TOL, face_rows, initial_basis
     from hpcwedge.rays.faces import split_faces
-    from hpcwedge.run.numerics import NumericsReport
+    from hpcwedge.rays.numerics import NumericsReport
 
     mu = 1.5 * tan(0.1)
     scene = grid._scene(SMALL_TAPER, mu, {})

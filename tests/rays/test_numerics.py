@@ -19,7 +19,7 @@ from hpcwedge import exact as xq
 from hpcwedge.contact.problem import Parametrization, friction_rows_2d, strip_exact
 from hpcwedge.progress import Progress
 from hpcwedge.rays.dd import BASIS_DEPENDENT, CANCELLATION_MIN, complementary_rays
-from hpcwedge.run.numerics import COND_SUSPECT, NumericsReport, settle_rays_2d
+from hpcwedge.rays.numerics import COND_SUSPECT, NumericsReport, settle_rays_2d
 
 DELTA, EPS = 1e-8, 0.05
 
