@@ -83,14 +83,14 @@ def main(argv: list[str] | None = None) -> int:
         # written (outputs are atomic); one line and the status of a process ended by SIGINT
         code = _error("interrupted (nothing written)", 128 + signal.SIGINT)
     except BaseException as e:                  # noqa: BLE001  (a bug: one line, the traceback on request)
-        from hpcwedge.files import FileError
+        from hpcwedge.errors import UserError
         if not isinstance(e, Exception):
             from hpcwedge.errors import Interrupted
             if not isinstance(e, Interrupted):
                 raise                           # SystemExit (argparse's exits)
             # a stop (parallel.Interrupted) outside _run's own handling of it
             code = _error(f"{e}: stopped before any checkpointable work", 75)
-        elif isinstance(e, FileError):          # a file a user can fix (files.check_output, ...)
+        elif isinstance(e, UserError):          # a failure a user can fix (a key, a file, memory)
             code = _error(str(e), 2)
         else:
             if os.environ.get("HPCWEDGE_DEBUG"):
@@ -190,7 +190,7 @@ def _to_devnull(stream) -> None:
 
 
 def _run(args) -> int:
-    from hpcwedge.errors import Interrupted
+    from hpcwedge.errors import Interrupted, UserError
     from hpcwedge.parallel.engine import EXIT_INTERRUPTED, Engine
     from hpcwedge.parallel.mpi import ParallelError, world
     from hpcwedge.parallel.worker import serve
@@ -204,13 +204,11 @@ def _run(args) -> int:
         condense(None, comm)                    # the master's run_scene: the collective condense stage
         serve(comm, WORKER_MODULES)
         return 0
-    from hpcwedge.files import FileError, OutputLock, check_output, checkpoint_path, refuse_not_ours, remove_if_there
-    from hpcwedge.parallel.checkpoint import CheckpointError
+    from hpcwedge.files import OutputLock, check_output, checkpoint_path, refuse_not_ours, remove_if_there
     from hpcwedge.progress import Progress
     from hpcwedge.results.hdf5 import result_state, write_result
     from hpcwedge.run.pipeline import release_workers, run_scene
     from hpcwedge.scene.parse import changed_settings, load_scene
-    from hpcwedge.scene.values import SceneError
     progress = Progress(quiet=args.quiet)
     engine = Engine(comm, progress=None if args.quiet else progress)
     engine.install_signals()
@@ -261,7 +259,7 @@ def _run(args) -> int:
                 raise _UserError(_output_lost(args.output, e, engine, ckpt)) from None
             engine.remove_checkpoint()
             engine.mark_done()
-        except (SceneError, CheckpointError, FileError) as e:
+        except UserError as e:
             raise _UserError(str(e)) from None
         except Interrupted as e:
             written = engine.write_checkpoint(str(e))

@@ -7,11 +7,11 @@ import io
 import os
 import resource
 import subprocess
-import sys
 
 import pytest
 from mpi_helpers import command, env, needs_mpirun
 
+from hpcwedge.errors import UserError
 from hpcwedge.progress import GB, MemoryGuard, MemoryLimit, Progress, eta, rss_bytes
 from hpcwedge.scene.parse import parse_scene
 from hpcwedge.scene.values import SceneError
@@ -93,7 +93,7 @@ def test_guard_limit_and_message():
     assert g.limit == 0.001 * GB
     with pytest.raises(MemoryLimit, match=r"^run.max_memory_gb: building X: about .* GB needed") as e:
         g.check(0, "building X")
-    assert isinstance(e.value, SceneError) and "\n" not in str(e.value)
+    assert isinstance(e.value, UserError) and "\n" not in str(e.value)
     MemoryGuard(1e6).check(10 * GB, "fits")          # a large limit: no error
     assert rss_bytes() > 0
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from hpcwedge import exact as xq
 from hpcwedge.contact.problem import ContactProblem, stiffness_range
+from hpcwedge.errors import UserError
 from hpcwedge.models.record import Model
 from hpcwedge.progress import GB, MemoryGuard, physical_bytes, ranks_on_host
 from hpcwedge.scene.parse import Scene
@@ -46,7 +47,7 @@ def stiffness_exponent(scene: Scene) -> int:
     if scene.kind == "stiffness":
         try:
             K = _raw_arrays(scene)[0]
-        except SceneError:
+        except UserError:
             return 0
         return _exponent(K)
     vals = []
@@ -127,7 +128,7 @@ def _build_model(scene: Scene, params: dict) -> Model:
             return _mesh_model(scene, params)
         guard_condensed(scene, library.contact_count(scene.kind, params), scene.dim)
         return library.builtin(scene.kind, params)
-    except SceneError:
+    except UserError:
         raise
     except MemoryError:
         raise SceneError(f"model: {_TOO_LARGE}") from None
@@ -285,7 +286,7 @@ def _load_file(path: str, key: str):
                     raise SceneError(f"model.file: {key} has no dataset K" + (" (K is a group)" if "K" in f else ""))
                 N = array(f["null_space"][()], "model.file null_space") if "null_space" in f else None
                 return array(f["K"][()], "model.file K", 2), N
-    except SceneError:
+    except UserError:
         raise
     except Exception as e:  # unreadable file of a known type
         why = (str(e).strip().splitlines() or [""])[0]

@@ -37,6 +37,7 @@ from hpcwedge.contact.problem import (
     ray_vectors,
 )
 from hpcwedge.environment import environment, single_threaded
+from hpcwedge.errors import UserError
 from hpcwedge.mu_c.critical import mu_critical, run_mu_c
 from hpcwedge.mu_c.exact_2d import certify_2d, exact_certifier
 from hpcwedge.mu_c.global_search import global_mu_critical
@@ -47,7 +48,6 @@ from hpcwedge.patterns.symmetry import Symmetry, node_symmetries
 from hpcwedge.patterns.tree import BnBStats, PatternTree, expand_orbits, solver_statuses
 from hpcwedge.progress import MemoryGuard, Progress, out_of_memory, ranks_on_host
 from hpcwedge.rays.faces import branching_nodes, run_faces
-from hpcwedge.results.record import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
 from hpcwedge.rays.numerics import (
     NumericsReport,
     checked_rays_2d,
@@ -57,6 +57,7 @@ from hpcwedge.rays.numerics import (
     recheck_patterns_2d,
     settle_rays_2d,
 )
+from hpcwedge.results.record import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
 from hpcwedge.run.stages import Condensed, Cones, Context, GlobalMuC, MuCValues, OrbitKey, PatternSets, Rays
 from hpcwedge.scene.parse import Plan, Scene
 from hpcwedge.scene.values import SceneError
@@ -231,7 +232,7 @@ def condense(scene: Scene | None, comm=None) -> Condensed | None:
         return None
     try:
         problem = contact_problem(scene, model, comm)
-    except SceneError:
+    except UserError:
         if comm.rank == 0:
             raise
         return None
