@@ -31,15 +31,11 @@ from hpcwedge.post.panels import (
     PlotError,
     axial_colours,
     bars_panel,
-    checked_model,
-    configuration_of,
-    item_index,
     message,
-    mu_c_attr,
     mu_c_panel,
-    run_group,
+    read_figure,
 )
-from hpcwedge.results.hdf5 import check_items, open_result, read_items, read_rays, text
+from hpcwedge.results.hdf5 import check_items, open_result, read_items, read_rays
 
 #: the figure formats by file suffix (no suffix: PNG)
 FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg", "": "png"}
@@ -124,21 +120,15 @@ def _read(f, path: str, run: int, ray: int | None = None, pattern: int | None = 
     if dim == 3:
         from hpcwedge.post.plot3d import read_3d
         return read_3d(f, path, run, 0 if pattern is None else pattern)
-    ray = 0 if ray is None else ray
-    m = int(a["m"])
-    k, n_runs, g = run_group(f, run)
+    return read_figure(f, path, run, "ray", 0 if ray is None else ray, _rays_and_cones)
+
+
+def _rays_and_cones(g, m: int) -> tuple:
+    """(the run's wedged rays, its cones and sign patterns) of the run group g; files.FileError."""
     rays = read_rays(g, 4 * m)
-    n_rays = 0 if rays is None else len(rays)
-    j = item_index(ray, n_rays, "ray", "wedged ray", k)
-    out = {"name": text(a.get("name", os.path.basename(path))), "dim": dim, "m": m,
-           "run": k, "n_runs": n_runs, "mu": float(g.attrs["mu"]), "mu_c": mu_c_attr(a),
-           "rays": rays, "ray": j,
-           "cones": read_items(g, "cones"), "patterns": read_items(g, "patterns"),
-           "model": checked_model(f, path, dim, m)}
-    check_items(out["cones"], None, n_rays, m)
-    if out["model"] is not None:
-        out["config"], out["config_note"] = (None, None) if j is None else configuration_of(path, k, ray=j)
-    return out
+    more = {"cones": read_items(g, "cones"), "patterns": read_items(g, "patterns")}
+    check_items(more["cones"], None, 0 if rays is None else len(rays), m)
+    return rays, more
 
 
 

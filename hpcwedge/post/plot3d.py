@@ -28,15 +28,11 @@ from hpcwedge.post.panels import (
     WALL_FRACTION,
     axial_colours,
     bars_panel,
-    checked_model,
-    configuration_of,
-    item_index,
     message,
-    mu_c_attr,
     mu_c_panel,
-    run_group,
+    read_figure,
 )
-from hpcwedge.results.hdf5 import check_items, read_counts, read_items, stored_scene, text
+from hpcwedge.results.hdf5 import check_items, read_counts, read_items, stored_scene
 
 VON_MISES_PERCENTILE = 95  # the colour scale ends here (point contacts concentrate the stress)
 #: boundary faces of the 3D cells (meshio / VTK node order), for the drawn surface
@@ -49,18 +45,12 @@ CELL_FACES = {"tetra": ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)),
 
 def read_3d(f, path: str, run: int, pattern: int) -> dict:
     """The figure data of sign pattern `pattern` of run `run` of the open 3D result f."""
-    a = f.attrs
-    m = int(a["m"])
-    k, n_runs, g = run_group(f, run)
-    patterns = read_items(g, "patterns")
-    check_items(None, patterns, 0, m)
-    j = item_index(pattern, len(patterns or []), "pattern", "sign pattern", k)
-    counts = read_counts(f, "n_patterns")
-    out = {"name": text(a.get("name", os.path.basename(path))), "dim": 3, "m": m,
-           "run": k, "n_runs": n_runs, "mu": float(g.attrs["mu"]), "mu_c": mu_c_attr(a),
-           "patterns": patterns, "pattern": j, "counts": counts,
-           "model": checked_model(f, path, 3, m), "config": None, "config_note": None,
-           "obstacles": None, "point": None}
+    def patterns_and_counts(g, m: int) -> tuple:
+        patterns = read_items(g, "patterns")
+        check_items(None, patterns, 0, m)
+        return patterns, {"counts": read_counts(f, "n_patterns"), "obstacles": None, "point": None}
+
+    out = read_figure(f, path, run, "pattern", pattern, patterns_and_counts)
     scene = _scene(f, path)
     if scene is not None and scene.obstacles:
         from hpcwedge.models.obstacle import parse_obstacles
@@ -68,14 +58,11 @@ def read_3d(f, path: str, run: int, pattern: int) -> dict:
             out["obstacles"] = parse_obstacles(scene.obstacles, 3, scene.obstacle_key)
         except ValueError:
             pass                                           # drawn as wall squares instead
-    if j is None:
-        return out
-    if out["model"] is not None:
-        out["config"], out["config_note"] = configuration_of(path, k, pattern=j)
-    elif scene is not None:                                # raw stiffness: the pattern's point only
+    j = out["pattern"]
+    if j is not None and out["model"] is None and scene is not None:   # raw stiffness: the pattern's point only
         from hpcwedge.post.recovery import ConfigurationError, pattern_point
         try:
-            out["point"] = pattern_point(scene, None, patterns[j]["contact"], out["mu"])
+            out["point"] = pattern_point(scene, None, out["patterns"][j]["contact"], out["mu"])
         except (ConfigurationError, ValueError) as e:
             out["config_note"] = str(e).splitlines()[0]
     return out
