@@ -193,3 +193,38 @@ def test_a_solver_module_loads_no_hdf5_mpi_or_petsc(module):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+# ---------------------------------------------------------------- short functions (issue 40)
+
+MAX_FUNCTION_LINES = 80
+
+
+def long_functions(source: str, limit: int = MAX_FUNCTION_LINES) -> list[str]:
+    """'name (n lines)' of every function or method of `source` longer than `limit` lines,
+    from its def line to its last line (nested functions counted in their own right too)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            n = node.end_lineno - node.lineno + 1
+            if n > limit:
+                found.append(f"{node.name} ({n} lines)")
+    return found
+
+
+@pytest.mark.xfail(strict=False, reason="until the splits of parse_scene, _kkt_newton, cli._run, cli.main, "
+                                        "PatternTree.explore and global_bracket_milp are merged")
+def test_no_function_is_long():
+    offenders = [f"{_name(p)}: {f}" for p in sorted(PACKAGE.rglob("*.py")) for f in long_functions(p.read_text())]
+    assert offenders == [], f"functions over {MAX_FUNCTION_LINES} lines: {offenders}"
+
+
+def test_long_function_check_can_fail():
+    """A function and a method one line over the limit are named; one at the limit is not."""
+    def body(indent: str) -> str:
+        return "".join(f"{indent}x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES - 1))
+    source = (f"def short():\n{body('    ')}\n"                       # def + 79 lines: at the limit
+              f"class C:\n    def long(self):\n{body(' ' * 8)}        pass\n\n"
+              f"async def later():\n{body('    ')}    await x\n")
+    assert sorted(long_functions(source)) == [f"later ({MAX_FUNCTION_LINES + 1} lines)",
+                                              f"long ({MAX_FUNCTION_LINES + 1} lines)"]

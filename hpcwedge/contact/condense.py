@@ -293,6 +293,23 @@ def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.nd
         raise ValueError(f"condense: unknown solver {solver!r} (mumps, petsc)")
     PETSc = _petsc()
     comm = PETSc.COMM_SELF if comm is None else comm
+    nloc, n = Kii.shape
+    A = _petsc_matrix(PETSc, Kii, comm, symmetrise)
+    ksp = PETSc.KSP().create(comm=comm)
+    objs = [A, ksp]
+    try:
+        pc, use_mumps = _choose_factorisation(PETSc, ksp, A, solver)
+        F = _factorise(PETSc, ksp, pc, use_mumps, model, n)
+        _solve_probe(ksp, A, probe, model, objs)
+        yield _dense_solver(PETSc, F, nloc, n, comm)
+    finally:
+        for o in objs:
+            o.destroy()
+
+
+def _petsc_matrix(PETSc, Kii: sp.csr_matrix, comm, symmetrise: bool):
+    """This rank's rows of K_ii as an assembled PETSc AIJ matrix on `comm`; symmetrise:
+    replaced by 0.5 (A + A^T)."""
     Kii = sp.csr_matrix(Kii)
     Kii.sort_indices()
     nloc, n = Kii.shape
@@ -305,72 +322,87 @@ def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.nd
         A.axpy(1.0, At, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
         At.destroy()
         A.scale(0.5)
-    ksp = PETSc.KSP().create(comm=comm)
-    objs = [A, ksp]
-    try:
-        ksp.setOperators(A)
-        ksp.setType("preonly")
-        pc = ksp.getPC()
-        use_mumps = solver == "mumps" or (solver is None and PETSc.Sys.hasExternalPackage("mumps"))
-        # MUMPS: symmetric LDL^T (SYM = 2, with pivoting) when K_ii is exactly symmetric (as the
-        # truss / Q4 assemblies guarantee): half the factor memory and ~35% less time than LU
-        # (block2d refine 200, 8e5 DOFs). Otherwise, and natively, LU.
-        symmetric = use_mumps and A.isSymmetric(0.0)
-        pc.setType("cholesky" if symmetric else "lu")
-        if use_mumps:
-            pc.setFactorSolverType("mumps")
-            pc.setFactorSetUpSolverType()
-            F = pc.getFactorMatrix()
-            F.setMumpsIcntl(24, 1)                 # detect null pivots ...
-            F.setMumpsCntl(3, NULL_PIVOT_RTOL)     # ... |pivot| <= tol * ||A_pre||
-        else:
-            pc.setFactorSolverType("petsc")
-            pc.setFactorOrdering("nd")
-            pc.setFactorPivot(zeropivot=NULL_PIVOT_RTOL)
-        try:
-            ksp.setUp()
-        except PETSc.Error as e:
-            if e.ierr in _ZERO_PIVOT_ERRORS:
-                raise _singular(model, f"PETSc error {e.ierr}: zero pivot or empty row in the factorisation") from None
-            raise RuntimeError(f"condense: PETSc error {e.ierr} while factoring K_ii ({n} DOFs)") from None
+    return A
+
+
+def _choose_factorisation(PETSc, ksp, A, solver: str | None):
+    """Set up `ksp` as a direct solve of A (see `condense` for the choice of solver); returns
+    (its PC, whether MUMPS factors)."""
+    ksp.setOperators(A)
+    ksp.setType("preonly")
+    pc = ksp.getPC()
+    use_mumps = solver == "mumps" or (solver is None and PETSc.Sys.hasExternalPackage("mumps"))
+    # MUMPS: symmetric LDL^T (SYM = 2, with pivoting) when K_ii is exactly symmetric (as the
+    # truss / Q4 assemblies guarantee): half the factor memory and ~35% less time than LU
+    # (block2d refine 200, 8e5 DOFs). Otherwise, and natively, LU.
+    symmetric = use_mumps and A.isSymmetric(0.0)
+    pc.setType("cholesky" if symmetric else "lu")
+    if use_mumps:
+        pc.setFactorSolverType("mumps")
+        pc.setFactorSetUpSolverType()
         F = pc.getFactorMatrix()
-        if use_mumps:
-            info = F.getMumpsInfog(1)
-            if info == -10:
-                raise _singular(model, "MUMPS INFOG(1) = -10")
-            if info == -2 and F.getMumpsInfog(2) == 0:
-                raise _singular(model, "no stiffness at all, MUMPS INFOG(1) = -2")
-            if info < 0:
-                raise RuntimeError(f"condense: MUMPS failed, INFOG(1) = {info}, INFOG(2) = {F.getMumpsInfog(2)}")
-            nnull = F.getMumpsInfog(28)
-            if nnull > 0:
-                raise _singular(model, f"{nnull} null pivot(s) found by MUMPS")
-        # petsc4py 3.18 has no PCGetFailedReason: a failed factorisation shows as a KSP
-        # solve that diverges with DIVERGED_PC_FAILED (native LU flags small pivots this way)
-        b, x = A.createVecLeft(), A.createVecRight()
-        objs += [b, x]
-        b.setArray(np.asarray(probe, dtype=float))
-        ksp.solve(b, x)
-        reason = ksp.getConvergedReason()
-        if reason < 0:
-            raise _singular(model, f"factorisation failed, KSP reason {reason}")
+        F.setMumpsIcntl(24, 1)                 # detect null pivots ...
+        F.setMumpsCntl(3, NULL_PIVOT_RTOL)     # ... |pivot| <= tol * ||A_pre||
+    else:
+        pc.setFactorSolverType("petsc")
+        pc.setFactorOrdering("nd")
+        pc.setFactorPivot(zeropivot=NULL_PIVOT_RTOL)
+    return pc, use_mumps
 
-        def solve(B: np.ndarray) -> np.ndarray:
-            q = B.shape[1]
-            Bm = PETSc.Mat().createDense(((nloc, n), (None, q)), array=np.asfortranarray(B, dtype=float),
-                                         comm=comm)
-            Xm = PETSc.Mat().createDense(((nloc, n), (None, q)), comm=comm)
-            try:
-                Xm.setUp()
-                Bm.assemble()
-                Xm.assemble()
-                F.matSolve(Bm, Xm)
-                return np.array(Xm.getDenseArray())
-            finally:
-                Bm.destroy()
-                Xm.destroy()
 
-        yield solve
-    finally:
-        for o in objs:
-            o.destroy()
+def _factorise(PETSc, ksp, pc, use_mumps: bool, model: Model, n: int):
+    """Factor K_ii (ksp.setUp) and return the factor; ValueError if K_ii is singular (a zero
+    or null pivot), RuntimeError for another PETSc or MUMPS failure."""
+    try:
+        ksp.setUp()
+    except PETSc.Error as e:
+        if e.ierr in _ZERO_PIVOT_ERRORS:
+            raise _singular(model, f"PETSc error {e.ierr}: zero pivot or empty row in the factorisation") from None
+        raise RuntimeError(f"condense: PETSc error {e.ierr} while factoring K_ii ({n} DOFs)") from None
+    F = pc.getFactorMatrix()
+    if use_mumps:
+        info = F.getMumpsInfog(1)
+        if info == -10:
+            raise _singular(model, "MUMPS INFOG(1) = -10")
+        if info == -2 and F.getMumpsInfog(2) == 0:
+            raise _singular(model, "no stiffness at all, MUMPS INFOG(1) = -2")
+        if info < 0:
+            raise RuntimeError(f"condense: MUMPS failed, INFOG(1) = {info}, INFOG(2) = {F.getMumpsInfog(2)}")
+        nnull = F.getMumpsInfog(28)
+        if nnull > 0:
+            raise _singular(model, f"{nnull} null pivot(s) found by MUMPS")
+    return F
+
+
+def _solve_probe(ksp, A, probe: np.ndarray, model: Model, objs: list) -> None:
+    """Solve A x = probe once; ValueError (singular K_ii) if the factorisation failed. Its two
+    vectors are appended to `objs`, for the caller to destroy."""
+    # petsc4py 3.18 has no PCGetFailedReason: a failed factorisation shows as a KSP
+    # solve that diverges with DIVERGED_PC_FAILED (native LU flags small pivots this way)
+    b, x = A.createVecLeft(), A.createVecRight()
+    objs += [b, x]
+    b.setArray(np.asarray(probe, dtype=float))
+    ksp.solve(b, x)
+    reason = ksp.getConvergedReason()
+    if reason < 0:
+        raise _singular(model, f"factorisation failed, KSP reason {reason}")
+
+
+def _dense_solver(PETSc, F, nloc: int, n: int, comm):
+    """solve(B (n_loc, q) dense) -> this rank's rows of K_ii^-1 B, by MatMatSolve with the factor F."""
+    def solve(B: np.ndarray) -> np.ndarray:
+        q = B.shape[1]
+        Bm = PETSc.Mat().createDense(((nloc, n), (None, q)), array=np.asfortranarray(B, dtype=float),
+                                     comm=comm)
+        Xm = PETSc.Mat().createDense(((nloc, n), (None, q)), comm=comm)
+        try:
+            Xm.setUp()
+            Bm.assemble()
+            Xm.assemble()
+            F.matSolve(Bm, Xm)
+            return np.array(Xm.getDenseArray())
+        finally:
+            Bm.destroy()
+            Xm.destroy()
+
+    return solve

@@ -1,12 +1,15 @@
-"""What the 2D and 3D figures share: sizes, the index checks, the bars and mu^c panels."""
+"""What the 2D and 3D figures share: sizes, reading a run's item with its body, the index
+checks, the bars and mu^c panels."""
 from __future__ import annotations
 
 import math
+import os
+from typing import Callable
 
 import numpy as np
 
 from hpcwedge.errors import UserError
-from hpcwedge.results.hdf5 import RangeError, index, index_range, read_model, read_run
+from hpcwedge.results.hdf5 import RangeError, index, index_range, read_model, read_run, text
 
 DISP_FRACTION = 0.10     # largest drawn displacement / body size
 ARROW_FRACTION = 0.15    # largest drawn reaction arrow / body size (3D: twice that)
@@ -18,6 +21,32 @@ AXIAL_LABEL = "bar axial force (tension > 0)"
 class PlotError(UserError):
     """A figure that cannot be drawn (bad run, ray or pattern index, the wrong option for
     the dimension): one line."""
+
+
+#: the dimension of a figure and the noun of its items, by the kind of item it draws
+ITEM_KINDS = {"ray": (2, "wedged ray"), "pattern": (3, "sign pattern")}
+
+
+def read_figure(f, path: str, run: int, kind: str, j: int, read: Callable[[object, int], tuple]) -> dict:
+    """The data every figure has, of item j (Python-style index) of run `run` of the open
+    result f, kind "ray" (2D) or "pattern" (3D): name, dim, m, run (its index), n_runs, mu,
+    mu_c (global, None when absent), the run's items under kind + "s" (None: not computed),
+    the item's index under kind (None when the run has none), the figure's other data read
+    by read(run group, m) -> (items, dict), model (the checked /model group, or None) and
+    config, config_note (the item's Configuration, or None and why; both None without a model
+    or an item). PlotError for a bad run or item index or a /model of the wrong shape."""
+    dim, noun = ITEM_KINDS[kind]
+    a = f.attrs
+    m = int(a["m"])
+    k, n_runs, g = run_group(f, run)
+    items, more = read(g, m)
+    i = item_index(j, 0 if items is None else len(items), kind, noun, k)
+    out = {"name": text(a.get("name", os.path.basename(path))), "dim": dim, "m": m, "run": k, "n_runs": n_runs,
+           "mu": float(g.attrs["mu"]), "mu_c": mu_c_attr(a), kind + "s": items, kind: i, **more,
+           "model": checked_model(f, path, dim, m), "config": None, "config_note": None}
+    if out["model"] is not None and i is not None:
+        out["config"], out["config_note"] = configuration_of(path, k, **{kind: i})
+    return out
 
 
 def run_group(f, run: int):

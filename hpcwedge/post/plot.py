@@ -31,15 +31,11 @@ from hpcwedge.post.panels import (
     PlotError,
     axial_colours,
     bars_panel,
-    checked_model,
-    configuration_of,
-    item_index,
     message,
-    mu_c_attr,
     mu_c_panel,
-    run_group,
+    read_figure,
 )
-from hpcwedge.results.hdf5 import check_items, open_result, read_items, read_rays, text
+from hpcwedge.results.hdf5 import check_items, open_result, read_items, read_rays
 
 #: the figure formats by file suffix (no suffix: PNG)
 FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg", "": "png"}
@@ -124,21 +120,15 @@ def _read(f, path: str, run: int, ray: int | None = None, pattern: int | None = 
     if dim == 3:
         from hpcwedge.post.plot3d import read_3d
         return read_3d(f, path, run, 0 if pattern is None else pattern)
-    ray = 0 if ray is None else ray
-    m = int(a["m"])
-    k, n_runs, g = run_group(f, run)
+    return read_figure(f, path, run, "ray", 0 if ray is None else ray, _rays_and_cones)
+
+
+def _rays_and_cones(g, m: int) -> tuple:
+    """(the run's wedged rays, its cones and sign patterns) of the run group g; files.FileError."""
     rays = read_rays(g, 4 * m)
-    n_rays = 0 if rays is None else len(rays)
-    j = item_index(ray, n_rays, "ray", "wedged ray", k)
-    out = {"name": text(a.get("name", os.path.basename(path))), "dim": dim, "m": m,
-           "run": k, "n_runs": n_runs, "mu": float(g.attrs["mu"]), "mu_c": mu_c_attr(a),
-           "rays": rays, "ray": j,
-           "cones": read_items(g, "cones"), "patterns": read_items(g, "patterns"),
-           "model": checked_model(f, path, dim, m)}
-    check_items(out["cones"], None, n_rays, m)
-    if out["model"] is not None:
-        out["config"], out["config_note"] = (None, None) if j is None else configuration_of(path, k, ray=j)
-    return out
+    more = {"cones": read_items(g, "cones"), "patterns": read_items(g, "patterns")}
+    check_items(more["cones"], None, 0 if rays is None else len(rays), m)
+    return rays, more
 
 
 
@@ -172,6 +162,8 @@ def _config_panel(ax, d: dict) -> None:
 
 
 def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str | None = None) -> None:
+    """The body undeformed and displaced by the ray (the whole body with a configuration,
+    else its contact nodes only), the obstacle walls, the reactions, the node numbers."""
     from matplotlib.collections import LineCollection
 
     X = mdl["coords"]
@@ -190,37 +182,51 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str
     dmax = float(np.max(np.linalg.norm(D, axis=1)))
     scale = DISP_FRACTION * size / dmax if dmax > 0 else 0.0
     Y = X + scale * D
-
-    def segments(P):
-        segs = []
-        for kind, cells in mdl["cells"].items():
-            if cells.size == 0:
-                continue
-            cells = cells.reshape(len(cells), -1)
-            if kind == "line" or cells.shape[1] == 2:
-                segs.extend(P[cells])
-            else:                                        # polygons (quad, ...): closed outlines
-                for cell in cells:
-                    segs.append(P[np.append(cell, cell[0])])
-        return segs
-
     what = "whole body" if config is not None else "contact nodes"
     values = config.element_values if config is not None else {}
-    ax.add_collection(LineCollection(segments(X), colors="0.78", linewidths=1.2, zorder=1,
+    ax.add_collection(LineCollection(_outlines(mdl["cells"], X), colors="0.78", linewidths=1.2, zorder=1,
                                      label="undeformed"))
     if values:
         _coloured_body(ax, mdl["cells"], Y, values, f"{what} displaced (x{scale:.3g})")
     else:
-        ax.add_collection(LineCollection(segments(Y), colors="tab:blue", linewidths=1.4, zorder=2,
+        ax.add_collection(LineCollection(_outlines(mdl["cells"], Y), colors="tab:blue", linewidths=1.4, zorder=2,
                                          label=f"{what} displaced (x{scale:.3g})"))
     if not mdl["cells"]:
         ax.plot(X[:, 0], X[:, 1], ".", color="0.7")
-
-    # obstacle walls: segments through each (undeformed) contact node along its tangent,
-    # with short hatches on the obstacle side (-n)
     h = WALL_FRACTION * size / 2
+    _walls(ax, X[c], n, t, h)
+    ax.plot(Y[c, 0], Y[c, 1], "o", ms=4, color="tab:blue", zorder=4)
+    R = _reactions_2d(ax, Y[c], reac, n, size)
+    _frame_2d(ax, np.vstack([X, Y, X[c] - 0.6 * h * n, X[c] + h * t, X[c] - h * t]
+                            + ([Y[c] + R] if R is not None else [])))
+    first = (f"{head}: the whole body (interior from the condensation)" if config is not None else
+             f"{head}: only contact nodes displaced ({note or 'body not rebuilt'})")
+    ax.set_title(f"{first}\ndisplacement x{scale:.3g} (largest = {DISP_FRACTION:.0%} of body size); "
+                 f"arrows: reactions", fontsize=9)
+
+
+def _outlines(cells: dict, P: np.ndarray) -> list:
+    """The segments drawing the cells on the points P: bars, and closed polygon outlines."""
+    segs = []
+    for kind, q in cells.items():
+        if q.size == 0:
+            continue
+        q = q.reshape(len(q), -1)
+        if kind == "line" or q.shape[1] == 2:
+            segs.extend(P[q])
+        else:                                        # polygons (quad, ...): closed outlines
+            for cell in q:
+                segs.append(P[np.append(cell, cell[0])])
+    return segs
+
+
+def _walls(ax, P: np.ndarray, n: np.ndarray, t: np.ndarray, h: float) -> None:
+    """Obstacle walls: segments of half-length h through each (undeformed) contact node P
+    along its tangent t, with short hatches on the obstacle side (-n)."""
+    from matplotlib.collections import LineCollection
+
     walls, hatch = [], []
-    for p, ni, ti in zip(X[c], n, t):
+    for p, ni, ti in zip(P, n, t):
         walls.append([p - h * ti, p + h * ti])
         for s in np.linspace(-0.8, 0.8, 5):
             q = p + s * h * ti
@@ -228,28 +234,31 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str
     ax.add_collection(LineCollection(walls, colors="black", linewidths=2.0, zorder=3, label="obstacle wall"))
     ax.add_collection(LineCollection(hatch, colors="black", linewidths=0.7, zorder=3))
 
-    ax.plot(Y[c, 0], Y[c, 1], "o", ms=4, color="tab:blue", zorder=4)
+
+def _reactions_2d(ax, P: np.ndarray, reac: np.ndarray, n: np.ndarray, size: float):
+    """The reactions reac at the displaced contact nodes P as arrows (the largest
+    ARROW_FRACTION of the body size), and the nodes' numbers; returns the drawn arrows
+    (None when there is no reaction)."""
     rmax = float(np.max(np.linalg.norm(reac, axis=1)))
+    R = None
     if rmax > 0:
         R = ARROW_FRACTION * size / rmax * reac
-        ax.quiver(Y[c, 0], Y[c, 1], R[:, 0], R[:, 1], angles="xy", scale_units="xy", scale=1.0,
+        ax.quiver(P[:, 0], P[:, 1], R[:, 0], R[:, 1], angles="xy", scale_units="xy", scale=1.0,
                   color="tab:red", width=0.005, zorder=5, label="reaction r")
-    for i, p in enumerate(Y[c]):
+    for i, p in enumerate(P):
         ax.annotate(str(i), p, xytext=(-9 * n[i, 0] - 4, -9 * n[i, 1] - 4), textcoords="offset points",
                     fontsize=7, color="0.3")
+    return R
 
-    pts = np.vstack([X, Y, X[c] - 0.6 * h * n, X[c] + h * t, X[c] - h * t]
-                    + ([Y[c] + ARROW_FRACTION * size / rmax * reac] if rmax > 0 else []))
+
+def _frame_2d(ax, pts: np.ndarray) -> None:
+    """Equal-aspect limits around the points pts, the legend below the axes."""
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pad = 0.06 * max(float(np.max(hi - lo)), 1e-12)
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_aspect("equal", adjustable="box")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=4, fontsize=8, frameon=False)
-    first = (f"{head}: the whole body (interior from the condensation)" if config is not None else
-             f"{head}: only contact nodes displaced ({note or 'body not rebuilt'})")
-    ax.set_title(f"{first}\ndisplacement x{scale:.3g} (largest = {DISP_FRACTION:.0%} of body size); "
-                 f"arrows: reactions", fontsize=9)
 
 
 def _coloured_body(ax, cells: dict, Y: np.ndarray, values: dict, label: str) -> None:

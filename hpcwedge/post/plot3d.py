@@ -28,15 +28,11 @@ from hpcwedge.post.panels import (
     WALL_FRACTION,
     axial_colours,
     bars_panel,
-    checked_model,
-    configuration_of,
-    item_index,
     message,
-    mu_c_attr,
     mu_c_panel,
-    run_group,
+    read_figure,
 )
-from hpcwedge.results.hdf5 import check_items, read_counts, read_items, stored_scene, text
+from hpcwedge.results.hdf5 import check_items, read_counts, read_items, stored_scene
 
 VON_MISES_PERCENTILE = 95  # the colour scale ends here (point contacts concentrate the stress)
 #: boundary faces of the 3D cells (meshio / VTK node order), for the drawn surface
@@ -49,18 +45,12 @@ CELL_FACES = {"tetra": ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)),
 
 def read_3d(f, path: str, run: int, pattern: int) -> dict:
     """The figure data of sign pattern `pattern` of run `run` of the open 3D result f."""
-    a = f.attrs
-    m = int(a["m"])
-    k, n_runs, g = run_group(f, run)
-    patterns = read_items(g, "patterns")
-    check_items(None, patterns, 0, m)
-    j = item_index(pattern, len(patterns or []), "pattern", "sign pattern", k)
-    counts = read_counts(f, "n_patterns")
-    out = {"name": text(a.get("name", os.path.basename(path))), "dim": 3, "m": m,
-           "run": k, "n_runs": n_runs, "mu": float(g.attrs["mu"]), "mu_c": mu_c_attr(a),
-           "patterns": patterns, "pattern": j, "counts": counts,
-           "model": checked_model(f, path, 3, m), "config": None, "config_note": None,
-           "obstacles": None, "point": None}
+    def patterns_and_counts(g, m: int) -> tuple:
+        patterns = read_items(g, "patterns")
+        check_items(None, patterns, 0, m)
+        return patterns, {"counts": read_counts(f, "n_patterns"), "obstacles": None, "point": None}
+
+    out = read_figure(f, path, run, "pattern", pattern, patterns_and_counts)
     scene = _scene(f, path)
     if scene is not None and scene.obstacles:
         from hpcwedge.models.obstacle import parse_obstacles
@@ -68,14 +58,11 @@ def read_3d(f, path: str, run: int, pattern: int) -> dict:
             out["obstacles"] = parse_obstacles(scene.obstacles, 3, scene.obstacle_key)
         except ValueError:
             pass                                           # drawn as wall squares instead
-    if j is None:
-        return out
-    if out["model"] is not None:
-        out["config"], out["config_note"] = configuration_of(path, k, pattern=j)
-    elif scene is not None:                                # raw stiffness: the pattern's point only
+    j = out["pattern"]
+    if j is not None and out["model"] is None and scene is not None:   # raw stiffness: the pattern's point only
         from hpcwedge.post.recovery import ConfigurationError, pattern_point
         try:
-            out["point"] = pattern_point(scene, None, patterns[j]["contact"], out["mu"])
+            out["point"] = pattern_point(scene, None, out["patterns"][j]["contact"], out["mu"])
         except (ConfigurationError, ValueError) as e:
             out["config_note"] = str(e).splitlines()[0]
     return out
@@ -153,9 +140,6 @@ def _boundary(cells: dict) -> tuple[list, list, list]:
 
 def _body_3d(ax, d: dict) -> None:
     """The body in perspective: undeformed and deformed, C/G nodes, reactions, obstacle."""
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
-
-    from hpcwedge.post.recovery import AXIAL_FORCE, VON_MISES
     mdl, cfg, m = d["model"], d["config"], d["m"]
     pat, j = d["patterns"][d["pattern"]], d["pattern"]
     X, c = mdl["coords"], mdl["contact_nodes"]
@@ -169,13 +153,36 @@ def _body_3d(ax, d: dict) -> None:
     dmax = float(np.max(np.linalg.norm(D, axis=1)))
     scale = DISP_FRACTION * size / dmax if dmax > 0 else 0.0
     Y = X + scale * D
-    faces, owner, bars = _boundary(mdl["cells"])
-    values = cfg.element_values if cfg is not None else {}
-
     ax.computed_zorder = False                # layers below, not depth-sorted: the nodes stay on top
+    label = f"deformed (displacement x{scale:.3g})" if cfg is not None else "body (not rebuilt: undeformed)"
+    _mesh_3d(ax, mdl["cells"], X, Y, cfg.element_values if cfg is not None else {}, label)
+    ext = [X, Y]
+    drawn = _obstacles_3d(ax, d["obstacles"], X[c], n, size)
+    if drawn is not None:
+        ext.append(drawn)
+    ext += _contact_nodes_3d(ax, Y[c], to_mask(pat["contact"], m), reac, n, size)
+    _box_3d(ax, np.vstack(ext), size)
+    ax.figure.legend(*ax.get_legend_handles_labels(), loc="lower left", ncol=3, fontsize=8, frameon=False,
+                     bbox_to_anchor=(0.01, 0.0))     # below the 3D box, which draws past its frame
+    head = f"sign pattern {j} of {len(d['patterns'])}, contact C = {pat['contact']}"
+    if cfg is not None:
+        title = f"{head}:\nthe whole body at a feasible point; arrows: reactions, pointing at the nodes"
+    else:
+        import textwrap
+        title = "\n".join([f"{head}: body not rebuilt, drawn undeformed"]
+                          + textwrap.wrap(d["config_note"] or "no configuration", 100))
+    ax.set_title(title, fontsize=9)
+
+
+def _mesh_3d(ax, cells: dict, X: np.ndarray, Y: np.ndarray, values: dict, label: str) -> None:
+    """The edges of the undeformed body X (grey) and the deformed body Y: its boundary faces
+    coloured by von Mises stress, its bars by axial force (else plain), with colour bars."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+    from hpcwedge.post.recovery import AXIAL_FORCE, VON_MISES
+    faces, owner, bars = _boundary(cells)
     edges = [X[b] for b in bars] + [X[np.append(f, f[0])] for f in faces]
     ax.add_collection3d(Line3DCollection(edges, colors="0.72", linewidths=0.6, zorder=1, label="undeformed"))
-    label = f"deformed (displacement x{scale:.3g})" if cfg is not None else "body (not rebuilt: undeformed)"
     if faces:
         vm = values.get(VON_MISES)
         pc = Poly3DCollection([Y[f] for f in faces], edgecolors="0.3", linewidths=0.2, alpha=0.6, zorder=3,
@@ -200,26 +207,31 @@ def _body_3d(ax, d: dict) -> None:
             lc.set_color("tab:blue")
         ax.add_collection3d(lc)
 
-    ext = [X, Y]
-    drawn = _obstacles_3d(ax, d["obstacles"], X[c], n, size)
-    if drawn is not None:
-        ext.append(drawn)
-    in_c = to_mask(pat["contact"], m)
-    P = Y[c]
+
+def _contact_nodes_3d(ax, P: np.ndarray, in_c: np.ndarray, reac: np.ndarray, n: np.ndarray,
+                      size: float) -> list:
+    """The contact nodes P (m, 3): the contact set C (in_c, filled) and the gap set G (open),
+    the reactions reac as arrows pointing at them, their numbers on the body side (-n).
+    Returns the arrows' tails (for the axis limits), if any were drawn."""
     ax.scatter(*P[in_c].T, s=40, color="tab:red", edgecolors="black", linewidths=0.6, depthshade=False,
                zorder=6, label=f"contact set C ({int(in_c.sum())}): u_n = 0")
     ax.scatter(*P[~in_c].T, s=40, facecolors="white", edgecolors="tab:blue", linewidths=1.5,
                depthshade=False, zorder=6, label=f"gap set G ({int((~in_c).sum())}): r_n = 0")
-    rmax = float(np.max(np.linalg.norm(reac, axis=1))) if m else 0.0
+    tails = []
+    rmax = float(np.max(np.linalg.norm(reac, axis=1))) if len(P) else 0.0
     if rmax > 0:
         R = 2 * ARROW_FRACTION * size / rmax * reac
         ax.quiver(*P.T, *R.T, pivot="tip", color="tab:red", linewidths=1.6, arrow_length_ratio=0.25,
                   zorder=5, label="reaction (obstacle on body)")
-        ext.append(P - R)
+        tails.append(P - R)
     for i, p in enumerate(P):
         q = p - 0.06 * size * n[i]
         ax.text(*q, str(i), fontsize=7, color="0.2", ha="center", va="center", zorder=7)
-    pts = np.vstack(ext)
+    return tails
+
+
+def _box_3d(ax, pts: np.ndarray, size: float) -> None:
+    """Equal scales on the three axes around the points pts, in perspective from one view."""
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     mid, half = (lo + hi) / 2, np.maximum((hi - lo) / 2, 0.02 * size) * 1.02
     for setter, a, b in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid - half, mid + half):
@@ -231,16 +243,6 @@ def _body_3d(ax, d: dict) -> None:
     ax.set_ylabel("y", fontsize=9, labelpad=-2)
     ax.set_zlabel("z", fontsize=9, labelpad=-2)
     ax.tick_params(labelsize=7, pad=0)
-    ax.figure.legend(*ax.get_legend_handles_labels(), loc="lower left", ncol=3, fontsize=8, frameon=False,
-                     bbox_to_anchor=(0.01, 0.0))     # below the 3D box, which draws past its frame
-    head = f"sign pattern {j} of {len(d['patterns'])}, contact C = {pat['contact']}"
-    if cfg is not None:
-        title = f"{head}:\nthe whole body at a feasible point; arrows: reactions, pointing at the nodes"
-    else:
-        import textwrap
-        title = "\n".join([f"{head}: body not rebuilt, drawn undeformed"]
-                          + textwrap.wrap(d["config_note"] or "no configuration", 100))
-    ax.set_title(title, fontsize=9)
 
 
 def _obstacles_3d(ax, obstacles: list | None, P: np.ndarray, n: np.ndarray, size: float):

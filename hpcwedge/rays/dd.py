@@ -115,15 +115,58 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
     well_posed: initial_basis's threshold for a well-posed basis row (float runs).
     """
     t0 = time.perf_counter()
-    nc, d = A.shape
     bits = RowBits(m)
+    greedy, order = _row_order(order, exact, m)
+    X, Z, added, fixed, nz1 = _start_cone(A, m, bits, order, exact, face_rows(face, m), well_posed)
+    done = np.zeros(bits.W, dtype=np.uint64)
+    for i in range(m):
+        if _node_finished(i, added):
+            bits.add_node(done, i)
+    keep = bits.complementary_at(Z, done)
+    X, Z = X[keep], Z[keep]
+    rest = [3 * i + U_N for i in order if 3 * i + U_N not in added]
+    rest += [c for c in range(A.shape[0]) if c not in added and c not in rest]
+    stats = _initial_stats(X, exact, face)
+    total = len(rest)
+    work: dict = {}                  # buffers reused from step to step
+    pending = list(rest)
+    for step in range(1, total + 1):
+        h = _next_row(pending, A, X, Z, added, bits) if greedy else pending[0]
+        pending.remove(h)
+        added.add(h)
+        done_after = done.copy()
+        if _node_finished(h // 3, added):
+            bits.add_node(done_after, h // 3)
+        X, Z = _add_constraint(A[h], h, X, Z, done, done_after, fixed, nz1, bits, exact, stats, work)
+        done = done_after
+        stats["max_rays"] = max(stats["max_rays"], int(X.shape[0]))
+        if progress is not None:
+            progress({"done": step, "total": total, "rays": int(X.shape[0]),
+                      "bytes": int(X.nbytes + Z.nbytes), "elapsed": time.perf_counter() - t0})
+    stats["seconds"] = time.perf_counter() - t0
+    return DDResult(X=X, zero=bits.unpack(Z), stats=stats)
+
+
+def _row_order(order: list[int] | str | None, exact: bool, m: int) -> tuple[bool, list[int]]:
+    """(whether rows are chosen greedily, the node order) of complementary_rays's `order`."""
     if isinstance(order, str) and order not in ("greedy", "static"):
         raise ValueError(f'order must be a list of nodes, "greedy" or "static", got {order!r}')
     greedy = (order is None and not exact) or (isinstance(order, str) and order == "greedy")
     if greedy and exact:
         raise ValueError('order="greedy" needs float arithmetic')
-    order = list(range(m)) if order is None or isinstance(order, str) else [int(i) for i in order]
-    eq = face_rows(face, m)
+    return greedy, list(range(m)) if order is None or isinstance(order, str) else [int(i) for i in order]
+
+
+def _node_finished(i: int, added: set[int]) -> bool:
+    """Whether all three rows of node i are in."""
+    return {3 * i, 3 * i + 1, 3 * i + 2} <= added
+
+
+def _start_cone(A, m: int, bits: RowBits, order: list[int], exact: bool, eq: list[int], well_posed: float):
+    """The face {a_c x = 0, c in eq} of the simplicial start cone of initial_basis: its rays X,
+    their packed zero sets Z, the rows taken in (basis and implied), the packed bits of the
+    equality rows (`fixed`), and the number of zeros of a simple ray of the face (`nz1`)."""
+    nc, d = A.shape
     basis, implied = initial_basis(A, m, order, exact, eq, well_posed)
     X = _initial_rays(A[basis], exact)
     # the face of the simplicial cone: rays that are tight at every equality row
@@ -134,47 +177,23 @@ def complementary_rays(A: np.ndarray, m: int, exact: bool = False,
         zero[j, c] = False
     zero[:, implied] = True          # equality rows dependent on the chosen ones
     X, zero = X[on_face], zero[on_face]
-    Z = bits.pack(zero)
-    added = set(basis) | set(implied)
-    fixed = np.zeros(bits.W, dtype=np.uint64)          # bits of the equality rows
+    fixed = np.zeros(bits.W, dtype=np.uint64)
     for c in eq + implied:
         w, bit = bits.pos(c)
         fixed[w] |= bit
     # a simple ray of the face has d - 1 zeros plus one per dependent equality row
-    nz1 = d - 1 + len(implied)
-    done = np.zeros(bits.W, dtype=np.uint64)
-    for i in range(m):
-        if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
-            bits.add_node(done, i)
-    keep = bits.complementary_at(Z, done)
-    X, Z = X[keep], Z[keep]
-    rest = [3 * i + U_N for i in order if 3 * i + U_N not in added]
-    rest += [c for c in range(nc) if c not in added and c not in rest]
+    return X, bits.pack(zero), set(basis) | set(implied), fixed, d - 1 + len(implied)
+
+
+def _initial_stats(X: np.ndarray, exact: bool, face: Face | None) -> dict:
+    """The counters of a run before its first step."""
     stats = {"initial_rays": int(X.shape[0]), "pairs_tested": 0, "pairs_adjacent": 0,
              "max_rays": int(X.shape[0])}
     if not exact:
         stats.update(close_calls=0, closest=None, cancellation=1.0)
     if face is not None:
         stats["face"] = canonical_face(face)
-    total = len(rest)
-    work: dict = {}                  # buffers reused from step to step
-    pending = list(rest)
-    for step in range(1, total + 1):
-        h = _next_row(pending, A, X, Z, added, bits) if greedy else pending[0]
-        pending.remove(h)
-        added.add(h)
-        i = h // 3
-        done_after = done.copy()
-        if {3 * i, 3 * i + 1, 3 * i + 2} <= added:
-            bits.add_node(done_after, i)
-        X, Z = _add_constraint(A[h], h, X, Z, done, done_after, fixed, nz1, bits, exact, stats, work)
-        done = done_after
-        stats["max_rays"] = max(stats["max_rays"], int(X.shape[0]))
-        if progress is not None:
-            progress({"done": step, "total": total, "rays": int(X.shape[0]),
-                      "bytes": int(X.nbytes + Z.nbytes), "elapsed": time.perf_counter() - t0})
-    stats["seconds"] = time.perf_counter() - t0
-    return DDResult(X=X, zero=bits.unpack(Z), stats=stats)
+    return stats
 
 
 GREEDY_ALPHA = 1.5      # expected new rays per ray on the smaller side of a step
