@@ -39,7 +39,7 @@ from hpcwedge.post.panels import (
     mu_c_panel,
     run_group,
 )
-from hpcwedge.results.hdf5 import check_items, open_result, read_items, read_rays, text
+from hpcwedge.results.hdf5 import open_result, read_items, read_rays, text
 
 #: the figure formats by file suffix (no suffix: PNG)
 FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg", "": "png"}
@@ -133,9 +133,8 @@ def _read(f, path: str, run: int, ray: int | None = None, pattern: int | None = 
     out = {"name": text(a.get("name", os.path.basename(path))), "dim": dim, "m": m,
            "run": k, "n_runs": n_runs, "mu": float(g.attrs["mu"]), "mu_c": mu_c_attr(a),
            "rays": rays, "ray": j,
-           "cones": read_items(g, "cones"), "patterns": read_items(g, "patterns"),
+           "cones": read_items(g, "cones", n_rays, m), "patterns": read_items(g, "patterns", n_rays, m),
            "model": checked_model(f, path, dim, m)}
-    check_items(out["cones"], None, n_rays, m)
     if out["model"] is not None:
         out["config"], out["config_note"] = (None, None) if j is None else configuration_of(path, k, ray=j)
     return out
@@ -174,9 +173,9 @@ def _config_panel(ax, d: dict) -> None:
 def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str | None = None) -> None:
     from matplotlib.collections import LineCollection
 
-    X = mdl["coords"]
-    c = mdl["contact_nodes"]
-    n = mdl["normals"]
+    X = mdl.coords
+    c = mdl.contact_nodes
+    n = mdl.normals
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     t = np.stack([n[:, 1], -n[:, 0]], axis=1)          # 2D tangent t = (n_y, -n_x)
     reac = rn[:, None] * n + rt[:, None] * t
@@ -193,7 +192,7 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str
 
     def segments(P):
         segs = []
-        for kind, cells in mdl["cells"].items():
+        for kind, cells in mdl.cells.items():
             if cells.size == 0:
                 continue
             cells = cells.reshape(len(cells), -1)
@@ -209,11 +208,11 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str
     ax.add_collection(LineCollection(segments(X), colors="0.78", linewidths=1.2, zorder=1,
                                      label="undeformed"))
     if values:
-        _coloured_body(ax, mdl["cells"], Y, values, f"{what} displaced (x{scale:.3g})")
+        _coloured_body(ax, mdl.cells, Y, values, f"{what} displaced (x{scale:.3g})")
     else:
         ax.add_collection(LineCollection(segments(Y), colors="tab:blue", linewidths=1.4, zorder=2,
                                          label=f"{what} displaced (x{scale:.3g})"))
-    if not mdl["cells"]:
+    if not mdl.cells:
         ax.plot(X[:, 0], X[:, 1], ".", color="0.7")
 
     # obstacle walls: segments through each (undeformed) contact node along its tangent,
@@ -282,9 +281,9 @@ def _coloured_body(ax, cells: dict, Y: np.ndarray, values: dict, label: str) -> 
 def _cones_panel(ax, d: dict) -> None:
     """2D: the mu^c of the run's cones, those holding the drawn ray highlighted."""
     cones = d["cones"]
-    marked = [d["ray"] is not None and d["ray"] in c.get("rays", []) for c in cones or []]
+    marked = [d["ray"] is not None and d["ray"] in c.rays for c in cones or []]
     mu_c_panel(ax, d, cones, "cone", marked, f"cone with the drawn ray {d['ray']}",
-                lambda c: f"({len(c.get('rays', []))} rays)")
+                lambda c: f"({len(c.rays)} rays)")
 
 
 

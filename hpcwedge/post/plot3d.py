@@ -36,7 +36,7 @@ from hpcwedge.post.panels import (
     mu_c_panel,
     run_group,
 )
-from hpcwedge.results.hdf5 import check_items, read_counts, read_items, stored_scene, text
+from hpcwedge.results.hdf5 import read_counts, read_items, stored_scene, text
 
 VON_MISES_PERCENTILE = 95  # the colour scale ends here (point contacts concentrate the stress)
 #: boundary faces of the 3D cells (meshio / VTK node order), for the drawn surface
@@ -52,8 +52,7 @@ def read_3d(f, path: str, run: int, pattern: int) -> dict:
     a = f.attrs
     m = int(a["m"])
     k, n_runs, g = run_group(f, run)
-    patterns = read_items(g, "patterns")
-    check_items(None, patterns, 0, m)
+    patterns = read_items(g, "patterns", 0, m)
     j = item_index(pattern, len(patterns or []), "pattern", "sign pattern", k)
     counts = read_counts(f, "n_patterns")
     out = {"name": text(a.get("name", os.path.basename(path))), "dim": 3, "m": m,
@@ -75,7 +74,7 @@ def read_3d(f, path: str, run: int, pattern: int) -> dict:
     elif scene is not None:                                # raw stiffness: the pattern's point only
         from hpcwedge.post.recovery import ConfigurationError, pattern_point
         try:
-            out["point"] = pattern_point(scene, None, patterns[j]["contact"], out["mu"])
+            out["point"] = pattern_point(scene, None, patterns[j].contact, out["mu"])
         except (ConfigurationError, ValueError) as e:
             out["config_note"] = str(e).splitlines()[0]
     return out
@@ -122,7 +121,7 @@ def figure_3d(fig, d: dict) -> None:
     elif body:
         _body_3d(ax1, d)
     else:
-        head = f"sign pattern {j} of {len(pats)}, contact {pats[j]['contact']}"
+        head = f"sign pattern {j} of {len(pats)}, contact {pats[j].contact}"
         if d["point"] is None:
             message(ax1, f"no point of the pattern to draw\n({d['config_note']})", head)
         else:
@@ -158,8 +157,8 @@ def _body_3d(ax, d: dict) -> None:
     from hpcwedge.post.recovery import AXIAL_FORCE, VON_MISES
     mdl, cfg, m = d["model"], d["config"], d["m"]
     pat, j = d["patterns"][d["pattern"]], d["pattern"]
-    X, c = mdl["coords"], mdl["contact_nodes"]
-    n = mdl["normals"] / np.maximum(np.linalg.norm(mdl["normals"], axis=1, keepdims=True), 1e-300)
+    X, c = mdl.coords, mdl.contact_nodes
+    n = mdl.normals / np.maximum(np.linalg.norm(mdl.normals, axis=1, keepdims=True), 1e-300)
     if cfg is not None:
         D, reac = cfg.displacement, cfg.reaction[c]
     else:                          # no point of the pattern without the body: the body as it is
@@ -169,7 +168,7 @@ def _body_3d(ax, d: dict) -> None:
     dmax = float(np.max(np.linalg.norm(D, axis=1)))
     scale = DISP_FRACTION * size / dmax if dmax > 0 else 0.0
     Y = X + scale * D
-    faces, owner, bars = _boundary(mdl["cells"])
+    faces, owner, bars = _boundary(mdl.cells)
     values = cfg.element_values if cfg is not None else {}
 
     ax.computed_zorder = False                # layers below, not depth-sorted: the nodes stay on top
@@ -204,7 +203,7 @@ def _body_3d(ax, d: dict) -> None:
     drawn = _obstacles_3d(ax, d["obstacles"], X[c], n, size)
     if drawn is not None:
         ext.append(drawn)
-    in_c = to_mask(pat["contact"], m)
+    in_c = to_mask(pat.contact, m)
     P = Y[c]
     ax.scatter(*P[in_c].T, s=40, color="tab:red", edgecolors="black", linewidths=0.6, depthshade=False,
                zorder=6, label=f"contact set C ({int(in_c.sum())}): u_n = 0")
@@ -233,7 +232,7 @@ def _body_3d(ax, d: dict) -> None:
     ax.tick_params(labelsize=7, pad=0)
     ax.figure.legend(*ax.get_legend_handles_labels(), loc="lower left", ncol=3, fontsize=8, frameon=False,
                      bbox_to_anchor=(0.01, 0.0))     # below the 3D box, which draws past its frame
-    head = f"sign pattern {j} of {len(d['patterns'])}, contact C = {pat['contact']}"
+    head = f"sign pattern {j} of {len(d['patterns'])}, contact C = {pat.contact}"
     if cfg is not None:
         title = f"{head}:\nthe whole body at a feasible point; arrows: reactions, pointing at the nodes"
     else:

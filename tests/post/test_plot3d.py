@@ -81,7 +81,7 @@ def test_plug3d_png(tmp_path, capsys):
     assert d["config"].element_values[AXIAL_FORCE]["line"].shape == (len(d["model"]["cells"]["line"]),)
     counts = [n for _, n in d["counts"]]
     assert len(counts) == 2 and counts[0] < counts[1]             # mu 0.3 < 1: more patterns feasible
-    contact = d["patterns"][0]["contact"]
+    contact = d["patterns"][0].contact
     assert 0 < len(contact) < d["m"]                             # both C and G nodes to draw
     png = tmp_path / "plug.png"
     plot_result(h5, str(png))
