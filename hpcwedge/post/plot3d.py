@@ -129,7 +129,7 @@ def figure_3d(fig, d: dict) -> None:
             bars_panel(ax1, u[:d["m"]], r[:d["m"]], head, "a feasible point of the pattern")
     marked = [i == j for i in range(len(pats or []))]
     mu_c_panel(fig.add_subplot(gs[0, 1]), d, pats, "sign pattern", marked, f"drawn pattern {j}",
-                lambda p: f"(|C| = {len(p['contact'])})")
+                lambda p: f"(|C| = {len(p.contact)})")
     _counts_panel(fig.add_subplot(gs[1, 1]), d)
 
 

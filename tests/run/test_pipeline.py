@@ -188,7 +188,7 @@ def test_3d_stages_and_global_mu_c():
     assert r.runs[0].patterns is None and r.stages == ["mu_c"] and abs(r.mu_c - want) <= 1e-9 * want
     # mu_c = "global": patterns listed without their own mu^c
     r = run_scene(scene(K3, mu=(5.0,), dim=3, mu_c="global"))
-    assert r.runs[0].patterns == [{"contact": [0], "mu_c": None, "undecided": False}]
+    assert r.runs[0].patterns == [Pattern(contact=[0], mu_c=None, undecided=False)]
     assert abs(r.mu_c - want) <= 1e-9 * want
     r = run_scene(scene(K3, mu=(5.0,), dim=3, mu_c="none"))
     assert r.mu_c is None and r.stages == ["enumerate"] and r.runs[0].n_patterns == 1
