@@ -1,5 +1,6 @@
-"""The result file (SPEC §4): the HDF5 layout of a results.Result, its writer, the one reader,
-and the JSON of `show`.
+"""The result file (SPEC §4): the HDF5 layout of a results.Result, its writer, its reader
+(read_result: the Result written), and the JSON of `show` (dump_result_json, streamed from
+the file; Result.to_dict gives the same object from the record).
 
 Results are written by files.write_atomic (checksummed user block, atomic rename) and
 opened by open_result, which verifies the checksum first. Result files written before
@@ -17,10 +18,12 @@ Layout of RESULT.h5
     /model/          coords, contact_nodes, normals, cells_<kind> (when a model was built)
     /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
                      (an attribute absent = null); datasets rays, trivial_rays,
-                     ray_zero, cones_json (JSON list), patterns_json (3D: JSON list of
-                     {"contact", "mu_c", "mu_c_polished", "undecided"}, canonical order: contact
-                     bits; mu_c_polished: the value certified (pencil / KKT polish) or an upper
-                     bound (a bisection bracket's end, a 3D point), null without a value, absent when no mu^c stage ran)
+                     ray_zero, cones_json (JSON list of Cone.to_dict()), patterns_json (JSON
+                     list of Pattern.to_dict(): {"contact", "mu_c", "undecided",
+                     "mu_c_polished"}, canonical order: contact bits; mu_c_polished: the
+                     value certified (pencil / KKT polish) or an upper bound (a bisection
+                     bracket's end, a 3D point), null without a value, absent when no mu^c
+                     stage ran)
 """
 from __future__ import annotations
 
