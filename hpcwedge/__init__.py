@@ -17,8 +17,9 @@ holds every import to this order):
 """
 from hpcwedge.version import __version__
 
-__all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
-           "plot", "export_vtu", "DEFAULT_MU", "__version__"]
+__all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "Cone", "Pattern", "NOT_COMPUTED", "ContactProblem",
+           "solve", "contact_problem", "read_result", "write_result", "plot", "export_vtu", "DEFAULT_MU",
+           "__version__"]
 
 
 def __getattr__(name: str):

@@ -3,8 +3,9 @@
 A thin layer over the stages the command line runs: every scene, however it is made, is a
 scene table that goes through the one validator (scene.parse_scene), so every check,
 default and error message (a SceneError naming the key) is the parser's; `solve` is
-pipeline.run_scene; the result file, its JSON, the figure and the VTU export are
-resultfile.py, plot.py, recovery.py and export.py.
+run.pipeline.run_scene and `contact_problem` its condensation; the result file, its JSON,
+the figure and the VTU export are results/hdf5.py, post/plot.py, post/recovery.py and
+post/export.py.
 
 A scene made in Python (a dict, keyword arguments, arrays) keeps its table as TOML text
 (Scene.text): its hash identifies it, and a result file stores it, so that `show`, `plot`
@@ -28,15 +29,17 @@ import tempfile
 from collections.abc import Iterator, Mapping
 from typing import Any
 
+from hpcwedge.contact.problem import ContactProblem
 from hpcwedge.files import FileError
-from hpcwedge.results.record import Result, Run
+from hpcwedge.results.record import NOT_COMPUTED, Cone, Pattern, Result, Run
 from hpcwedge.run.pipeline import run_scene
 from hpcwedge.scene.constructors import DEFAULT_MU, builtin_scene, scene_from_dict, stiffness_scene, truss_scene
 from hpcwedge.scene.parse import Scene, load_scene
 from hpcwedge.scene.values import SceneError
 
-__all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "solve", "read_result", "write_result",
-           "plot", "export_vtu", "DEFAULT_MU", "scene_from_dict", "builtin_scene", "stiffness_scene", "truss_scene"]
+__all__ = ["Scene", "SceneError", "FileError", "Result", "Run", "Cone", "Pattern", "NOT_COMPUTED", "ContactProblem",
+           "solve", "contact_problem", "read_result", "write_result", "plot", "export_vtu", "DEFAULT_MU",
+           "scene_from_dict", "builtin_scene", "stiffness_scene", "truss_scene"]
 
 # --------------------------------------------------------------------------- solving, files
 
@@ -54,9 +57,9 @@ def solve(scene: Scene | str | os.PathLike | Mapping, *, progress: bool = False)
     -------
     Result
         ``mu_c`` (None: none found), ``mu_c_status``, ``runs`` (one Run per listed mu:
-        ``rays``, ``trivial_rays``, ``cones``, ``patterns`` and their counts ``n_*``; None
-        for what the scene did not ask for), ``stats``, ``timings``, ``to_dict()`` (the
-        ``show --json`` object).
+        ``rays``, ``trivial_rays`` (numpy arrays), ``cones`` (Cone records), ``patterns``
+        (Pattern records) and their counts ``n_*``; None for what the scene did not ask
+        for), ``stats``, ``timings``, ``to_dict()`` (the ``show --json`` object).
 
     Examples
     --------
@@ -65,17 +68,48 @@ def solve(scene: Scene | str | os.PathLike | Mapping, *, progress: bool = False)
     (6, 44, (44, 24), ['condense', 'enumerate', 'mu_c', 'total'])
     """
     from hpcwedge.progress import Progress
+    return run_scene(_scene(scene), Progress(quiet=not progress))
+
+
+def contact_problem(scene: Scene | str | os.PathLike | Mapping) -> ContactProblem:
+    """The condensed problem of a scene, what `solve` works on (its condense stage).
+
+    Parameters
+    ----------
+    scene : Scene, path or dict
+        As for `solve`.
+
+    Returns
+    -------
+    ContactProblem
+        ``K`` (dim*m x dim*m): the body's stiffness condensed to the contact DOFs, local
+        frames, block ordering (SPEC §1), scaled by a power of two that changes no answer
+        (contact.build.stiffness_exponent); ``N``: its rigid modes (no columns for a
+        supported body); ``dim``, ``m``.
+
+    Examples
+    --------
+    >>> p = contact_problem(Scene.builtin("plug2d", rows=3))
+    >>> p.m, p.K.shape, p.N.shape
+    (6, (12, 12), (12, 3))
+    """
+    from hpcwedge.contact.build import contact_problem as condensed
+    return condensed(_scene(scene))
+
+
+def _scene(scene: Scene | str | os.PathLike | Mapping) -> Scene:
+    """A Scene, a scene file (load_scene) or a scene table (scene_from_dict) as a Scene."""
     if isinstance(scene, (str, os.PathLike)):
-        scene = load_scene(os.fspath(scene))
-    elif isinstance(scene, Mapping):
-        scene = scene_from_dict(scene)
-    elif not isinstance(scene, Scene):
+        return load_scene(os.fspath(scene))
+    if isinstance(scene, Mapping):
+        return scene_from_dict(scene)
+    if not isinstance(scene, Scene):
         raise SceneError(f"scene: a Scene, a scene file or a dict, got {type(scene).__name__}")
-    return run_scene(scene, Progress(quiet=not progress))
+    return scene
 
 
 def write_result(result: Result, path: str | os.PathLike) -> None:
-    """Write `result` as a result file (SPEC §4; atomic, checksummed: resultfile.write_result),
+    """Write `result` as a result file (SPEC §4; atomic, checksummed: results.hdf5.write_result),
     which ``hpcwedge show``, ``plot`` and ``export`` read like one written by ``hpcwedge run``.
     FileError (one line, nothing written) where ``run -o`` would refuse the path: an existing
     file that is neither empty nor HDF5, a directory, a missing or read-only folder."""
@@ -89,9 +123,14 @@ def write_result(result: Result, path: str | os.PathLike) -> None:
     write(os.fspath(path), result)
 
 
-def read_result(path: str | os.PathLike, *, with_rays: bool = True) -> dict:
-    """The ``show --json`` object of a result file (resultfile.read_result); FileError (one
-    line) for a missing, damaged or malformed file.
+def read_result(path: str | os.PathLike, *, with_rays: bool = True) -> Result:
+    """The Result a result file holds, as `write_result` took it (results.hdf5.read_result):
+    the same scene, runs (rays bit for bit), mu^c, stats and timings; ``model`` is the body
+    the file keeps for figures (coordinates, contact nodes, normals, cells) and ``problem``
+    is None (`contact_problem` of ``result.scene`` rebuilds it). with_rays False: the ray
+    arrays are not read (None; their counts ``n_*`` kept). ``to_dict()`` is the file's
+    ``hpcwedge show --json`` object. FileError (one line) for a missing, damaged or
+    malformed file.
 
     Examples
     --------
@@ -99,7 +138,10 @@ def read_result(path: str | os.PathLike, *, with_rays: bool = True) -> dict:
     >>> r = solve(Scene.builtin("vgroove_bar", mu=1.0))
     >>> with tempfile.TemporaryDirectory() as d:
     ...     write_result(r, os.path.join(d, "r.h5"))
-    ...     read_result(os.path.join(d, "r.h5")) == r.to_dict()
+    ...     back = read_result(os.path.join(d, "r.h5"))
+    >>> back.scene == r.scene, back.mu_c == r.mu_c, back.runs[0].cones == r.runs[0].cones
+    (True, True, True)
+    >>> back.to_dict() == r.to_dict()
     True
     """
     from hpcwedge.results.hdf5 import read_result as read

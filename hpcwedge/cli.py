@@ -307,7 +307,7 @@ def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
     return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
 
 
-def _read(path: str, with_rays: bool = True) -> dict:
+def _read(path: str, with_rays: bool = True):
     from hpcwedge.files import FileError
     from hpcwedge.results.hdf5 import read_result
     try:
@@ -322,49 +322,46 @@ def _show(args) -> int:
     if args.no_rays and not args.json:
         raise _UserError("show: --no-rays only applies with --json (the text summary has no rays)")
     try:
+        if args.json:
+            dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)
+            return 0
         res = read_result(args.result, with_rays=False)
     except CheckpointGiven:
         return _show_checkpoint(args)
     except FileError as e:
         raise _UserError(str(e)) from None
-    if args.json:
-        try:
-            dump_result_json(args.result, sys.stdout, with_rays=not args.no_rays)
-        except FileError as e:
-            raise _UserError(str(e)) from None
-        return 0
-    mu_c = "null" if res["mu_c"] is None else f"{res['mu_c']:.12g}"
-    status = ", ".join(x for x in (res["mu_c_status"], _global_caveat(res)) if x)
-    print(f"{res['name']}: dim {res['dim']}, m {res['m']}, mu_c = {mu_c}" + (f" ({status})" if status else ""))
+    mu_c = "null" if res.mu_c is None else f"{res.mu_c:.12g}"
+    status = ", ".join(x for x in (res.mu_c_status, _global_caveat(res)) if x)
+    print(f"{res.scene.name}: dim {res.scene.dim}, m {res.m}, mu_c = {mu_c}" + (f" ({status})" if status else ""))
     # mu as given (shortest round-trip digits): runs 1e-11 apart stay apart
-    w = max([8] + [len(repr(float(run["mu"]))) for run in res["runs"]])
+    w = max([8] + [len(repr(float(run.mu))) for run in res.runs])
     print(f"{'mu':>{w}} {'wedged':>8} {'trivial':>8} {'cones':>6} {'patterns':>9}")
-    for run in res["runs"]:
-        cells = [run[k] for k in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns")]
-        print(f"{float(run['mu'])!r:>{w}} " + " ".join(f"{'-' if v is None else v:>{w}}"
-                                               for v, w in zip(cells, (8, 8, 6, 9))))
-        for j, cone in enumerate(run["cones"] or []):
-            print(f"         cone {j}: {len(cone['rays'])} rays, zero_u {cone['zero_u']}, "
-                  f"zero_r {cone['zero_r']}, mu_c {_mu_c_text(cone)}")
-        for j, pat in enumerate(run["patterns"] or []):
-            flag = " (undecided)" if pat.get("undecided") else ""
-            print(f"         pattern {j}: contact {pat['contact']}, mu_c {_mu_c_text(pat)}{flag}")
-    t = res["timings"]
+    for run in res.runs:
+        cells = [run.n_wedged_rays, run.n_trivial_rays, run.n_cones, run.n_patterns]
+        print(f"{float(run.mu)!r:>{w}} " + " ".join(f"{'-' if v is None else v:>{w}}"
+                                                 for v, w in zip(cells, (8, 8, 6, 9))))
+        for j, cone in enumerate(run.cones or []):
+            print(f"         cone {j}: {len(cone.rays)} rays, zero_u {cone.zero_u}, "
+                  f"zero_r {cone.zero_r}, mu_c {_mu_c_text(cone)}")
+        for j, pat in enumerate(run.patterns or []):
+            flag = " (undecided)" if pat.undecided else ""
+            print(f"         pattern {j}: contact {pat.contact}, mu_c {_mu_c_text(pat)}{flag}")
+    t = res.timings
     print("timings: " + ", ".join(f"{k} {v:.3f} s" for k, v in t.items()))
     return 0
 
 
-def _global_caveat(res: dict) -> str:
+def _global_caveat(res) -> str:
     """What `show` adds to the global mu^c when it is not certified to 1e-9: the listed value
     it is is not polished, or the global search left values unpolished or patterns' mu^c
     undecided (stats.bnb.unsettled; a file without it: any solve undecided)."""
-    if res["mu_c"] is None:
+    if res.mu_c is None:
         return ""
-    items = [it for run in res["runs"] for it in (run["cones"] or []) + (run["patterns"] or [])]
-    source = [it for it in items if it.get("mu_c") == res["mu_c"]]
+    items = [it for run in res.runs for it in (run.cones or []) + (run.patterns or [])]
+    source = [it for it in items if it.mu_c == res.mu_c]
     if source:
-        return "" if all(it.get("mu_c_polished") is not False for it in source) else "not polished: an upper bound"
-    st = res["stats"]
+        return "" if all(it.mu_c_polished is not False for it in source) else "not polished: an upper bound"
+    st = res.stats
     bnb, unpolished = st.get("bnb") or {}, st.get("mu_c_unpolished", 0)
     if "unsettled" in bnb:
         doubt, what = bnb["unsettled"], "pattern(s) with mu^c undecided"
@@ -373,12 +370,12 @@ def _global_caveat(res: dict) -> str:
     return f"not certified to 1e-9: {unpolished} value(s) not polished, {doubt} {what}" if unpolished or doubt else ""
 
 
-def _mu_c_text(item: dict) -> str:
+def _mu_c_text(item) -> str:
     """A cone's or pattern's mu^c for `show`: "-" when not computed; a value not certified
     to 1e-9 (an upper bound: a bisection bracket's end, or a 3D point not polished) says so."""
-    if item["mu_c"] is None:
+    if item.mu_c is None:
         return "-"
-    return f"{item['mu_c']:.12g}" + (" (not polished: an upper bound)" if item.get("mu_c_polished") is False else "")
+    return f"{item.mu_c:.12g}" + (" (not polished: an upper bound)" if item.mu_c_polished is False else "")
 
 
 def _show_checkpoint(args) -> int:

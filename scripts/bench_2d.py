@@ -123,7 +123,7 @@ def _run_scene(tables: dict, mu: float, mu_c: str, exact: bool = False):
 def _counts(res) -> dict:
     """Counts, fingerprint and the run's own stage timings of a one-mu 2D Result."""
     run = res.runs[0]
-    keys = [(c["zero_u"], c["zero_r"]) for c in run.cones]
+    keys = [(c.zero_u, c.zero_r) for c in run.cones]
     return {"m": res.m, "n_wedged_rays": run.n_wedged_rays, "n_cones": run.n_cones,
             "n_trivial_rays": run.n_trivial_rays, "fingerprint": _fingerprint(run.ray_zero, keys),
             "breakdown": {k: float(v) for k, v in res.timings.items()}}
@@ -177,7 +177,7 @@ def worker_mpirun(rows: int, mu: float, workers: int = 2) -> dict:
         subprocess.run([mpirun, *extra, "--oversubscribe", "-n", str(workers + 1), "-x", "PYTHONPATH",
                         sys.executable, "-m", "hpcwedge", "run", scene, "-o", out, "-q"], check=True)
         wall = time.perf_counter() - t0
-        res = read_result(out, with_rays=False)
+        res = read_result(out, with_rays=False).to_dict(with_rays=False)
         with h5py.File(out, "r") as f:
             zero = f["runs/000/ray_zero"][()]
     run = res["runs"][0]

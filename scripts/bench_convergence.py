@@ -44,7 +44,7 @@ def cones_at(refine: int, mu: float, rows: int, patch: float = 0.0, kind: str = 
     t = time.perf_counter()
     res = run_scene(scene)
     sec = time.perf_counter() - t
-    cones = {f"u{c['zero_u']} r{c['zero_r']}": c["mu_c"] for c in res.runs[0].cones}
+    cones = {f"u{c.zero_u} r{c.zero_r}": c.mu_c for c in res.runs[0].cones}
     return {"refine": refine, "dofs": int(res.model.K.shape[0]), "m": res.m, "seconds": sec,
             "patch_nodes": patch_nodes(res.model, patch),
             "mu_c": res.mu_c, "n_rays": res.runs[0].n_wedged_rays, "cones": cones}

@@ -79,7 +79,7 @@ def worker_3d(engine: str, ring: int) -> dict:
                              "run": {"symmetry": engine == "bnb_sym"}})
         res = run_scene(scene)
         m = res.m
-        found = [sum(1 << i for i in pat["contact"]) for pat in res.runs[0].patterns]
+        found = [sum(1 << i for i in pat.contact) for pat in res.runs[0].patterns]
         stages = {k: res.timings[k] for k in ("condense", "enumerate")}
         counters = {k: res.stats["bnb"][k] for k in ("nodes", "solves", "skipped", "pruned", "undecided")}
     digest = hashlib.sha1(repr(sorted(found)).encode()).hexdigest()[:16]     # the pattern set

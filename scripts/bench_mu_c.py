@@ -78,11 +78,11 @@ def critical_pattern(dim: int, model: dict, mu: float):
     res = run_scene(scene)
     m = res.m
     if dim == 2:
-        cone = min(res.runs[0].cones, key=lambda c: c["mu_c"])
-        zu, zr = np.isin(np.arange(m), cone["zero_u"]), np.isin(np.arange(m), cone["zero_r"])
+        cone = min(res.runs[0].cones, key=lambda c: c.mu_c)
+        zu, zr = np.isin(np.arange(m), cone.zero_u), np.isin(np.arange(m), cone.zero_r)
     else:
-        pat = min(res.runs[0].patterns, key=lambda p: p["mu_c"])
-        zu = np.isin(np.arange(m), pat["contact"])
+        pat = min(res.runs[0].patterns, key=lambda p: p.mu_c)
+        zu = np.isin(np.arange(m), pat.contact)
         zr = ~zu
     return parametrize(res.problem), m, zu, zr
 

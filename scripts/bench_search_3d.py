@@ -108,7 +108,7 @@ def worker(task: str, levels: int, ring: int, screens: bool = False) -> dict:
            "undecided": bnb.get("undecided"),
            "seconds": cpu, "wall_in_process": wall}
     if task == "enumerate":
-        pats = [tuple(p["contact"]) for p in res.runs[0].patterns]
+        pats = [tuple(p.contact) for p in res.runs[0].patterns]
         out["patterns"] = len(pats)
         out["patterns_hash"] = patterns_hash(pats)
         out["socps_per_pattern"] = out["socps"] / max(len(pats), 1)

@@ -178,7 +178,7 @@ def main() -> int:
         except ImportError:
             pass
         for run in res.runs:
-            cmu = sorted(c["mu_c"] for c in run.cones if c["mu_c"] is not None)
+            cmu = sorted(c.mu_c for c in run.cones if c.mu_c is not None)
             cones_mu = ", ".join(f"{v:.6f}" for v in cmu[:4]) + (" ..." if len(cmu) > 4 else "")
             rows.append((scene.name, res.m, run.mu, run.n_wedged_rays, run.n_trivial_rays,
                          run.n_cones, cones_mu or "-",

@@ -148,7 +148,7 @@ def tan(deg: float) -> float:
 def cone_mu_c(spec: dict, mu: float) -> list[float]:
     """Sorted distinct mu^c of the cones found at mu (float pipeline)."""
     res = run_scene(_scene(spec, mu, {"mu_c": "cones"}))
-    return sorted({c["mu_c"] for c in res.runs[0].cones if c["mu_c"] is not None})
+    return sorted({c.mu_c for c in res.runs[0].cones if c.mu_c is not None})
 
 
 def cases(quick: bool, families: set[str] | None = None) -> list[Case]:
@@ -231,7 +231,7 @@ def _answer(res) -> dict:
     """Counts and zero-set keys of a run_scene result (one mu)."""
     run = res.runs[0]
     zero = run.ray_zero if run.ray_zero is not None else np.zeros((0, 3 * res.m), dtype=bool)
-    cones = sorted((tuple(c["zero_u"]), tuple(c["zero_r"])) for c in run.cones or [])
+    cones = sorted((tuple(c.zero_u), tuple(c.zero_r)) for c in run.cones or [])
     return {"rays": run.n_wedged_rays, "trivial": run.n_trivial_rays, "cones": run.n_cones,
             "ray_keys": sorted(np.packbits(z).tobytes().hex() for z in zero), "cone_keys": cones,
             "mu_c": res.mu_c, "numerics": res.stats.get("numerics", {})}
@@ -262,7 +262,7 @@ def run_case(case: Case, exact_answers: dict) -> dict:
                                                                       "mu_c": "none"})))
     m = fl.m
     F, R = _answer(fl), _answer(raw)
-    float_pats = {tuple(p["contact"]) for p in pat.runs[0].patterns}
+    float_pats = {tuple(p.contact) for p in pat.runs[0].patterns}
     row = {"family": case.family, "parameter": case.param, "m": m, "mu": case.mu,
            "float_rays": F["rays"], "float_cones": F["cones"], "float_patterns": len(float_pats),
            "raw_rays": R["rays"], "raw_cones": R["cones"],

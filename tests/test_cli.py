@@ -68,17 +68,19 @@ def test_show_says_when_the_global_search_left_mu_c_uncertified():
     """A global mu^c from the search (no listed value) with values left unpolished or solves
     undecided (plug3d at a 0.01 deg taper: 4 and 98, the value 1.5e-4 above tan 0.01 deg):
     show says it is not certified; with none, nothing is added."""
+    from types import SimpleNamespace
+
     from hpcwedge.cli import _global_caveat
-    res = {"mu_c": 0.5, "runs": [{"cones": None, "patterns": None}],
-           "stats": {"mu_c_unpolished": 4, "bnb": {"undecided": 98}}}
+    from hpcwedge.results.record import Run
+    res = SimpleNamespace(mu_c=0.5, runs=[Run(mu=1.0)], stats={"mu_c_unpolished": 4, "bnb": {"undecided": 98}})
     assert _global_caveat(res) == "not certified to 1e-9: 4 value(s) not polished, 98 solve(s) undecided"
-    res["stats"] = {"mu_c_unpolished": 0, "bnb": {"undecided": 0}}
+    res.stats = {"mu_c_unpolished": 0, "bnb": {"undecided": 0}}
     assert _global_caveat(res) == ""
     # a file that counts the patterns left unsettled: solves undecided in the bracket's dives
     # or in a polished value's computation leave the value certified
-    res["stats"] = {"mu_c_unpolished": 0, "bnb": {"undecided": 5, "unsettled": 0}}
+    res.stats = {"mu_c_unpolished": 0, "bnb": {"undecided": 5, "unsettled": 0}}
     assert _global_caveat(res) == ""
-    res["stats"] = {"mu_c_unpolished": 0, "bnb": {"undecided": 5, "unsettled": 2}}
+    res.stats = {"mu_c_unpolished": 0, "bnb": {"undecided": 5, "unsettled": 2}}
     assert _global_caveat(res) == "not certified to 1e-9: 0 value(s) not polished, 2 pattern(s) with mu^c undecided"
 
 
@@ -228,16 +230,17 @@ def test_export_stiffness_scene_and_missing_file(tmp_path, capsys):
 
 @pytest.mark.parametrize("chunk", [1, 7, 16384])
 def test_show_json_streams_the_same_object_as_read_result(tmp_path, capsys, monkeypatch, chunk):
-    """`show --json` streams the rays in chunks; the object equals read_result's (ray
-    vectors to the last bit: repr round-trips floats) whatever the chunk size."""
+    """`show --json` streams the rays in chunks; the object equals the to_dict() of the Result
+    read_result gives (ray vectors to the last bit: repr round-trips floats) whatever the
+    chunk size."""
     from hpcwedge.results import hdf5 as results
     monkeypatch.setattr(results, "RAY_CHUNK", chunk)
     out, got = run_show_json(tmp_path, capsys, 'name = "p"\ndim = 2\n[model]\nkind = "plug2d"\n'
                              'rows = 3\n[friction]\nmu = [0.65, 2.0]\n[compute]\nmu_c = "cones"\n')
-    want = results.read_result(out)
+    want = results.read_result(out).to_dict()
     assert got == want and len(got["runs"][0]["rays"]) == got["runs"][0]["n_wedged_rays"] > 7
     assert main(["show", out, "--json", "--no-rays"]) == 0
-    assert json.loads(capsys.readouterr().out) == results.read_result(out, with_rays=False)
+    assert json.loads(capsys.readouterr().out) == results.read_result(out, with_rays=False).to_dict(with_rays=False)
     # the text summary has no rays: --no-rays without --json is a usage error, not ignored
     assert main(["show", out, "--no-rays"]) == 2
     cap = capsys.readouterr()

@@ -10,6 +10,7 @@ import numpy as np
 
 from hpcwedge.errors import UserError
 from hpcwedge.results.hdf5 import RangeError, index, index_range, read_model, read_run, text
+from hpcwedge.results.record import StoredModel
 
 DISP_FRACTION = 0.10     # largest drawn displacement / body size
 ARROW_FRACTION = 0.15    # largest drawn reaction arrow / body size (3D: twice that)
@@ -66,14 +67,14 @@ def item_index(j: int, n: int, name: str, noun: str, k: int) -> int | None:
     return i if n else None
 
 
-def checked_model(f, path: str, dim: int, m: int) -> dict | None:
+def checked_model(f, path: str, dim: int, m: int) -> StoredModel | None:
     """The /model group (results.read_model), or None without one; PlotError unless it has
     the result's dimension and m contact nodes."""
     mdl = read_model(f)
     if mdl is None:
         return None
-    if mdl["coords"].ndim != 2 or mdl["coords"].shape[1] != dim or len(mdl["contact_nodes"]) != m \
-            or mdl["normals"].shape != (m, dim):
+    if mdl.coords.ndim != 2 or mdl.coords.shape[1] != dim or len(mdl.contact_nodes) != m \
+            or mdl.normals.shape != (m, dim):
         raise PlotError(f"plot: {path}: /model does not match dim {dim} and m = {m}")
     return mdl
 
@@ -133,7 +134,7 @@ def mu_c_panel(ax, d: dict, items: list | None, noun: str, marked: list, marked_
     if not items:
         message(ax, f"the run has no {noun}s\n(global mu^c = {glob})", title)
         return
-    vals = [c.get("mu_c") for c in items]
+    vals = [c.mu_c for c in items]
     if all(v is None for v in vals):
         message(ax, f"{len(items)} {noun}(s); mu^c not computed", title)
         return

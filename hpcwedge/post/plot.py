@@ -35,7 +35,7 @@ from hpcwedge.post.panels import (
     mu_c_panel,
     read_figure,
 )
-from hpcwedge.results.hdf5 import check_items, open_result, read_items, read_rays
+from hpcwedge.results.hdf5 import open_result, read_items, read_rays
 
 #: the figure formats by file suffix (no suffix: PNG)
 FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg", "": "png"}
@@ -126,8 +126,8 @@ def _read(f, path: str, run: int, ray: int | None = None, pattern: int | None = 
 def _rays_and_cones(g, m: int) -> tuple:
     """(the run's wedged rays, its cones and sign patterns) of the run group g; files.FileError."""
     rays = read_rays(g, 4 * m)
-    more = {"cones": read_items(g, "cones"), "patterns": read_items(g, "patterns")}
-    check_items(more["cones"], None, 0 if rays is None else len(rays), m)
+    n_rays = 0 if rays is None else len(rays)
+    more = {"cones": read_items(g, "cones", n_rays, m), "patterns": read_items(g, "patterns", n_rays, m)}
     return rays, more
 
 
@@ -166,9 +166,9 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str
     else its contact nodes only), the obstacle walls, the reactions, the node numbers."""
     from matplotlib.collections import LineCollection
 
-    X = mdl["coords"]
-    c = mdl["contact_nodes"]
-    n = mdl["normals"]
+    X = mdl.coords
+    c = mdl.contact_nodes
+    n = mdl.normals
     n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     t = np.stack([n[:, 1], -n[:, 0]], axis=1)          # 2D tangent t = (n_y, -n_x)
     reac = rn[:, None] * n + rt[:, None] * t
@@ -184,14 +184,14 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str
     Y = X + scale * D
     what = "whole body" if config is not None else "contact nodes"
     values = config.element_values if config is not None else {}
-    ax.add_collection(LineCollection(_outlines(mdl["cells"], X), colors="0.78", linewidths=1.2, zorder=1,
+    ax.add_collection(LineCollection(_outlines(mdl.cells, X), colors="0.78", linewidths=1.2, zorder=1,
                                      label="undeformed"))
     if values:
-        _coloured_body(ax, mdl["cells"], Y, values, f"{what} displaced (x{scale:.3g})")
+        _coloured_body(ax, mdl.cells, Y, values, f"{what} displaced (x{scale:.3g})")
     else:
-        ax.add_collection(LineCollection(_outlines(mdl["cells"], Y), colors="tab:blue", linewidths=1.4, zorder=2,
+        ax.add_collection(LineCollection(_outlines(mdl.cells, Y), colors="tab:blue", linewidths=1.4, zorder=2,
                                          label=f"{what} displaced (x{scale:.3g})"))
-    if not mdl["cells"]:
+    if not mdl.cells:
         ax.plot(X[:, 0], X[:, 1], ".", color="0.7")
     h = WALL_FRACTION * size / 2
     _walls(ax, X[c], n, t, h)
@@ -291,9 +291,9 @@ def _coloured_body(ax, cells: dict, Y: np.ndarray, values: dict, label: str) -> 
 def _cones_panel(ax, d: dict) -> None:
     """2D: the mu^c of the run's cones, those holding the drawn ray highlighted."""
     cones = d["cones"]
-    marked = [d["ray"] is not None and d["ray"] in c.get("rays", []) for c in cones or []]
+    marked = [d["ray"] is not None and d["ray"] in c.rays for c in cones or []]
     mu_c_panel(ax, d, cones, "cone", marked, f"cone with the drawn ray {d['ray']}",
-                lambda c: f"({len(c.get('rays', []))} rays)")
+                lambda c: f"({len(c.rays)} rays)")
 
 
 

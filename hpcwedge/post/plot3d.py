@@ -32,7 +32,7 @@ from hpcwedge.post.panels import (
     mu_c_panel,
     read_figure,
 )
-from hpcwedge.results.hdf5 import check_items, read_counts, read_items, stored_scene
+from hpcwedge.results.hdf5 import read_counts, read_items, stored_scene
 
 VON_MISES_PERCENTILE = 95  # the colour scale ends here (point contacts concentrate the stress)
 #: boundary faces of the 3D cells (meshio / VTK node order), for the drawn surface
@@ -46,8 +46,7 @@ CELL_FACES = {"tetra": ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)),
 def read_3d(f, path: str, run: int, pattern: int) -> dict:
     """The figure data of sign pattern `pattern` of run `run` of the open 3D result f."""
     def patterns_and_counts(g, m: int) -> tuple:
-        patterns = read_items(g, "patterns")
-        check_items(None, patterns, 0, m)
+        patterns = read_items(g, "patterns", 0, m)
         return patterns, {"counts": read_counts(f, "n_patterns"), "obstacles": None, "point": None}
 
     out = read_figure(f, path, run, "pattern", pattern, patterns_and_counts)
@@ -62,7 +61,7 @@ def read_3d(f, path: str, run: int, pattern: int) -> dict:
     if j is not None and out["model"] is None and scene is not None:   # raw stiffness: the pattern's point only
         from hpcwedge.post.recovery import ConfigurationError, pattern_point
         try:
-            out["point"] = pattern_point(scene, None, out["patterns"][j]["contact"], out["mu"])
+            out["point"] = pattern_point(scene, None, out["patterns"][j].contact, out["mu"])
         except (ConfigurationError, ValueError) as e:
             out["config_note"] = str(e).splitlines()[0]
     return out
@@ -109,7 +108,7 @@ def figure_3d(fig, d: dict) -> None:
     elif body:
         _body_3d(ax1, d)
     else:
-        head = f"sign pattern {j} of {len(pats)}, contact {pats[j]['contact']}"
+        head = f"sign pattern {j} of {len(pats)}, contact {pats[j].contact}"
         if d["point"] is None:
             message(ax1, f"no point of the pattern to draw\n({d['config_note']})", head)
         else:
@@ -117,7 +116,7 @@ def figure_3d(fig, d: dict) -> None:
             bars_panel(ax1, u[:d["m"]], r[:d["m"]], head, "a feasible point of the pattern")
     marked = [i == j for i in range(len(pats or []))]
     mu_c_panel(fig.add_subplot(gs[0, 1]), d, pats, "sign pattern", marked, f"drawn pattern {j}",
-                lambda p: f"(|C| = {len(p['contact'])})")
+                lambda p: f"(|C| = {len(p.contact)})")
     _counts_panel(fig.add_subplot(gs[1, 1]), d)
 
 
@@ -142,8 +141,8 @@ def _body_3d(ax, d: dict) -> None:
     """The body in perspective: undeformed and deformed, C/G nodes, reactions, obstacle."""
     mdl, cfg, m = d["model"], d["config"], d["m"]
     pat, j = d["patterns"][d["pattern"]], d["pattern"]
-    X, c = mdl["coords"], mdl["contact_nodes"]
-    n = mdl["normals"] / np.maximum(np.linalg.norm(mdl["normals"], axis=1, keepdims=True), 1e-300)
+    X, c = mdl.coords, mdl.contact_nodes
+    n = mdl.normals / np.maximum(np.linalg.norm(mdl.normals, axis=1, keepdims=True), 1e-300)
     if cfg is not None:
         D, reac = cfg.displacement, cfg.reaction[c]
     else:                          # no point of the pattern without the body: the body as it is
@@ -155,16 +154,16 @@ def _body_3d(ax, d: dict) -> None:
     Y = X + scale * D
     ax.computed_zorder = False                # layers below, not depth-sorted: the nodes stay on top
     label = f"deformed (displacement x{scale:.3g})" if cfg is not None else "body (not rebuilt: undeformed)"
-    _mesh_3d(ax, mdl["cells"], X, Y, cfg.element_values if cfg is not None else {}, label)
+    _mesh_3d(ax, mdl.cells, X, Y, cfg.element_values if cfg is not None else {}, label)
     ext = [X, Y]
     drawn = _obstacles_3d(ax, d["obstacles"], X[c], n, size)
     if drawn is not None:
         ext.append(drawn)
-    ext += _contact_nodes_3d(ax, Y[c], to_mask(pat["contact"], m), reac, n, size)
+    ext += _contact_nodes_3d(ax, Y[c], to_mask(pat.contact, m), reac, n, size)
     _box_3d(ax, np.vstack(ext), size)
     ax.figure.legend(*ax.get_legend_handles_labels(), loc="lower left", ncol=3, fontsize=8, frameon=False,
                      bbox_to_anchor=(0.01, 0.0))     # below the 3D box, which draws past its frame
-    head = f"sign pattern {j} of {len(d['patterns'])}, contact C = {pat['contact']}"
+    head = f"sign pattern {j} of {len(d['patterns'])}, contact C = {pat.contact}"
     if cfg is not None:
         title = f"{head}:\nthe whole body at a feasible point; arrows: reactions, pointing at the nodes"
     else:

@@ -41,6 +41,7 @@ import numpy as np
 from hpcwedge.errors import UserError
 from hpcwedge.models.record import Model
 from hpcwedge.nodesets import to_mask
+from hpcwedge.results.record import StoredModel
 
 #: cell-data names by cell family, in the VTU and in Configuration.element_values
 VON_MISES, AXIAL_FORCE = "von_mises", "axial_force"
@@ -136,7 +137,6 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     from hpcwedge.files import FileError
     from hpcwedge.results.hdf5 import (
         RangeError,
-        check_items,
         index,
         index_range,
         open_result,
@@ -159,8 +159,8 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
                 raise ConfigurationError(str(e)) from None
             mu = float(g.attrs["mu"])
             rays = read_rays(g, 2 * dim * m)
-            cones, patterns = read_items(g, "cones"), read_items(g, "patterns")
-            check_items(cones, patterns, 0 if rays is None else len(rays), m)
+            n_rays = 0 if rays is None else len(rays)
+            cones, patterns = read_items(g, "cones", n_rays, m), read_items(g, "patterns", n_rays, m)
             text, scene_dir, inputs = stored_scene(f)
             stored = read_model(f)
     except FileError as e:
@@ -183,15 +183,15 @@ def load_configuration(path: str, run: int = -1, ray: int | None = None, cone: i
     if what == "ray":
         u, r = rays[i, :n], rays[i, n:]
     elif what == "cone":
-        members = items[i]["rays"]
+        members = items[i].rays
         if not members:
             raise ConfigurationError(f"cone {i} of {head} has no wedged ray")
         v = rays[members].mean(axis=0)
         u, r = v[:n], v[n:]
         label += f" (mean of its {len(members)} wedged ray(s))"
     else:
-        u, r = pattern_point(scene, model, items[i]["contact"], mu)
-        label += f" (contact {items[i]['contact']}; a feasible point)"
+        u, r = pattern_point(scene, model, items[i].contact, mu)
+        label += f" (contact {items[i].contact}; a feasible point)"
     try:
         return whole_body(model, u, r, label=label, solver=solver)
     except ValueError as e:
@@ -219,7 +219,7 @@ def pattern_point(scene, model: Model, contact: list[int], mu: float) -> tuple[n
     return u / s, r / s
 
 
-def rebuild_model(path: str, text: str, scene_dir: str | None, stored: dict | None,
+def rebuild_model(path: str, text: str, scene_dir: str | None, stored: StoredModel | None,
                   inputs: dict | None = None):
     """(Scene, Model) of the result file `path`, from its stored scene text and folder and
     input digests (results.stored_scene) and its /model (results.read_model; None: none).
@@ -259,7 +259,7 @@ def rebuild_model(path: str, text: str, scene_dir: str | None, stored: dict | No
     except (SceneError, tomllib.TOMLDecodeError) as e:
         raise ConfigurationError(f"cannot rebuild the body from the stored scene: {str(e).splitlines()[0]}") from None
     if stored is not None:
-        X, c = np.asarray(stored["coords"], float), np.asarray(stored["contact_nodes"])
+        X, c = np.asarray(stored.coords, float), np.asarray(stored.contact_nodes)
         scale = max(float(np.abs(X).max(initial=0.0)), 1e-300)
         if (X.shape != model.coords.shape or not np.array_equal(c, model.contact_nodes)
                 or np.abs(X - model.coords).max() > MODEL_MATCH_RTOL * scale):

@@ -156,7 +156,7 @@ def note_near_mu_c(numerics: NumericsReport, runs) -> None:
     arithmetic 8); runs: pipeline Runs with cones and their mu^c."""
     exact = {r["mu"] for r in numerics.runs if r.get("exact")}
     near = [run.mu for run in runs if run.cones and run.mu not in exact
-            and any(c.get("mu_c") is not None and run.mu <= c["mu_c"] * (1 + NEAR_MU_C_RTOL) for c in run.cones)]
+            and any(c.mu_c is not None and run.mu <= c.mu_c * (1 + NEAR_MU_C_RTOL) for c in run.cones)]
     if near:
         numerics.notes.append(f"mu = {', '.join(f'{mu:.17g}' for mu in near)} lies within "
                               f"{NEAR_MU_C_RTOL:g} above a cone's mu^c: its rays there are nearly parallel and "
@@ -179,8 +179,8 @@ def drop_below_mu_c(numerics: NumericsReport, runs) -> None:
     for run in runs:
         if not run.patterns:
             continue
-        keep = [p for p in run.patterns if not (p.get("mu_c") is not None and p.get("mu_c_polished")
-                                                and run.mu < p["mu_c"] * (1 - BELOW_MU_C_RTOL))]
+        keep = [p for p in run.patterns if not (p.mu_c is not None and p.mu_c_polished
+                                                and run.mu < p.mu_c * (1 - BELOW_MU_C_RTOL))]
         if len(keep) < len(run.patterns):
             dropped.append(f"{len(run.patterns) - len(keep)} at mu = {run.mu:.17g}")
             run.patterns = keep

@@ -1,5 +1,6 @@
-"""The result file (SPEC §4): the HDF5 layout of a results.Result, its writer, the one reader,
-and the JSON of `show`.
+"""The result file (SPEC §4): the HDF5 layout of a results.Result, its writer, its reader
+(read_result: the Result written), and the JSON of `show` (dump_result_json, streamed from
+the file; Result.to_dict gives the same object from the record).
 
 Results are written by files.write_atomic (checksummed user block, atomic rename) and
 opened by open_result, which verifies the checksum first. Result files written before
@@ -17,10 +18,12 @@ Layout of RESULT.h5
     /model/          coords, contact_nodes, normals, cells_<kind> (when a model was built)
     /runs/<k>/       attrs: mu, n_wedged_rays, n_trivial_rays, n_cones, n_patterns
                      (an attribute absent = null); datasets rays, trivial_rays,
-                     ray_zero, cones_json (JSON list), patterns_json (3D: JSON list of
-                     {"contact", "mu_c", "mu_c_polished", "undecided"}, canonical order: contact
-                     bits; mu_c_polished: the value certified (pencil / KKT polish) or an upper
-                     bound (a bisection bracket's end, a 3D point), null without a value, absent when no mu^c stage ran)
+                     ray_zero, cones_json (JSON list of Cone.to_dict()), patterns_json (JSON
+                     list of Pattern.to_dict(): {"contact", "mu_c", "undecided",
+                     "mu_c_polished"}, canonical order: contact bits; mu_c_polished: the
+                     value certified (pencil / KKT polish) or an upper bound (a bisection
+                     bracket's end, a 3D point), null without a value, absent when no mu^c
+                     stage ran)
 """
 from __future__ import annotations
 
@@ -29,6 +32,7 @@ import math
 import os
 import sys
 import time
+import tomllib
 from contextlib import contextmanager
 
 import h5py
@@ -46,12 +50,13 @@ from hpcwedge.files import (
     verify_checksum,
     write_atomic,
 )
-from hpcwedge.scene.parse import changed_settings
-from hpcwedge.version import __version__
+from hpcwedge.results.record import Cone, Pattern, Result, Run, StoredModel, plain_number
+from hpcwedge.scene.parse import changed_settings, parse_scene
+from hpcwedge.scene.values import SceneError
 
 
 def write_result(path: str, result, tmp_path: str | None = None) -> None:
-    """Store a pipeline.Result (see module doc). tmp_path: the temp file's fixed name
+    """Store a results.Result (see module doc). tmp_path: the temp file's fixed name
     (files.replace_atomic; default: a fresh hidden name in the same folder)."""
 
     def fill(f):
@@ -59,11 +64,11 @@ def write_result(path: str, result, tmp_path: str | None = None) -> None:
         f.attrs.update({"name": s.name, "dim": s.dim, "m": result.m, "complete": result.complete,
                         "mu_c": np.nan if result.mu_c is None else result.mu_c,
                         "mu_c_status": result.mu_c_status or "",
-                        "version": __version__, "scene_hash": s.hash,
+                        "version": result.version, "scene_hash": s.hash,
                         "inputs": json.dumps(s.input_digests),
                         "scene_dir": os.path.abspath(s.base_dir),
                         "stages": json.dumps(result.stages), "timings": json.dumps(result.timings),
-                        "stats": json.dumps(result.stats, default=_plain)})
+                        "stats": json.dumps(result.stats, default=plain_number)})
         f.create_dataset("scene_text", data=s.text)
         if result.model is not None:
             g = f.create_group("model")
@@ -84,9 +89,10 @@ def write_result(path: str, result, tmp_path: str | None = None) -> None:
                 if v is not None:
                     g.create_dataset(name, data=v, compression=compression(v))
             if run.cones is not None:
-                g.create_dataset("cones_json", data=json.dumps(run.cones, default=_plain))
+                g.create_dataset("cones_json", data=json.dumps([c.to_dict() for c in run.cones], default=plain_number))
             if run.patterns is not None:
-                g.create_dataset("patterns_json", data=json.dumps(run.patterns, default=_plain))
+                g.create_dataset("patterns_json", data=json.dumps([p.to_dict() for p in run.patterns],
+                                                                  default=plain_number))
 
     write_atomic(path, fill, tmp_path)
 
@@ -144,11 +150,49 @@ _VERIFIED: set = set()
 STABLE_S = 2.0
 
 
-def read_result(path: str, with_rays: bool = True) -> dict:
-    """The `show --json` object of a result file (SPEC §4), rays as nested lists.
-    FileError (one line) for a missing, damaged or malformed file."""
+def read_result(path: str, with_rays: bool = True) -> Result:
+    """The Result stored in a result file, equal field for field to the one written: the
+    scene parsed from its stored text and folder, with the input digests the file recorded;
+    rays as the arrays written, bit for bit (with_rays False: not read, their counts kept in
+    Run.stored_counts); model the StoredModel of /model; problem None. FileError (one line)
+    for a missing, damaged or malformed file, or a stored scene that no longer parses."""
     with open_result(path) as f:
-        return _result_object(f, (lambda ds: ds[()].tolist()) if with_rays else None)
+        a = f.attrs
+        text, scene_dir, inputs = stored_scene(f)
+        try:
+            scene = parse_scene(tomllib.loads(text), text=text, base_dir=scene_dir or os.path.dirname(
+                os.path.abspath(path)))
+        except (SceneError, tomllib.TOMLDecodeError) as e:
+            raise FileError(f"{path}: its stored scene does not read ({str(e).splitlines()[0]})") from None
+        if inputs is not None:                # Scene.input_digests is cached: the file's, not the bytes now
+            scene.__dict__["input_digests"] = inputs
+        if (str(a["name"]), int(a["dim"])) != (scene.name, scene.dim):
+            raise ValueError("the name or dim attribute is not the stored scene's")
+        m = int(a["m"])
+        mu_c = float(a["mu_c"])
+        return Result(scene=scene, m=m, runs=[_read_run(g, m, with_rays) for g in _run_groups(f)],
+                      mu_c=None if math.isnan(mu_c) else mu_c, mu_c_status=str(a["mu_c_status"]) or None,
+                      complete=bool(a["complete"]), stages=json.loads(a["stages"]),
+                      timings=json.loads(a["timings"]), stats=json.loads(a["stats"]), model=read_model(f),
+                      version=str(a["version"]))
+
+
+def _run_groups(f) -> list:
+    """The /runs/<k> groups in order."""
+    return [f["runs"][k] for k in sorted(f["runs"])]
+
+
+def _read_run(g, m: int, with_rays: bool) -> Run:
+    """The Run of run group g (a result with m contact nodes)."""
+    check_arrays(g)
+    arrays = {name: g[name][()] if name in g else None for name in ("rays", "trivial_rays", "ray_zero")}
+    n_rays = g["rays"].shape[0] if "rays" in g else int(g.attrs.get("n_wedged_rays", 0))
+    cones, patterns = read_items(g, "cones", n_rays, m), read_items(g, "patterns", n_rays, m)
+    if with_rays:
+        return Run(float(g.attrs["mu"]), **arrays, cones=cones, patterns=patterns)
+    counts = {name: int(g.attrs[attr]) for name, attr in (("rays", "n_wedged_rays"),
+                                                          ("trivial_rays", "n_trivial_rays")) if attr in g.attrs}
+    return Run(float(g.attrs["mu"]), cones=cones, patterns=patterns, stored_counts=counts)
 
 
 def result_state(path: str, scene) -> str:
@@ -159,18 +203,18 @@ def result_state(path: str, scene) -> str:
     is not a readable result; SceneError when an input file cannot be read."""
     if not os.path.exists(path):
         return "missing"
-    r = read_result(path, with_rays=False)
-    if r["scene_hash"] != scene.hash:
-        with open_result(path) as f:
-            if changed_settings(stored_scene(f)[0], scene.text) is None:
-                return "other-scene"
-    if (r["inputs"] or {}) != scene.input_digests:
-        return "other-scene"
-    return "complete" if r["complete"] else "incomplete"
+    with open_result(path) as f:
+        text, _, inputs = stored_scene(f)
+        if str(f.attrs["scene_hash"]) != scene.hash and changed_settings(text, scene.text) is None:
+            return "other-scene"
+        if (inputs or {}) != scene.input_digests:
+            return "other-scene"
+        return "complete" if bool(f.attrs["complete"]) else "incomplete"
 
 
 def dump_result_json(path: str, out, with_rays: bool = True) -> None:
-    """Write read_result(path, with_rays) as one JSON object to the text stream `out`, the
+    """Write the `show --json` object of a result file (SPEC §4: read_result(path,
+    with_rays).to_dict(with_rays)) as one JSON object to the text stream `out`, the
     ray arrays streamed RAY_CHUNK rows at a time: a result with millions of rays (plug2d
     m = 20: 2e6 x 80) never exists as Python lists or as one string. FileError as read_result
     (found before anything is written, as the checksum covers the whole file)."""
@@ -235,15 +279,21 @@ def _result_object(f, rays) -> dict:
         run = {"mu": float(g.attrs["mu"])}
         for name in ("n_wedged_rays", "n_trivial_rays", "n_cones", "n_patterns"):
             run[name] = int(g.attrs[name]) if name in g.attrs else None
+        check_arrays(g)
         for name in ("rays", "trivial_rays"):
-            if name in g and (g[name].ndim != 2 or g[name].dtype.kind != "f"):
-                raise TypeError(f"/runs/{k}/{name}: {g[name].ndim}-D {g[name].dtype}, expected 2-D floats")
             run[name] = rays(g[name]) if (name in g and rays is not None) else None
-        run["cones"], run["patterns"] = read_items(g, "cones"), read_items(g, "patterns")
+        run["cones"], run["patterns"] = _items_json(g, "cones"), _items_json(g, "patterns")
         n_rays = g["rays"].shape[0] if "rays" in g else int(g.attrs.get("n_wedged_rays", 0))
         check_items(run["cones"], run["patterns"], n_rays, out["m"])
         out["runs"].append(run)
     return out
+
+
+def check_arrays(g) -> None:
+    """TypeError unless run group g's ray arrays (those stored) are 2-D floats."""
+    for name in ("rays", "trivial_rays"):
+        if name in g and (g[name].ndim != 2 or g[name].dtype.kind != "f"):
+            raise TypeError(f"{g.name}/{name}: {g[name].ndim}-D {g[name].dtype}, expected 2-D floats")
 
 
 def check_items(cones, patterns, n_rays: int, m: int) -> None:
@@ -319,24 +369,33 @@ def read_rays(g, width: int) -> np.ndarray | None:
     return np.asarray(g["rays"][()], dtype=float).reshape(-1, width) if "rays" in g else None
 
 
-def read_items(g, kind: str) -> list | None:
-    """The parsed JSON list of run group g's "cones" or "patterns" (None when not stored);
-    check them with check_items before use."""
+def read_items(g, kind: str, n_rays: int, m: int) -> list[Cone] | list[Pattern] | None:
+    """The Cones (kind "cones") or Patterns ("patterns") of run group g, None when not
+    stored; ValueError unless they fit a run of n_rays wedged rays and m nodes (check_items)."""
+    items = _items_json(g, kind)
+    if kind == "cones":
+        check_items(items, None, n_rays, m)
+        return None if items is None else [Cone.from_dict(c) for c in items]
+    check_items(None, items, n_rays, m)
+    return None if items is None else [Pattern.from_dict(p) for p in items]
+
+
+def _items_json(g, kind: str) -> list | None:
+    """The parsed JSON list of run group g's "cones" or "patterns" (None when not stored)."""
     name = f"{kind}_json"
     return json.loads(text(g[name])) if name in g else None
 
 
-def read_model(f) -> dict | None:
-    """The /model group as {"coords": (n, dim) floats, "contact_nodes": (m,) ints, "normals":
-    (m, dim) floats, "cells": {kind: int array}}, or None when the result has none."""
+def read_model(f) -> StoredModel | None:
+    """The /model group, or None when the result has none."""
     if "model" not in f:
         return None
     mg = f["model"]
-    return {"coords": np.asarray(mg["coords"][()], dtype=float),
-            "contact_nodes": np.asarray(mg["contact_nodes"][()], dtype=int),
-            "normals": np.asarray(mg["normals"][()], dtype=float),
-            "cells": {name[len("cells_"):]: np.asarray(mg[name][()], dtype=int)
-                      for name in mg if name.startswith("cells_")}}
+    return StoredModel(coords=np.asarray(mg["coords"][()], dtype=float),
+                       contact_nodes=np.asarray(mg["contact_nodes"][()], dtype=int),
+                       normals=np.asarray(mg["normals"][()], dtype=float),
+                       cells={name[len("cells_"):]: np.asarray(mg[name][()], dtype=int)
+                              for name in mg if name.startswith("cells_")})
 
 
 def stored_scene(f) -> tuple[str, str | None, dict | None]:
@@ -345,12 +404,3 @@ def stored_scene(f) -> tuple[str, str | None, dict | None]:
     return (text(f["scene_text"]), text(f.attrs["scene_dir"]) if "scene_dir" in f.attrs else None,
             dict(json.loads(f.attrs["inputs"])) if "inputs" in f.attrs else None)
 
-
-def _plain(o):
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.floating):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o))

@@ -22,6 +22,7 @@ one face of a few branching nodes, at one mu).
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from functools import cache as once
 from functools import partial
 
@@ -57,7 +58,16 @@ from hpcwedge.rays.numerics import (
     recheck_patterns_2d,
     settle_rays_2d,
 )
-from hpcwedge.results.record import GlobalRouteStats, Result, Run, SolveStats, SymmetryStats, TreeStats
+from hpcwedge.results.record import (
+    Cone,
+    GlobalRouteStats,
+    Pattern,
+    Result,
+    Run,
+    SolveStats,
+    SymmetryStats,
+    TreeStats,
+)
 from hpcwedge.run.stages import Condensed, Cones, Context, GlobalMuC, MuCValues, OrbitKey, PatternSets, Rays
 from hpcwedge.scene.parse import Plan, Scene
 from hpcwedge.scene.values import SceneError
@@ -138,10 +148,7 @@ def _run_plan(scene: Scene, progress: Progress, engine: Engine, condensed: Conde
                 stats.add(solves=r.solves, undecided=r.undecided, polished=int(r.polished),
                           unpolished=int(not r.polished))
             if plan.mu_c_cones:
-                for key, item in (pair for pairs in values.keyed for pair in pairs):
-                    value = values.by_key[key]
-                    item["mu_c"] = value.mu_c
-                    item["mu_c_polished"] = None if value.mu_c is None else bool(value.polished)
+                _file_mu_c(values, result.runs)
         elif step == "global_mu_c":
             g = global_mu_c(ctx, values)
             result.mu_c, result.mu_c_status = g.mu_c, g.status
@@ -303,11 +310,8 @@ def cones(r: Rays) -> Cones:
     items = []
     for cone in maximal_cones(gap, load, wedged):
         ids = np.asarray(cone.rays, dtype=int)
-        items.append({"rays": widx[ids[wedged[ids]]].tolist(),
-                      "trivial_rays": tidx[ids[~wedged[ids]]].tolist(),
-                      "zero_u": np.flatnonzero(cone.zero_u).tolist(),
-                      "zero_r": np.flatnonzero(cone.zero_r).tolist(),
-                      "mu_c": None})
+        items.append(Cone(rays=widx[ids[wedged[ids]]].tolist(), trivial_rays=tidx[ids[~wedged[ids]]].tolist(),
+                          zero_u=np.flatnonzero(cone.zero_u).tolist(), zero_r=np.flatnonzero(cone.zero_r).tolist()))
     return Cones(items)
 
 
@@ -322,8 +326,8 @@ def patterns(ctx: Context) -> PatternSets:
     items = []
     for found, doubt in zip(pats.found, pats.undecided):
         found, doubt = expand_orbits(found, sym, m), set(expand_orbits(doubt, sym, m))
-        items.append([{"contact": list(bits_to_nodes(s.contact, m)), "mu_c": None,
-                       "undecided": s in doubt} for s in sorted(found, key=lambda s: pattern_key(s.contact))])
+        items.append([Pattern(list(bits_to_nodes(s.contact, m)), undecided=s in doubt)
+                      for s in sorted(found, key=lambda s: pattern_key(s.contact))])
     reps = None if sym is None else [len(f) for f in pats.found]
     c = pats.counters
     undecided = sum(len(u) for u in pats.undecided)
@@ -332,8 +336,8 @@ def patterns(ctx: Context) -> PatternSets:
         exact_sets = recheck_patterns_2d(ctx.numerics, m, scene.mu, near, undecided, c.get("undecided", 0),
                                          ctx.exact_param, scene.exact)
         if exact_sets is not None:
-            exact = [[{"contact": list(cs), "mu_c": None, "undecided": False}
-                      for cs in sorted(sets, key=lambda cs: pattern_key(to_bits(cs)))] for sets in exact_sets]
+            exact = [[Pattern(list(cs)) for cs in sorted(sets, key=lambda cs: pattern_key(to_bits(cs)))]
+                     for sets in exact_sets]
             items = exact + items[len(exact):]
             undecided = 0
     tree = TreeStats.of(c, 2 ** m * len(scene.mu))        # partitions: what brute force would solve
@@ -361,15 +365,28 @@ def orbit_key(zero_u, zero_r, symmetry: Symmetry | None) -> OrbitKey:
     return bits if symmetry is None else symmetry.canonical(*bits)
 
 
-def mu_c_keys(run: Run, m: int, symmetry: Symmetry | None) -> list[tuple[OrbitKey, list, list, dict]]:
-    """(key, zero_u, zero_r, item) of every cone (its zero sets) then every pattern (zero_u:
-    its contact nodes, zero_r: the others) of the run, in the run's order."""
-    out = [(orbit_key(c["zero_u"], c["zero_r"], symmetry), c["zero_u"], c["zero_r"], c)
-           for c in run.cones or []]
+def mu_c_keys(run: Run, m: int, symmetry: Symmetry | None) -> list[tuple[OrbitKey, list, list]]:
+    """(key, zero_u, zero_r) of every cone (its zero sets) then every pattern (zero_u: its
+    contact nodes, zero_r: the others) of the run, in the run's order."""
+    out = [(orbit_key(c.zero_u, c.zero_r, symmetry), c.zero_u, c.zero_r) for c in run.cones or []]
     for p in run.patterns or []:
-        gap = sorted(set(range(m)).difference(p["contact"]))
-        out.append((orbit_key(p["contact"], gap, symmetry), p["contact"], gap, p))
+        gap = sorted(set(range(m)).difference(p.contact))
+        out.append((orbit_key(p.contact, gap, symmetry), p.contact, gap))
     return out
+
+
+def _file_mu_c(values: MuCValues, runs: list[Run]) -> None:
+    """Every run's cones and patterns with their mu^c (values.keyed: one list per run) and
+    whether it is certified (None without a value)."""
+    def valued(item, key):
+        v = values.by_key[key]
+        return replace(item, mu_c=v.mu_c, mu_c_polished=None if v.mu_c is None else bool(v.polished))
+    for run, keys in zip(runs, values.keyed):
+        n = len(run.cones or [])
+        if run.cones is not None:
+            run.cones = [valued(c, key) for c, key in zip(run.cones, keys[:n])]
+        if run.patterns is not None:
+            run.patterns = [valued(p, key) for p, key in zip(run.patterns, keys[n:])]
 
 
 def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
@@ -384,7 +401,7 @@ def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
     entries = [mu_c_keys(run, m, ctx.symmetry) for run in wanted]
     tasks: dict = {}
     for run, entry in zip(wanted, entries):
-        for key, zu, zr, _ in entry:
+        for key, zu, zr in entry:
             if key not in tasks:
                 tasks[key] = (to_mask(zu, m), to_mask(zr, m), run.mu)
     solve = partial(mu_critical, ctx.float_param, m, mu_max=scene.mu_max, method=scene.mu_c_method,
@@ -392,9 +409,9 @@ def mu_c(ctx: Context, runs: list[Run], every_run: bool) -> MuCValues:
     by_key = dict(zip(tasks, run_mu_c(solve, list(tasks.values()), engine=ctx.engine)))
     if scene.dim == 2 and scene.mu_c_method == "accurate" and (scene.exact or ctx.numerics.exact_fallback):
         certify_2d(by_key, tasks, ctx.exact_param(), ctx.float_param, m, ctx.scale, ctx.numerics.notes)
-    keyed = [[(key, item) for key, _, _, item in entry] for entry in entries]
+    keyed = [[key for key, _, _ in entry] for entry in entries]
     first = next((ks for r, ks in zip(wanted, keyed) if r is listed[0]), None) if listed else None
-    return MuCValues(by_key, keyed, None if first is None else [key for key, _ in first])
+    return MuCValues(by_key, keyed, first)
 
 
 def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:

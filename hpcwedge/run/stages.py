@@ -12,8 +12,8 @@ from hpcwedge.mu_c.critical import MuC
 from hpcwedge.parallel.engine import Engine
 from hpcwedge.patterns.symmetry import Symmetry
 from hpcwedge.progress import Progress
-from hpcwedge.results.record import GlobalRouteStats, TreeStats
 from hpcwedge.rays.numerics import NumericsReport
+from hpcwedge.results.record import Cone, GlobalRouteStats, Pattern, TreeStats
 from hpcwedge.scene.parse import Scene
 
 OrbitKey = tuple[int, int]
@@ -69,19 +69,17 @@ class Rays:
 
 @dataclass
 class Cones:
-    """The cones stage at one mu: result items {"rays", "trivial_rays" (indices into the
-    run's lists), "zero_u", "zero_r" (nodes), "mu_c": None}."""
+    """The cones stage at one mu: its Cones (mu^c not computed yet)."""
 
-    items: list[dict]
+    items: list[Cone]
 
 
 @dataclass
 class PatternSets:
-    """The patterns stage: per mu the result items {"contact", "mu_c": None, "undecided"}
-    (canonical order), how many are undecided, the tree's counters, the 3D solver statuses
+    """The patterns stage: per mu its Patterns (canonical order, mu^c not computed yet), how many are undecided, the tree's counters, the 3D solver statuses
     (2D: None) and per mu the orbit representatives found (no symmetry: None)."""
 
-    items: list[list[dict]]
+    items: list[list[Pattern]]
     undecided: int
     tree: TreeStats
     statuses: dict | None
@@ -90,12 +88,12 @@ class PatternSets:
 
 @dataclass
 class MuCValues:
-    """The mu_c stage: the MuC of every orbit key (one task each); keyed: per run asked
-    (mu_c_keys) its (key, item) pairs; first: the keys of the first run that lists any cone
-    or pattern (None: no run does)."""
+    """The mu_c stage: the MuC of every orbit key (one task each); keyed: per run asked the
+    keys of its cones then its patterns, in the run's order (mu_c_keys); first: the keys of
+    the first run that lists any cone or pattern (None: no run does)."""
 
     by_key: dict[OrbitKey, MuC]
-    keyed: list[list[tuple[OrbitKey, dict]]]
+    keyed: list[list[OrbitKey]]
     first: list[OrbitKey] | None
 
 

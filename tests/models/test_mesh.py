@@ -75,7 +75,7 @@ def v_groove_obstacles(as_cone):
 
 
 def _answers(res):
-    return [(r.mu, r.n_wedged_rays, r.n_cones, sorted((tuple(c["zero_u"]), tuple(c["zero_r"])) for c in r.cones))
+    return [(r.mu, r.n_wedged_rays, r.n_cones, sorted((tuple(c.zero_u), tuple(c.zero_r)) for c in r.cones))
             for r in res.runs]
 
 
@@ -114,7 +114,7 @@ def test_block2d_mesh_same_K_and_answers(tmp_path):
     assert _answers(r2) == _answers(r0) and r0.runs[0].n_wedged_rays == 244
     assert math.isclose(r2.mu_c, r0.mu_c, rel_tol=1e-9) and math.isclose(r2.mu_c, math.tan(TAU), rel_tol=1e-9)
     for a, b in zip(r0.runs[0].cones, r2.runs[0].cones):
-        assert math.isclose(a["mu_c"], b["mu_c"], rel_tol=1e-9)
+        assert math.isclose(a.mu_c, b.mu_c, rel_tol=1e-9)
 
 
 def test_triangles_and_mixed_cells(tmp_path):
@@ -234,7 +234,7 @@ def cone_obstacle(R=np.eye(3), b=np.zeros(3)):
 
 
 def _patterns(res):
-    return [(r.mu, r.n_patterns, sorted(tuple(p["contact"]) for p in r.patterns)) for r in res.runs]
+    return [(r.mu, r.n_patterns, sorted(tuple(p.contact) for p in r.patterns)) for r in res.runs]
 
 
 @pytest.mark.parametrize("cell", ["hexahedron", "tetra"])
@@ -256,7 +256,7 @@ def test_plug3d_mesh(tmp_path, cell):
     assert math.isclose(res.mu_c, math.tan(TAU), rel_tol=1e-9)
     pats = _patterns(res)
     assert pats[0][1] >= 1 and pats[1][1] > pats[0][1]
-    assert all(p["mu_c"] >= res.mu_c * (1 - 1e-9) for r in res.runs for p in r.patterns)
+    assert all(p.mu_c >= res.mu_c * (1 - 1e-9) for r in res.runs for p in r.patterns)
     # the same body by node ids (group order = ascending ids), rotated and moved
     rng = np.random.default_rng(7)
     R = np.linalg.qr(rng.normal(size=(3, 3)))[0]

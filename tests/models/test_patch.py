@@ -80,7 +80,7 @@ def test_zero_patch_is_bit_for_bit_the_point_contact():
     scene["model"]["contact_patch"] = 0.0
     b = run_scene(parse_scene(scene))
     assert a.mu_c == b.mu_c
-    assert [c["mu_c"] for c in a.runs[0].cones] == [c["mu_c"] for c in b.runs[0].cones]
+    assert [c.mu_c for c in a.runs[0].cones] == [c.mu_c for c in b.runs[0].cones]
 
 
 def test_patch_covering_no_node_changes_nothing():

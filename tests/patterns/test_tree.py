@@ -218,6 +218,6 @@ def test_2d_patterns_agree_with_rays(rows, taper, mus):
         supp_u, supp_r = np.abs(un) > 1e-9 * scale, np.abs(rn) > 1e-9 * scale
         want = [[i for i in range(m) if bits >> i & 1]                   # canonical: by contact bits
                 for bits in sorted(patterns_of_supports(supp_r, supp_u, m))]
-        assert [p["contact"] for p in rp.patterns] == want
+        assert [p.contact for p in rp.patterns] == want
         for p in rp.patterns:               # a pattern's mu^c: at most the run's mu, at least the global one
-            assert ray.mu_c * (1 - 1e-9) <= p["mu_c"] <= rp.mu * (1 + 1e-9)
+            assert ray.mu_c * (1 - 1e-9) <= p.mu_c <= rp.mu * (1 + 1e-9)

@@ -14,7 +14,7 @@ from hpcwedge.cli import main
 from hpcwedge.files import seal
 from hpcwedge.post.plot import plot_result
 from hpcwedge.results.hdf5 import write_result
-from hpcwedge.results.record import Result, Run
+from hpcwedge.results.record import Cone, Result, Run
 from hpcwedge.scene.parse import parse_scene
 
 STIFFNESS_TOML = """\
@@ -182,8 +182,8 @@ def test_model_panel_without_condensation(tmp_path):
     rays[:, m:2 * m] -= 0.5                                   # tangential u of both signs
     rays[:, 3 * m:] -= 0.5
     rays[:, 2 * m:3 * m] /= rays[:, 2 * m:3 * m].sum(axis=1, keepdims=True)   # sum r_n = 1
-    cones = [{"rays": [0, 1], "trivial_rays": [], "zero_u": [0], "zero_r": [1], "mu_c": 0.4},
-             {"rays": [2], "trivial_rays": [], "zero_u": [1], "zero_r": [0], "mu_c": None}]
+    cones = [Cone(rays=[0, 1], trivial_rays=[], zero_u=[0], zero_r=[1], mu_c=0.4),
+             Cone(rays=[2], trivial_rays=[], zero_u=[1], zero_r=[0])]
     result = Result(scene=scene, m=m, model=model, mu_c=0.176, mu_c_status="found",
                     runs=[Run(mu=0.65, rays=rays, trivial_rays=np.zeros((0, 4 * m)),
                               ray_zero=np.zeros((3, 3 * m), dtype=bool), cones=cones)],
@@ -211,8 +211,8 @@ def test_block2d_whole_body_von_mises(tmp_path):
     d = _load(h5, -1, 1)
     cfg = d["config"]
     assert cfg is not None and d["config_note"] is None
-    assert cfg.element_values[VON_MISES]["quad"].shape == (len(d["model"]["cells"]["quad"]),)
-    interior = np.setdiff1d(np.arange(len(cfg.displacement)), d["model"]["contact_nodes"])
+    assert cfg.element_values[VON_MISES]["quad"].shape == (len(d["model"].cells["quad"]),)
+    interior = np.setdiff1d(np.arange(len(cfg.displacement)), d["model"].contact_nodes)
     assert np.abs(cfg.displacement[interior]).max() > 0
     png = tmp_path / "block.png"
     plot_result(h5, str(png), ray=1)

@@ -78,10 +78,10 @@ def test_plug3d_png(tmp_path, capsys):
     h5 = result_file(tmp_path, PLUG3D_TOML)
     d = _load(h5, -1, pattern=0)
     assert d["dim"] == 3 and d["config"] is not None and d["config_note"] is None
-    assert d["config"].element_values[AXIAL_FORCE]["line"].shape == (len(d["model"]["cells"]["line"]),)
+    assert d["config"].element_values[AXIAL_FORCE]["line"].shape == (len(d["model"].cells["line"]),)
     counts = [n for _, n in d["counts"]]
     assert len(counts) == 2 and counts[0] < counts[1]             # mu 0.3 < 1: more patterns feasible
-    contact = d["patterns"][0]["contact"]
+    contact = d["patterns"][0].contact
     assert 0 < len(contact) < d["m"]                             # both C and G nodes to draw
     png = tmp_path / "plug.png"
     plot_result(h5, str(png))

@@ -143,7 +143,7 @@ def test_a_pattern_below_its_own_mu_c_is_not_listed(delta, listed):
     notes = [n for n in res.stats["numerics"]["notes"] if "below their own certified mu^c" in n]
     assert res.runs[0].n_patterns == listed and bool(notes) == (listed == 0)
     if listed:
-        assert res.runs[0].patterns[0]["contact"] == list(range(6))
+        assert res.runs[0].patterns[0].contact == list(range(6))
 
 
 def test_exact_scenes_take_mu_c_in_the_float_routes_coordinates():
@@ -157,7 +157,7 @@ def test_exact_scenes_take_mu_c_in_the_float_routes_coordinates():
     for exact in (False, True):
         res = run_scene(parse_scene({"name": "p", "dim": 2, "model": {"kind": "plug2d", "rows": 4, "taper_deg": 0.1},
                                      "friction": {"mu": [0.65]}, "compute": {"exact": exact}}))
-        got.append({(tuple(c["zero_u"]), tuple(c["zero_r"])): (c["mu_c"], c["mu_c_polished"])
+        got.append({(tuple(c.zero_u), tuple(c.zero_r)): (c.mu_c, c.mu_c_polished)
                     for c in res.runs[0].cones})
         assert abs(res.mu_c - tan(0.1)) <= 1e-10 * tan(0.1)
     assert got[0] == got[1] and all(polished for _, polished in got[1].values())
@@ -183,5 +183,5 @@ def test_ill_conditioned_balanced_coordinates_make_a_run_suspect(taper, cond_T):
     assert num["flagged"] and num["exact_fallback"] == [0.65] and num["runs"][0]["cond_T"] > cond_T
     for r in runs:
         (cone,) = r.runs[0].cones
-        assert cone["mu_c_polished"] and abs(cone["mu_c"] - tan(taper)) <= 1e-11 * tan(taper)
-        assert r.mu_c == cone["mu_c"]
+        assert cone.mu_c_polished and abs(cone.mu_c - tan(taper)) <= 1e-11 * tan(taper)
+        assert r.mu_c == cone.mu_c

@@ -45,7 +45,7 @@ def run(spec, mu, progress=None, **compute):
 def answer(res):
     """Zero sets of the wedged rays and the cones' zero sets (canonical order)."""
     r = res.runs[0]
-    return r.ray_zero.tolist(), [(c["zero_u"], c["zero_r"]) for c in r.cones]
+    return r.ray_zero.tolist(), [(c.zero_u, c.zero_r) for c in r.cones]
 
 
 @pytest.mark.parametrize("taper,delta", [(1.0, 1e-7), (1.0, -1e-7), (1.0, 1e-9), (0.1, 1e-9)])

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hpcwedge.results.record import Run
+from hpcwedge.results.record import NOT_COMPUTED, Cone, Pattern, Run
 from hpcwedge.run.pipeline import condense, mu_c_keys, orbit_key, run_scene
 from hpcwedge.scene.parse import parse_scene
 
@@ -31,7 +31,7 @@ def test_vgroove_formula(theta, eps):
     want = math.tan(th) + eps / (0.5 * math.sin(2 * th))
     res = run_scene(scene({"kind": "vgroove_bar", "theta_deg": theta, "eps": eps}, mu=(want * 1.1,)))
     assert abs(res.mu_c - want) <= 1e-9 * want
-    assert res.runs[0].n_cones >= 1 and res.runs[0].cones[0]["mu_c"] is not None
+    assert res.runs[0].n_cones >= 1 and res.runs[0].cones[0].mu_c is not None
 
 
 def test_counts_of_the_seed_table():
@@ -74,8 +74,8 @@ def test_global_mu_c_when_listed_mu_is_below():
 def test_cone_zero_sets_cover_all_nodes():
     r = run_scene(scene({"kind": "plug2d", "rows": 4}))
     for cone in r.runs[0].cones:
-        assert set(cone["zero_u"]) | set(cone["zero_r"]) == set(range(8))
-        assert cone["mu_c"] >= r.mu_c * (1 - 1e-12)
+        assert set(cone.zero_u) | set(cone.zero_r) == set(range(8))
+        assert cone.mu_c >= r.mu_c * (1 - 1e-12)
 
 
 # ------------------------------------------------------------------------ 3D
@@ -93,14 +93,14 @@ def test_plug3d_pattern_counts_monotone_in_mu(plug3d_run):
     res = plug3d_run
     counts = [run.n_patterns for run in res.runs]
     assert counts == [6, 11, 31, 36, 131]
-    sets = [{tuple(p["contact"]) for p in run.patterns} for run in res.runs]
+    sets = [{tuple(p.contact) for p in run.patterns} for run in res.runs]
     assert all(a <= b for a, b in zip(sets, sets[1:]))
     for run in res.runs:
-        keys = [sum(1 << i for i in p["contact"]) for p in run.patterns]
+        keys = [sum(1 << i for i in p.contact) for p in run.patterns]
         assert keys == sorted(keys)                              # canonical order: pattern bits
         for p in run.patterns:
-            assert p["undecided"] is False
-            assert res.mu_c * (1 - 1e-12) <= p["mu_c"] <= run.mu * (1 + 1e-6)
+            assert p.undecided is False
+            assert res.mu_c * (1 - 1e-12) <= p.mu_c <= run.mu * (1 + 1e-6)
     want = math.tan(math.radians(10.0))
     assert res.mu_c_status == "found" and abs(res.mu_c - want) <= 1e-9 * want
     assert res.stats["mu_c_unpolished"] == 0 and res.stats["patterns_undecided"] == 0
@@ -117,8 +117,8 @@ def test_symmetry_changes_no_answer(plug3d_run):
     assert plug3d_run.stats["symmetry"]["order"] == 10 and "symmetry" not in off.stats
     on = {r.mu: r for r in plug3d_run.runs}
     for run in off.runs:
-        got = {tuple(p["contact"]): p["mu_c"] for p in on[run.mu].patterns}
-        want = {tuple(p["contact"]): p["mu_c"] for p in run.patterns}
+        got = {tuple(p.contact): p.mu_c for p in on[run.mu].patterns}
+        want = {tuple(p.contact): p.mu_c for p in run.patterns}
         assert list(got) == list(want)
         assert all(abs(got[k] - want[k]) <= 1e-9 * want[k] for k in got)
     assert abs(off.mu_c - plug3d_run.mu_c) <= 1e-12
@@ -139,8 +139,8 @@ def test_truss_3d_without_tangents_equals_plug3d(plug3d_run):
     res = run_scene(sc)
     ref = {r.mu: r for r in plug3d_run.runs}
     for run in res.runs:
-        got = {tuple(p["contact"]): p["mu_c"] for p in run.patterns}
-        want = {tuple(p["contact"]): p["mu_c"] for p in ref[run.mu].patterns}
+        got = {tuple(p.contact): p.mu_c for p in run.patterns}
+        want = {tuple(p.contact): p.mu_c for p in ref[run.mu].patterns}
         assert got.keys() == want.keys()
         for k in got:
             assert abs(got[k] - want[k]) <= 1e-9 * want[k]
@@ -167,7 +167,7 @@ def test_truss_3d_with_tangents_and_supports():
     assert [r.n_patterns for r in res.runs][0] <= res.runs[1].n_patterns
     for run in res.runs:
         for p in run.patterns:
-            assert p["mu_c"] <= run.mu * (1 + 1e-6)
+            assert p.mu_c <= run.mu * (1 + 1e-6)
     sc2 = parse_scene({"name": "t", "dim": 3, "model": base,
                        "contact": {"nodes": [0, 1, 2, 3], "normals": normals},
                        "friction": {"mu": [0.5, 2.0]}})
@@ -188,7 +188,7 @@ def test_3d_stages_and_global_mu_c():
     assert r.runs[0].patterns is None and r.stages == ["mu_c"] and abs(r.mu_c - want) <= 1e-9 * want
     # mu_c = "global": patterns listed without their own mu^c
     r = run_scene(scene(K3, mu=(5.0,), dim=3, mu_c="global"))
-    assert r.runs[0].patterns == [{"contact": [0], "mu_c": None, "undecided": False}]
+    assert r.runs[0].patterns == [Pattern(contact=[0], mu_c=None, undecided=False)]
     assert abs(r.mu_c - want) <= 1e-9 * want
     r = run_scene(scene(K3, mu=(5.0,), dim=3, mu_c="none"))
     assert r.mu_c is None and r.stages == ["enumerate"] and r.runs[0].n_patterns == 1
@@ -383,12 +383,10 @@ def test_orbit_keys_give_one_mu_c_task_per_orbit():
                 return (b & ~3) | ((b & 1) << 1) | ((b >> 1) & 1)
             return min((c, g), (swap(c), swap(g)))
     assert orbit_key([0, 2], [1], None) == (0b101, 0b010)
-    run = Run(mu=1.0, cones=[{"zero_u": [0], "zero_r": [1, 2]}],
-              patterns=[{"contact": [1]}, {"contact": [0, 2]}])
+    run = Run(mu=1.0, cones=[Cone(rays=[], trivial_rays=[], zero_u=[0], zero_r=[1, 2])],
+              patterns=[Pattern([1]), Pattern([0, 2])])
     keys = mu_c_keys(run, 3, None)
-    assert [(k, zu, zr) for k, zu, zr, _ in keys] == [((1, 6), [0], [1, 2]), ((2, 5), [1], [0, 2]),
-                                                      ((5, 2), [0, 2], [1])]
-    assert [item for *_, item in keys] == run.cones + run.patterns
+    assert keys == [((1, 6), [0], [1, 2]), ((2, 5), [1], [0, 2]), ((5, 2), [0, 2], [1])]
     sym = [k for k, *_ in mu_c_keys(run, 3, Swap())]
     assert sym[0] == sym[1] == (1, 6) and sym[2] == (5, 2)
 
@@ -402,11 +400,12 @@ def test_each_mu_c_says_whether_it_is_polished(method):
     r2 = run_scene(scene({"kind": "plug2d", "rows": 3}, mu=(0.1, 0.65), mu_c_method=method))
     r3 = run_scene(scene({"kind": "plug3d", "ring": 4}, dim=3, run={"symmetry": False}, mu_c_method=method))
     for res, items in ((r2, [c for run in r2.runs for c in run.cones]), (r3, r3.runs[0].patterns)):
-        assert items and all(i["mu_c"] is not None for i in items)
-        assert {i["mu_c_polished"] for i in items} == {method == "accurate"}
-    assert sum(not p["mu_c_polished"] for p in r3.runs[0].patterns) == r3.stats["mu_c_unpolished"]
+        assert items and all(i.mu_c is not None for i in items)
+        assert {i.mu_c_polished for i in items} == {method == "accurate"}
+    assert sum(not p.mu_c_polished for p in r3.runs[0].patterns) == r3.stats["mu_c_unpolished"]
     none = run_scene(scene({"kind": "plug2d", "rows": 2}, mu_c="none"))
-    assert all("mu_c_polished" not in c for c in none.runs[0].cones)
+    assert all(c.mu_c is None and c.mu_c_polished is NOT_COMPUTED for c in none.runs[0].cones)
+    assert all("mu_c_polished" not in c for c in none.to_dict()["runs"][0]["cones"])
 
 
 def test_a_condensed_problem_too_large_for_memory_is_refused_before_condensing():
