@@ -21,6 +21,7 @@ import json
 import math
 import multiprocessing
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -97,6 +98,16 @@ def _text(b) -> str:
 def python_command(*args: str) -> list[str]:
     """This interpreter running `args` (e.g. "-m", "hpcwedge", "run", path)."""
     return [sys.executable, *args]
+
+
+def mpirun_command(ranks: int, *args: str) -> list[str]:
+    """python_command(*args) under `mpirun -n ranks` (oversubscribed; PYTHONPATH and the BLAS
+    thread variables passed on to every rank)."""
+    root = ["--allow-run-as-root"] if os.geteuid() == 0 else []
+    passed = [x for v in ("PYTHONPATH", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+              if v in os.environ or v == "PYTHONPATH" for x in ("-x", v)]
+    return [shutil.which("mpirun") or "mpirun", *root, "--oversubscribe", "-n", str(ranks), *passed,
+            *python_command(*args)]
 
 
 # ---------------------------------------------------------------------------- records
