@@ -139,7 +139,7 @@ def parallel_record(m: int, mu: float, k: int, workers: int, limit: float | None
         with open(path, "w") as f:
             f.write(scene_toml(table(m, mu, k)))
         env = dict(os.environ, **THREADS)
-        rec = run_command(mpirun_command(workers + 1, "-m", "hpcwedge", "run", path, "-o", out, "-q"),
+        rec = run_command(mpirun_command(workers + 1, "-m", "hpcwedge", "run", path, "-o", out, "-q", env=env),
                           limit=limit, env=env)
         base = {"m": m, "kind": "parallel", "workers": workers, "nodes": list(range(m - k, m))}
         if rec["status"] != OK:
@@ -163,7 +163,7 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=float, default=None, help="seconds per case (default: none)")
     ap.add_argument("--out", default=RESULTS)
     args = ap.parse_args(argv)
-    os.environ.update({k: os.environ.get(k, v) for k, v in THREADS.items()})
+    os.environ.update({k: os.environ.get(k, v) for k, v in THREADS.items()})     # the solves in the cases too
     checks = Checks()
     report = []
     splits = {m: [split_nodes(spec, m) for spec in args.nodes] for m in args.m}     # bad sets stop here

@@ -100,12 +100,13 @@ def python_command(*args: str) -> list[str]:
     return [sys.executable, *args]
 
 
-def mpirun_command(ranks: int, *args: str) -> list[str]:
+def mpirun_command(ranks: int, *args: str, env: Mapping | None = None) -> list[str]:
     """python_command(*args) under `mpirun -n ranks` (oversubscribed; PYTHONPATH and the BLAS
-    thread variables passed on to every rank)."""
+    thread variables set in `env` (default os.environ) passed on to every rank)."""
+    env = os.environ if env is None else env
     root = ["--allow-run-as-root"] if os.geteuid() == 0 else []
     passed = [x for v in ("PYTHONPATH", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-              if v in os.environ or v == "PYTHONPATH" for x in ("-x", v)]
+              if v in env or v == "PYTHONPATH" for x in ("-x", v)]
     return [shutil.which("mpirun") or "mpirun", *root, "--oversubscribe", "-n", str(ranks), *passed,
             *python_command(*args)]
 
@@ -123,7 +124,6 @@ def write_records(base: str, records: list[dict], columns: Sequence[str] | None 
     """base.json: {"records": records, **extra, "environment": environment()}; base.csv: one row
     per record, `columns` (default: every key of the records in first-seen order, nested
     values as JSON). Directories are made; returns the two paths (csv None when not written)."""
-    os.makedirs(os.path.dirname(os.path.abspath(base)), exist_ok=True)
     write_json(base + ".json", {"records": records, **(extra or {})})
     if not csv_file:
         return base + ".json", None
@@ -143,6 +143,7 @@ def write_csv(path: str, records: list[dict], columns: Sequence[str] | None = No
     """One row per record under `columns` (default: every key, first seen first)."""
     if columns is None:
         columns = list(dict.fromkeys(k for r in records for k in r))
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(columns)
