@@ -4,7 +4,7 @@ the records written to results/ with the environment, and same-answer checks.
     from harness import Checks, run_call, run_command, write_records
 
 run_call(fn, ..., limit=s)       fn in a forked child: its value, wall and CPU seconds, or
-                                 "overrun" (the child killed at the limit) or "error"
+                                 OVERRUN (the child killed at the limit) or "error"
 run_command(cmd, limit=s)        a command (`hpcwedge run`, `mpirun -n K ...`) likewise
 write_records(base, records)     base.json ({"records", **extra, "environment"}) and base.csv
 answer(result)                   a Result's answers: counts per mu, pattern-set hash, mu^c
@@ -31,7 +31,8 @@ from typing import Any
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "results")
-OK, OVERRUN, ERROR = "ok", "overrun", "error"
+#: a case's status; an overrun is "timeout", the word results/*.json and docs_pages already use
+OK, OVERRUN, ERROR = "ok", "timeout", "error"
 
 
 def _child(conn, fn, args, kwargs) -> None:
@@ -51,7 +52,7 @@ def run_call(fn: Callable, *args, limit: float | None = None, **kwargs) -> dict:
     """fn(*args, **kwargs) in a forked child process, bounded by `limit` seconds (None: no
     bound). Returns {"status": "ok", "value": fn's value (picklable), "seconds": wall,
     "cpu_seconds": the child's CPU}, {"status": "error", "error": "Type: message", ...} or
-    {"status": "overrun", "seconds": limit} (the child killed). The parent's state is untouched."""
+    {"status": OVERRUN, "seconds": limit} (the child killed). The parent's state is untouched."""
     ctx = multiprocessing.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, fn, args, kwargs), daemon=True)
@@ -77,7 +78,7 @@ def run_call(fn: Callable, *args, limit: float | None = None, **kwargs) -> dict:
 def run_command(cmd: Sequence[str], limit: float | None = None, env: Mapping | None = None,
                 cwd: str | None = None) -> dict:
     """A command bounded by `limit` seconds: {"status", "seconds" (wall), "returncode",
-    "stdout", "stderr"}; "overrun" when killed at the limit, "error" on a non-zero exit.
+    "stdout", "stderr"}; OVERRUN when killed at the limit, "error" on a non-zero exit.
     The command gets PYTHONPATH with the repository first, so it runs this checkout."""
     env = dict(os.environ if env is None else env)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
