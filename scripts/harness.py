@@ -15,6 +15,7 @@ A case that overruns is recorded as such and the script goes on: nothing hangs.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import json
@@ -22,6 +23,7 @@ import math
 import multiprocessing
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -78,22 +80,23 @@ def run_call(fn: Callable, *args, limit: float | None = None, **kwargs) -> dict:
 def run_command(cmd: Sequence[str], limit: float | None = None, env: Mapping | None = None,
                 cwd: str | None = None) -> dict:
     """A command bounded by `limit` seconds: {"status", "seconds" (wall), "returncode",
-    "stdout", "stderr"}; OVERRUN when killed at the limit, "error" on a non-zero exit.
-    The command gets PYTHONPATH with the repository first, so it runs this checkout."""
+    "stdout", "stderr"}; OVERRUN when killed at the limit (its whole process group: mpirun's
+    ranks, a worker's children), "error" on a non-zero exit. The command gets PYTHONPATH with
+    the repository first, so it runs this checkout."""
     env = dict(os.environ if env is None else env)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
     t = time.perf_counter()
+    proc = subprocess.Popen(list(cmd), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            cwd=cwd, start_new_session=True)
     try:
-        p = subprocess.run(list(cmd), capture_output=True, text=True, timeout=limit, env=env, cwd=cwd)
-    except subprocess.TimeoutExpired as e:
-        return {"status": OVERRUN, "seconds": limit, "returncode": None,
-                "stdout": _text(e.stdout), "stderr": _text(e.stderr)}
-    return {"status": OK if p.returncode == 0 else ERROR, "seconds": time.perf_counter() - t,
-            "returncode": p.returncode, "stdout": p.stdout, "stderr": p.stderr}
-
-
-def _text(b) -> str:
-    return b.decode(errors="replace") if isinstance(b, bytes) else (b or "")
+        out, err = proc.communicate(timeout=limit)
+    except subprocess.TimeoutExpired:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        return {"status": OVERRUN, "seconds": limit, "returncode": None, "stdout": out, "stderr": err}
+    return {"status": OK if proc.returncode == 0 else ERROR, "seconds": time.perf_counter() - t,
+            "returncode": proc.returncode, "stdout": out, "stderr": err}
 
 
 def python_command(*args: str) -> list[str]:
