@@ -39,6 +39,7 @@ OK, OVERRUN, ERROR = "ok", "timeout", "error"
 
 def _child(conn, fn, args, kwargs) -> None:
     """The forked side of run_call: fn's value and its clocks back through the pipe."""
+    os.setpgrp()                        # its own process group: an overrun kills what it started too
     t, c = time.perf_counter(), time.process_time()
     try:
         value = fn(*args, **kwargs)
@@ -54,7 +55,8 @@ def run_call(fn: Callable, *args, limit: float | None = None, **kwargs) -> dict:
     """fn(*args, **kwargs) in a forked child process, bounded by `limit` seconds (None: no
     bound). Returns {"status": "ok", "value": fn's value (picklable), "seconds": wall,
     "cpu_seconds": the child's CPU}, {"status": "error", "error": "Type: message", ...} or
-    {"status": OVERRUN, "seconds": limit} (the child killed). The parent's state is untouched."""
+    {"status": OVERRUN, "seconds": limit} (the child's process group killed). The parent's state
+    is untouched."""
     ctx = multiprocessing.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, fn, args, kwargs), daemon=True)
@@ -68,7 +70,8 @@ def run_call(fn: Callable, *args, limit: float | None = None, **kwargs) -> dict:
         out = {"status": ERROR, "error": "the case's process ended without a result",
                "seconds": time.perf_counter() - t}
     if out is None:
-        proc.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
         out = {"status": OVERRUN, "seconds": limit}
     proc.join()
     parent.close()

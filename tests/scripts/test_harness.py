@@ -29,6 +29,36 @@ def test_a_call_over_its_limit_is_an_overrun_and_does_not_hang():
     assert time.perf_counter() - t < 30
 
 
+def _sleep_in_a_grandchild(path):
+    import subprocess
+    p = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    with open(path, "w") as f:
+        f.write(str(p.pid))
+    p.wait()
+
+
+def test_an_overrun_kills_what_the_case_started(tmp_path):
+    path = tmp_path / "pid"
+    rec = harness.run_call(_sleep_in_a_grandchild, str(path), limit=3)
+    assert rec["status"] == harness.OVERRUN
+    pid = int(path.read_text())
+    for _ in range(100):
+        if not _running(pid):
+            break
+        time.sleep(0.1)
+    else:
+        raise AssertionError(f"process {pid} of an overrun case still runs")
+
+
+def _running(pid: int) -> bool:
+    """pid exists and is not a zombie (a killed orphan waits for whoever reaps it)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
 def test_a_call_within_its_limit_returns_its_value_and_times():
     rec = harness.run_call(_sleep, 0.01, limit=30)
     assert rec["status"] == harness.OK and rec["value"] == "woke"
