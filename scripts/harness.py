@@ -138,11 +138,12 @@ def write_records(base: str, records: list[dict], columns: Sequence[str] | None 
     return base + ".json", base + ".csv"
 
 
-def write_json(path: str, payload: Mapping) -> str:
-    """payload with "environment" (environment()) added, as indented JSON at path."""
+def write_json(path: str, payload: Mapping, default: Callable = str) -> str:
+    """payload with "environment" (environment()) added, as indented JSON at path (`default`:
+    json.dump's, for values JSON has no type for)."""
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w") as f:
-        json.dump({**payload, "environment": environment()}, f, indent=1, default=str)
+        json.dump({**payload, "environment": environment()}, f, indent=1, default=default)
     return path
 
 
