@@ -55,10 +55,12 @@ import hashlib
 import json
 import math
 import os
-import signal
 import subprocess
 import sys
 import time
+
+import harness
+from harness import OVERRUN, python_command, run_command
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MARK = "BENCH_RESULT "
@@ -262,31 +264,18 @@ def run_worker(kind: str, rows: int, mu: float, limit: float) -> tuple[str, dict
 
 
 def run_script(script: str, argv: list[str], limit: float) -> tuple[str, dict | None, float, str]:
-    """(status, result, wall seconds, stderr tail) of `python script argv` in its own process
-    group, killed at `limit`; the result is the JSON on the last MARK line of its stdout."""
-    cmd = [sys.executable, script, *argv]
-    env = dict(os.environ)
-    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, env=env)
-    try:
-        out, err = proc.communicate(timeout=max(limit, 0.1))
-    except subprocess.TimeoutExpired:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)      # the worker's own process group
-        except ProcessLookupError:
-            pass
-        proc.communicate()
-        return "timeout", None, time.perf_counter() - t0, ""
-    wall = time.perf_counter() - t0
-    for line in reversed(out.splitlines()):
+    """(status, result, wall seconds, stderr tail) of `python script argv` under harness.run_command
+    (its own process group, killed at `limit`: status "timeout"); the result is the JSON on the
+    last MARK line of its stdout; exit status 3: "missing" (a peer not installed)."""
+    rec = run_command(python_command(script, *argv), limit=max(limit, 0.1))
+    if rec["status"] == OVERRUN:
+        return OVERRUN, None, rec["seconds"], ""
+    for line in reversed(rec["stdout"].splitlines()):
         if line.startswith(MARK):
-            return "ok", json.loads(line[len(MARK):]), wall, ""
-    if proc.returncode == 3:
-        return "missing", None, wall, err.strip()
-    tail = "\n".join(err.strip().splitlines()[-5:])
-    return "error", None, wall, tail
+            return "ok", json.loads(line[len(MARK):]), rec["seconds"], ""
+    if rec["returncode"] == 3:
+        return "missing", None, rec["seconds"], rec["stderr"].strip()
+    return "error", None, rec["seconds"], "\n".join(rec["stderr"].strip().splitlines()[-5:])
 
 
 def fields(r: dict, keys: tuple[str, ...], digits: int = 3) -> str:
@@ -297,15 +286,8 @@ def fields(r: dict, keys: tuple[str, ...], digits: int = 3) -> str:
 
 def write_records(out: str, records: list[dict], meta: dict, cols: list[str]) -> None:
     """<out>.json (meta, the records, the environment record) and <out>.csv (`cols` of each
-    record), for the benchmarks that run their engines through run_script."""
-    from hpcwedge.environment import environment
-    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
-    with open(out + ".json", "w") as f:
-        json.dump({**meta, "records": records, "environment": environment()}, f, indent=1)
-    with open(out + ".csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(records)
+    record), for the benchmarks that run their engines through run_script (harness.write_records)."""
+    harness.write_records(out, records, cols, extra=meta)
     print(f"wrote {out}.csv and {out}.json")
 
 

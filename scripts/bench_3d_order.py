@@ -12,7 +12,6 @@ wedge alone at the lowest mu first), and its reverse.
 """
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
@@ -21,11 +20,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 
+from harness import RESULTS, write_json  # noqa: E402
 from instances import random_problem_3d  # noqa: E402
 
 from hpcwedge.contact.build import contact_problem  # noqa: E402
 from hpcwedge.contact.problem import parametrize  # noqa: E402
-from hpcwedge.environment import environment  # noqa: E402
 from hpcwedge.patterns.tree import PatternTree  # noqa: E402
 from hpcwedge.scene.parse import parse_scene  # noqa: E402
 
@@ -77,9 +76,7 @@ def main():
         tot[r["order"]][0] += r["solves"]
         tot[r["order"]][1] += r["seconds"]
     print("total:", {k: (v[0], round(v[1], 2)) for k, v in tot.items()})
-    os.makedirs("results", exist_ok=True)
-    with open("results/bench_3d_order.json", "w") as f:
-        json.dump({"rows": rows, "total": tot, "environment": environment()}, f, indent=1)
+    write_json(os.path.join(RESULTS, "bench_3d_order.json"), {"rows": rows, "total": tot})
 
 
 if __name__ == "__main__":

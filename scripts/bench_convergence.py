@@ -19,22 +19,21 @@ results/bench_convergence_patch.{csv,json,png} instead.
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import os
 import time
 
-from hpcwedge.environment import environment
+from harness import OK, RESULTS, run_call, write_csv, write_json
+
 from hpcwedge.models.patch import boundary_nodes, patch_slaves
 from hpcwedge.run.pipeline import run_scene
 from hpcwedge.scene.parse import parse_scene
 
-OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "results")
+OUT = RESULTS
 
 
 def cones_at(refine: int, mu: float, rows: int, patch: float = 0.0, kind: str = "rigid") -> dict:
     """{"dofs", "seconds", "mu_c", "cones": {zero-set key: mu^c}} of block2d at one refinement
-    (patch > 0: contact patches of that half-width)."""
+    (patch > 0: contact patches of that half-width): a case, run in a child (harness.run_call)."""
     model = {"kind": "block2d", "rows": rows, "refine": refine}
     if patch > 0:
         model["contact_patch"] = patch
@@ -67,12 +66,17 @@ def main() -> None:
                     help="contact patch half-width a (model.contact_patch); 0 = point contacts")
     ap.add_argument("--patch-kind", choices=["rigid", "hat"], default="rigid",
                     help="model.contact_patch_kind (results/bench_convergence_patch[_hat].*)")
+    ap.add_argument("--limit", type=float, default=None, help="seconds per refinement level (default: none)")
     args = ap.parse_args()
     stem = ("bench_convergence" if args.patch == 0 else
             "bench_convergence_patch" + ("_hat" if args.patch_kind == "hat" else ""))
     levels = []
     for r in args.refine:
-        levels.append(cones_at(r, args.mu, args.rows, args.patch, args.patch_kind))
+        case = run_call(cones_at, r, args.mu, args.rows, args.patch, args.patch_kind, limit=args.limit)
+        if case["status"] != OK:
+            print(f"refine {r:3d}: {case['status']} after {case['seconds']} s {case.get('error', '')}", flush=True)
+            continue
+        levels.append(case["value"])
         lv = levels[-1]
         print(f"refine {r:3d}: {lv['dofs']:8d} DOFs, {lv['patch_nodes']:4d} patch nodes, "
               f"{lv['n_rays']:6d} wedged rays, {len(lv['cones']):3d} cones, "
@@ -91,16 +95,11 @@ def main() -> None:
         row["changes_rel"] = [abs(b - a) / abs(b) if a is not None and b is not None else None
                               for a, b in zip(vals, vals[1:])]
         rows.append(row)
-    os.makedirs(OUT, exist_ok=True)
     fields = ["cone"] + [f"r{lv['refine']}" for lv in levels] + ["last_change_rel"]
-    with open(os.path.join(OUT, stem + ".csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    with open(os.path.join(OUT, stem + ".json"), "w") as f:
-        json.dump({"rows_model": args.rows, "mu": args.mu, "contact_patch": args.patch,
-                   "contact_patch_kind": args.patch_kind, "levels": levels,
-                   "cones": rows, "environment": environment()}, f, indent=1)
+    write_csv(os.path.join(OUT, stem + ".csv"), rows, fields)
+    write_json(os.path.join(OUT, stem + ".json"), {"rows_model": args.rows, "mu": args.mu, "contact_patch": args.patch,
+                                                   "contact_patch_kind": args.patch_kind, "levels": levels,
+                                                   "cones": rows})
     plot(levels, rows, stem, args.patch, args.patch_kind)
     print(f"\n{'cone (zero sets)':<44}" + "".join(f"{'r=' + str(lv['refine']):>15}" for lv in levels)
           + f"{'last change':>13}")

@@ -61,11 +61,11 @@ def worker_3d(engine: str, ring: int) -> dict:
     stages and counters its own (timings condense / enumerate, stats bnb); brute: one SOCP
     per partition (reference.brute_force_patterns), "condense" = model + parametrize."""
     if engine == "brute":
-        from bench_socp_count import plug
+        from bench_socp_count import parametrized
 
         from hpcwedge.reference import brute_force_patterns
         t0 = time.perf_counter()
-        p, m = plug(LEVELS, ring)
+        p, m = parametrized(LEVELS, ring)
         t1 = time.perf_counter()
         found = brute_force_patterns(p, m, MU_3D)
         stages = {"condense": t1 - t0, "enumerate": time.perf_counter() - t1}

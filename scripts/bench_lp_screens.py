@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import json
 import os
 import sys
 import time
@@ -53,6 +52,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from bench_search_3d import scene  # noqa: E402
+from harness import write_json  # noqa: E402
 
 from hpcwedge.solvers.screens import edge_matrix  # noqa: E402
 
@@ -319,9 +319,7 @@ def main(argv=None) -> int:
                   f"{r['lps']:>7} {r['iterations_per_lp']:>6} {r['ms_per_lp']:>6} {r['lp_cpu_seconds']:>6} "
                   f"{r['cpu_seconds']:>6} {r['outer_infeasible_but_socp_feasible']:>5}  {r['patterns']} {r['hash']}{same}",
                   flush=True)
-    from hpcwedge.environment import environment
-    with open(args.out + ".json", "w") as f:
-        json.dump({"rows": rows, "environment": environment()}, f, indent=1)
+    write_json(args.out + ".json", {"rows": rows})
     return 0
 
 

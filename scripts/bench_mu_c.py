@@ -25,16 +25,14 @@ and prints a summary: the worst error of each method and the time of
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import math
 import os
 import time
 
 import numpy as np
+from harness import write_csv, write_json
 
 from hpcwedge.contact.problem import parametrize
-from hpcwedge.environment import environment
 from hpcwedge.mu_c.critical import mu_critical
 from hpcwedge.run.pipeline import run_scene
 from hpcwedge.scene.parse import parse_scene
@@ -116,14 +114,9 @@ def main() -> None:
             rows.append({"scene": label, "dim": dim, "m": m, "method": name, "tol": tol, "seconds": sec,
                          "lps": r.solves, "mu_c": r.mu_c, "analytic": want, "rel_error": err,
                          "polished": r.polished})
-    os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, "bench_mu_c.csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(os.path.join(args.out, "bench_mu_c.csv"), rows, list(rows[0]))
     summary = {f"{d}d": summarise([r for r in rows if r["dim"] == d]) for d in (2, 3)}
-    with open(os.path.join(args.out, "bench_mu_c.json"), "w") as f:
-        json.dump({"summary": summary, "rows": rows, "environment": environment()}, f, indent=1)
+    write_json(os.path.join(args.out, "bench_mu_c.json"), {"summary": summary, "rows": rows})
     plot(summary, args.out)
     for key, sm in summary.items():
         print(f"{key}: {'method':<22}{'worst rel. error':>18}{'mean time [ms]':>16}{'mean solves':>12}")

@@ -29,14 +29,13 @@ The global mu^c search alone (plug3d 4 x 8 without symmetry, m = 32; stats.bnb c
 from __future__ import annotations
 
 import argparse
-import csv
+import contextlib
 import json
 import os
 import shutil
-import subprocess
-import sys
 import tempfile
-import time
+
+from harness import ERROR, OK, OVERRUN, Checks, mpirun_command, python_command, run_command, write_csv, write_json
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "results")
@@ -52,29 +51,34 @@ def scene_text(levels: int, ring: int, mu: float, mu_c: str = "cones", symmetry:
             f'screens = {str(screens).lower()}\n')
 
 
-def run(ranks: int | None, scene: str, out: str) -> float:
-    env = dict(os.environ, PYTHONPATH=ROOT, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    cmd = [sys.executable, "-m", "hpcwedge", "run", scene, "-o", out, "-q"]
-    if ranks:
-        extra = ["--allow-run-as-root"] if os.geteuid() == 0 else []
-        cmd = [shutil.which("mpirun"), *extra, "--oversubscribe", "-n", str(ranks),
-               "-x", "PYTHONPATH", "-x", "OMP_NUM_THREADS", "-x", "OPENBLAS_NUM_THREADS"] + cmd
-    t = time.perf_counter()
-    subprocess.run(cmd, check=True, env=env)
-    return time.perf_counter() - t
+def run(ranks: int | None, scene: str, out: str, limit: float | None = None) -> dict:
+    """`hpcwedge run` in one process (ranks None) or under mpirun (harness.run_command)."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    args = ("-m", "hpcwedge", "run", scene, "-o", out, "-q")
+    cmd = mpirun_command(ranks, *args, env=env) if ranks else python_command(*args)
+    rec = run_command(cmd, limit=limit, env=env)
+    if rec["status"] == ERROR:
+        raise SystemExit(f"{' '.join(cmd)}: exit {rec['returncode']}\n{rec['stderr']}")
+    return rec
 
 
 def answers(path: str) -> dict:
-    env = dict(os.environ, PYTHONPATH=ROOT)
-    js = json.loads(subprocess.run([sys.executable, "-m", "hpcwedge", "show", path, "--json"],
-                                   check=True, capture_output=True, text=True, env=env).stdout)
+    js = json.loads(run_command(python_command("-m", "hpcwedge", "show", path, "--json"))["stdout"])
     return {"mu_c": js["mu_c"], "patterns": [[p["contact"], p["mu_c"]] for r in js["runs"]
                                              for p in r["patterns"] or []],
             "stats": dict(js["stats"], timings_total=js["timings"]["total"]),
             "stages": {k: js["timings"].get(k) for k in ("condense", "enumerate", "mu_c")}}
 
 
-def main() -> None:
+def same_answers(checks: Checks, label: str, g: dict, ref: dict) -> bool:
+    """g's mu^c and patterns' mu^c equal ref's to 1e-12 relative, its patterns and stats.bnb equal."""
+    def key(a):
+        return {"mu_c": a["mu_c"], "bnb": a["stats"].get("bnb"),
+                "patterns": [{"contact": c, "mu_c": v} for c, v in a["patterns"]]}
+    return checks.compare(label, key(g), key(ref))
+
+
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", type=int, default=3)
     ap.add_argument("--ring", type=int, default=6)
@@ -88,6 +92,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, nargs="*", default=[0, 1, 2, 3],
                     help="configurations: 0 = serial, k = mpirun with k workers (1 must be among them)")
     ap.add_argument("--out", default=os.path.join(OUT, "bench_parallel"))
+    ap.add_argument("--limit", type=float, default=None, help="seconds per run (default: none)")
     args = ap.parse_args()
     if 1 not in args.workers:
         ap.error("--workers must include 1: the speedups are against 1 worker")
@@ -103,25 +108,34 @@ def main() -> None:
     stages = {label: [] for label, _, _ in configs}
     loads = {label: [] for label, _, _ in configs}       # 1-min load average before each run (noise)
     got = {}
+    status = {label: OK for label, _, _ in configs}
     for rep in range(args.repeat):
         for label, ranks, workers in configs[rep % len(configs):] + configs[:rep % len(configs)]:
             out = os.path.join(tmp, f"r{ranks}.h5")
             loads[label].append(os.getloadavg()[0])
-            walls[label].append(run(ranks, scene, out))
+            rec = run(ranks, scene, out, args.limit)
+            if rec["status"] == OVERRUN:
+                status[label] = OVERRUN
+                print(f"  {label:<28} overran its {args.limit} s", flush=True)
+                continue
+            walls[label].append(rec["seconds"])
             got[label] = answers(out)
             inside[label].append(got[label]["stats"].get("timings_total", float("nan")))
             stages[label].append(got[label]["stages"])
             st = ", ".join(f"{k} {v:.2f}" for k, v in stages[label][-1].items() if v is not None)
             print(f"  {label:<28} {walls[label][-1]:7.2f} s wall, {inside[label][-1]:7.2f} s in the program "
                   f"({st} s; load before {loads[label][-1]:.1f})", flush=True)
-    rows, ref = [], got[configs[0][0]]
+    rows, checks = [], Checks(rel_tol=1e-12)
+    ref_label = next((label for label, _, _ in configs if label in got), None)
     for label, ranks, workers in configs:
+        if label not in got:
+            rows.append({"config": label, "ranks": ranks or 1, "workers": workers, "status": status[label],
+                         "seconds": float("nan"), "program_seconds": float("nan"), "same_answers": None})
+            continue
         g = got[label]
-        same = g["mu_c"] == ref["mu_c"] and g["stats"].get("bnb") == ref["stats"].get("bnb") \
-            and [p[0] for p in g["patterns"]] == [p[0] for p in ref["patterns"]] \
-            and all(a[1] == b[1] or (a[1] is not None and b[1] is not None and abs(a[1] - b[1]) <= 1e-12 * abs(b[1]))
-                    for a, b in zip(g["patterns"], ref["patterns"]))
-        rows.append({"config": label, "ranks": ranks or 1, "workers": workers, "seconds": min(walls[label]),
+        same = same_answers(checks, f"{label} against {ref_label}", g, got[ref_label])
+        rows.append({"config": label, "ranks": ranks or 1, "workers": workers, "status": status[label],
+                     "seconds": min(walls[label]),
                      "all_seconds": walls[label], "program_seconds": min(inside[label]),
                      "all_program_seconds": inside[label], "all_stage_seconds": stages[label],
                      "all_load_before": loads[label],
@@ -131,25 +145,21 @@ def main() -> None:
     for r in rows:
         r["speedup_vs_1_worker"] = one["seconds"] / r["seconds"]
         r["program_speedup_vs_1_worker"] = one["program_seconds"] / r["program_seconds"]
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out + ".csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=["config", "ranks", "workers", "seconds", "speedup_vs_1_worker",
-                                          "program_seconds", "program_speedup_vs_1_worker",
-                                          "patterns", "same_answers"], extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(args.out + ".csv", rows, ["config", "ranks", "workers", "seconds", "speedup_vs_1_worker",
+                                        "program_seconds", "program_speedup_vs_1_worker", "patterns",
+                                        "same_answers"])
     socp = os.path.join(OUT, "bench_socp_count.json")
-    from hpcwedge.environment import environment
-    doc = {"scene": text, "machine_cores": os.cpu_count(), "rows": rows,
-           "socp_count": json.load(open(socp)) if os.path.exists(socp) else None, "environment": environment()}
-    with open(args.out + ".json", "w") as f:
-        json.dump(doc, f, indent=1)
+    with open(socp) if os.path.exists(socp) else contextlib.nullcontext() as f:
+        socp_count = None if f is None else json.load(f)
+    write_json(args.out + ".json", {"scene": text, "machine_cores": os.cpu_count(), "rows": rows,
+                                    "socp_count": socp_count})
     for r in rows:
         print(f"{r['config']:<28} {r['seconds']:7.2f} s wall ({r['speedup_vs_1_worker']:.2f}x vs 1 worker), "
               f"{r['program_seconds']:7.2f} s in the program ({r['program_speedup_vs_1_worker']:.2f}x), "
               f"patterns {r['patterns']}, same answers {r['same_answers']}")
     shutil.rmtree(tmp, ignore_errors=True)
+    return checks.exit_status()
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -23,7 +23,6 @@ Writes <out>.json (with the environment record); prints a summary.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -34,6 +33,7 @@ import scipy.sparse as sp
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from bench_search_3d import scene  # noqa: E402
+from harness import write_json  # noqa: E402
 
 
 def available() -> bool:
@@ -179,9 +179,7 @@ def main(argv=None) -> int:
         parts = [f"{cls} {v['count']}: {v['us_per_solve']} us, {v['mean_iterations']} iterations, {v['statuses']}, "
                  f"{v['points_verified']} points verified" for cls, v in e["by_tree_status"].items()]
         print(f"  {name}: {e['us_per_solve']} us a solve; " + "; ".join(parts))
-    from hpcwedge.environment import environment
-    with open(args.out + ".json", "w") as f:
-        json.dump({"rows": [row], "environment": environment()}, f, indent=1)
+    write_json(args.out + ".json", {"rows": [row]})
     return 0
 
 

@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import os
 import sys
@@ -60,10 +59,10 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path[:0] = [ROOT, os.path.join(ROOT, "tests")]
 
+from harness import write_json  # noqa: E402
 from instances import random_problem  # noqa: E402  (tests/)
 
 from hpcwedge.contact.problem import friction_rows_2d, parametrize  # noqa: E402
-from hpcwedge.environment import environment  # noqa: E402
 from hpcwedge.models.library import plug2d  # noqa: E402
 from hpcwedge.rays.cones import implied_patterns  # noqa: E402
 from hpcwedge.rays.dd import complementary_rays  # noqa: E402
@@ -314,8 +313,7 @@ def write(rows: list[dict], out_dir: str, meta: dict) -> None:
         w.writeheader()
         for r in rows:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    with open(os.path.join(out_dir, "stress.json"), "w") as f:
-        json.dump({"meta": meta, "cases": rows, "environment": environment()}, f, indent=1, default=_plain)
+    write_json(os.path.join(out_dir, "stress.json"), {"meta": meta, "cases": rows}, default=_plain)
 
 
 def _plain(o):

@@ -7,7 +7,7 @@ symmetry at tapers 10 .. 0.001 deg.
                                              [--out results/stress_3d]
 
 Each case is one `hpcwedge run` pipeline (pipeline.run_scene) in its own process, killed
-at --limit seconds:
+at --limit seconds (harness.run_call: status "timeout"):
   enumerate   mu = 1.5 tan(taper): the feasible patterns, each one's mu^c, the global
               mu^c from them (compute.mu_c = "cones")
   enumerate65 mu = 0.65, the same (the issue-13 scene at 10 deg)
@@ -22,14 +22,14 @@ Writes <out>.csv and <out>.json (with the environment record) and prints the tab
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-import bench_2d  # noqa: E402
+import bench_2d  # noqa: E402  (fmt_s)
+from harness import ERROR, OK, RESULTS, run_call, write_records  # noqa: E402
 
 KINDS = ("enumerate", "enumerate65", "global")
 COLS = ["kind", "levels", "ring", "m", "taper_deg", "mu", "status", "patterns", "solves", "first_attempt",
@@ -92,33 +92,29 @@ def main() -> int:
     ap.add_argument("--tapers", type=float, nargs="*", default=None)
     ap.add_argument("--kinds", nargs="*", default=list(KINDS), choices=KINDS)
     ap.add_argument("--limit", type=float, default=300.0, help="seconds per case")
-    ap.add_argument("--out", default=os.path.join(bench_2d.ROOT, "results", "stress_3d"))
-    ap.add_argument("--worker", nargs=4, help=argparse.SUPPRESS)
+    ap.add_argument("--out", default=os.path.join(RESULTS, "stress_3d"))
     args = ap.parse_args()
-    if args.worker:
-        kind, levels, ring, taper = args.worker
-        print(bench_2d.MARK + json.dumps(worker(kind, int(levels), int(ring), float(taper))))
-        return 0
     levels = args.levels or (2 if args.quick else 3)
     ring = args.ring or (5 if args.quick else 6)
     tapers = args.tapers or ([10.0, 0.1, 0.01] if args.quick else [10.0, 1.0, 0.1, 0.01, 0.001])
     records = []
     for taper in tapers:
         for kind in args.kinds:
-            status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__),
-                                                         ["--worker", kind, str(levels), str(ring), str(taper)],
-                                                         args.limit)
-            rec = {"kind": kind, "levels": levels, "ring": ring, "taper_deg": taper, "status": status, "wall": wall}
-            if res is not None:
+            case = run_call(worker, kind, levels, ring, taper, limit=args.limit)
+            rec = {"kind": kind, "levels": levels, "ring": ring, "taper_deg": taper, "status": case["status"],
+                   "wall": case["seconds"]}
+            if case["status"] == OK:
+                res = case["value"]
                 rec.update(res)
                 want = math.tan(math.radians(taper))
                 rec["rel_error"] = None if res["mu_c"] is None else abs(res["mu_c"] - want) / want
-            elif err:
-                rec["error"] = err
+            elif case["status"] == ERROR:
+                rec["error"] = case["error"]
             records.append(rec)
             print(line(rec), flush=True)
-    bench_2d.write_records(args.out, records, {"levels": levels, "ring": ring, "limit_s": args.limit,
-                                               "analytic_mu_c": "tan(taper)"}, COLS)
+    write_records(args.out, records, COLS, extra={"levels": levels, "ring": ring, "limit_s": args.limit,
+                                                  "analytic_mu_c": "tan(taper)"})
+    print(f"wrote {args.out}.csv and {args.out}.json")
     ok = [r for r in records if r["status"] == "ok"]
     worst = max((r["rel_error"] for r in ok if r["rel_error"] is not None), default=None)
     print(f"{len(ok)} of {len(records)} cases finished; undecided tree nodes {sum(r['undecided'] for r in ok)}; "
