@@ -47,7 +47,7 @@ def solved(sc: hw.Scene) -> dict:
     return {"m": r.m, "timings": r.timings, "mu_c": r.mu_c, "mu_c_status": r.mu_c_status,
             "bnb": stats["bnb"], "statuses": stats.get("socp_statuses"), "lp_solves": stats["lp_solves"],
             "polished": stats["mu_c_polished"], "undecided": stats.get("patterns_undecided"),
-            "patterns": [[p["contact"], p["mu_c"]] for p in r.runs[0].patterns or []]}
+            "patterns": [[p.contact, p.mu_c] for p in r.runs[0].patterns or []]}
 
 
 def brute(sc: hw.Scene, mu: float) -> dict:

@@ -46,7 +46,7 @@ def product_tree(levels: int, ring: int, mu: float, symmetry: bool) -> dict:
     return {"m": r.m, "bnb": r.stats["bnb"], "statuses": r.stats["socp_statuses"],
             "undecided": r.stats["patterns_undecided"], "seconds": r.timings["enumerate"],
             "group_order": sym.get("order", 1) if symmetry else 1,
-            "patterns": [p["contact"] for p in r.runs[0].patterns],
+            "patterns": [p.contact for p in r.runs[0].patterns],
             "leaves_found": reps[0] if reps else len(r.runs[0].patterns)}
 
 
