@@ -140,7 +140,9 @@ class PatternTree:
     3D with friction and `screens` (`run.screens`): nodes with at least 40 % of the nodes
     fixed are first put to two pyramid LPs (screens.PyramidScreens), and only a node that
     neither decides gets a SOCP (plug3d 3 x 6 at mu 0.65 without symmetry: 855 SOCPs for
-    127 patterns instead of 7,219, in the same time)."""
+    127 patterns instead of 7,219, in the same time). Off by default: measured on plug3d up to
+    m = 24, the screens cost 0.90-1.34x the CPU time, median 1.12x (docs/benchmarks.md,
+    scripts/bench_flags.py)."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None, symmetry: Symmetry | None = None,
