@@ -42,8 +42,8 @@ bench: setup-bench
 	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py --rows 40 80 --engines ours scip_bisect --out results/bench_global_mu_c_large
 	PYTHONPATH=. $(PY) scripts/bench_global_mu_c.py --model block2d --rows 19 39 --engines ours scip_bisect --out results/bench_global_mu_c_block2d
 	PYTHONPATH=. $(PY) scripts/bench_search_3d.py --full
-	PYTHONPATH=. $(PY) scripts/bench_cores.py
 	PYTHONPATH=. $(PY) scripts/bench_lp_screens.py
+	PYTHONPATH=. $(PY) scripts/bench_flags.py
 	PYTHONPATH=. $(PY) scripts/bench_socp_solvers.py
 
 bench-quick: setup-bench

@@ -16,8 +16,8 @@ exit status 1 when they do not).
 Branching: "symmetric" (what `hpcwedge run` does: dynamic branching over orbits of plug3d's dihedral node symmetry, patterns
 expanded over the group afterwards), "dynamic" (PatternTree without a symmetry: on
 the free node whose relaxed solution violates complementarity most) and "static"
-(the order m-1..0 with steered solves). Like `hpcwedge run`, none learns infeasible
-cores (PatternTree's learn_cores, off by default; column "pruned" stays 0).
+(the order m-1..0 with steered solves). Column "pruned" stays 0 (no rule prunes a
+node without a solve).
 """
 from __future__ import annotations
 

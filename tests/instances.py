@@ -186,8 +186,7 @@ def random_partial_rows(rng, m: int = 3):
 
 
 def brute_3d(p, m, mu):
-    """Feasible full patterns by one SOCP per partition (contact bits; test_patterns.py,
-    test_cores.py)."""
+    """Feasible full patterns by one SOCP per partition (contact bits; test_tree.py)."""
     from hpcwedge.reference import brute_force_patterns
     return set(brute_force_patterns(p, m, mu))
 

@@ -3,7 +3,6 @@
 - tree.py: `PatternTree`, a serial, resumable search over subtrees (the parallel
   engine only moves subtrees around), and `run_patterns`.
 - symmetry.py: node symmetries and the orbits of patterns under them.
-- cores.py: learnt infeasible cores (off by default).
 """
 
-__all__ = ["tree", "symmetry", "cores"]
+__all__ = ["tree", "symmetry"]

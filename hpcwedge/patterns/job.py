@@ -156,7 +156,7 @@ class Patterns:
     them no solver decided, and the job's counters: nodes (tree nodes visited),
     solves, skipped, pruned, undecided and status_* (how each solve was decided)
     are the same for every split, rank count or resume (open subtrees carry their
-    witness; PatternTree learns no cores by default); tasks and handed_back depend
+    witness); tasks and handed_back depend
     on the schedule (the pipeline reports them under stats.parallel only)."""
 
     mus: list

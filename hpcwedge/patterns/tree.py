@@ -19,12 +19,11 @@ import numpy as np
 from hpcwedge.contact.problem import Parametrization, blocks
 from hpcwedge.nodesets import bits_to_mask, bits_to_nodes, to_bits
 from hpcwedge.parallel.cancel import task_stopping
-from hpcwedge.patterns.cores import Cores, infeasible_core
 from hpcwedge.patterns.symmetry import Symmetry
 from hpcwedge.results.record import TreeStats
-from hpcwedge.solvers.feasibility import TREE_OPTIONS, SolverOptions, decide
+from hpcwedge.solvers.feasibility import TREE_OPTIONS, Decision, SolverOptions, decide
 from hpcwedge.solvers.lp import lp_violation
-from hpcwedge.solvers.rows import ConeRows, Status, count, node_rows, pattern_rows, problem_dim
+from hpcwedge.solvers.rows import ConeRows, Status, count, pattern_rows, problem_dim
 from hpcwedge.solvers.screens import PyramidScreens
 from hpcwedge.solvers.socp import verified
 
@@ -42,8 +41,8 @@ NEAR_TOL = 1e-6
 class BnBStats:
     """solves: feasibility problems solved (3D: SOCPs); lps: linear programs solved
     besides (3D: screens and pyramid fallbacks); skipped: tree nodes decided by the
-    parent's solution; pruned: tree nodes ruled out by a learnt infeasible core
-    (Cores), without a solve; undecided: solves that decided nothing (kept); nodes: tree
+    parent's solution; pruned: tree nodes ruled out without a solve (no rule does so: 0,
+    kept as a counter of the result); undecided: solves that decided nothing (kept); nodes: tree
     nodes visited; statuses: how each solve was decided (feasibility.decide counts)."""
 
     solves: int = 0
@@ -141,19 +140,18 @@ class PatternTree:
     3D with friction and `screens` (`run.screens`): nodes with at least 40 % of the nodes
     fixed are first put to two pyramid LPs (screens.PyramidScreens), and only a node that
     neither decides gets a SOCP (plug3d 3 x 6 at mu 0.65 without symmetry: 855 SOCPs for
-    127 patterns instead of 7,219, in the same time)."""
+    127 patterns instead of 7,219, in the same time). Off by default: measured on plug3d up to
+    m = 24, the screens cost 0.90-1.34x the CPU time, median 1.12x (docs/benchmarks.md,
+    scripts/bench_flags.py)."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None, symmetry: Symmetry | None = None,
-                 learn_cores: bool = False, orbital_fixing: bool = True,
                  options: SolverOptions = TREE_OPTIONS, screens: bool = False):
         self.param, self.m, self.mu, self.friction = param, m, mu, friction
         #: the solver options of every solve (3D: long steps by default; DEFAULT_OPTIONS for
         #: a search near mu^c, global_mu_c, where long steps left nodes undecided)
         self.options = options
         self.symmetry = symmetry if symmetry is not None and symmetry.order > 1 else None
-        #: with a symmetry: orbital fixing of every child (class doc; off only to measure it)
-        self.orbital_fixing = orbital_fixing
         self.dim = problem_dim(param, m)
         #: 3D with friction and no order given: the node branched on is chosen from the
         #: relaxed solution (explore); otherwise the static order below
@@ -165,13 +163,6 @@ class PatternTree:
         self.steer = self.dim == 3 and friction and not self.dynamic
         U = blocks(param.U, m, self.dim)[0]
         self._steer = U / np.maximum(np.linalg.norm(U, axis=1, keepdims=True), 1e-300)
-        #: 3D with friction and learn_cores: the infeasible cores learnt so far (Cores). Off by
-        #: default: a core learnt in one subtree prunes nodes of another, so the solver
-        #: counters would depend on how the tree is split over tasks, ranks and resumes,
-        #: and they save no time (plug3d 2x5, 3x4, 2x6, 2x7 at mu 0.65 and 1, with and
-        #: without symmetry: 0-6 % fewer SOCPs, the same B&B time within noise)
-        self._cores = Cores(m) if learn_cores and self.dim == 3 and friction and m <= Cores.MAX_M else None
-        self._node_rows = node_rows(param, m) if self._cores is not None else None
         #: 3D with friction and screens: LP screens before the SOCPs of deep nodes (screens.py)
         self._screens = PyramidScreens(param, m, mu) if screens and self.dim == 3 and friction else None
 
@@ -193,7 +184,6 @@ class PatternTree:
         its optimum lies on u_n = 0 when the contact child is feasible (the
         skip-solve rule takes it, after verification), and a verified dual that
         proves min u_n > 0 rules the contact child out without a solve."""
-        m, param = self.m, self.param
         mu = self.mu if self.friction else 0.0
         stats = BnBStats()
         found: list[Subtree] = []
@@ -210,22 +200,8 @@ class PatternTree:
             stats.nodes += 1
             doubt = no_contact = False
             if x is None:
-                if self._cores is not None and self._cores.covers(node):
-                    stats.pruned += 1
-                    continue
-                zu, zr = node.masks(m)
-                rows = pattern_rows(param, m, zu, zr, self.friction)
-                dec = None
-                if self._screens is not None and self._screens.applies(zu, zr):
-                    dec = self._screens.decide(rows, zu, zr, stats.statuses)
-                if dec is None:
-                    stats.solves += 1
-                    steer = self._steer[self._static_next(node)] if node.depth < m and self.steer else None
-                    dec = decide(rows, mu, self.options, stats.statuses, objective=steer,
-                                 farkas=self._cores is not None)
+                dec = self._solve(node, mu, stats)
                 if dec.status == Status.INFEASIBLE:
-                    if dec.farkas is not None and self._cores is not None:
-                        self._cores.add(node, *infeasible_core(self._node_rows, rows, mu, zu, zr, dec.farkas))
                     continue
                 if dec.status == Status.UNDECIDED:
                     stats.undecided += 1
@@ -233,37 +209,63 @@ class PatternTree:
                 x, no_contact = dec.x, dec.positive
             else:
                 stats.skipped += 1
-            if node.depth == m:
-                found.append(node)
-                if doubt:
-                    undecided.append(node)
-                elif self.dim == 2 and self.friction and self._near_boundary(node, x, mu):
-                    count(stats.statuses, "near_boundary")
+            if node.depth == self.m:
+                self._leaf(node, x, doubt, mu, stats, found, undecided)
                 if first_only:
                     stack.clear()
                     break
                 continue
-            pt = None if x is None else RelaxedPoint.of(param, x)
-            i = self._branch_node(node, pt)
-            orbit = [i] if self.symmetry is None else \
-                self.symmetry.stabilizer(node.contact, node.gap).orbit(i).tolist()
-            kids = []
-            for contact in (True, False):
-                if contact and no_contact:
-                    count(stats.statuses, "contact_child_infeasible_by_parent")
-                    continue
-                kc = node.contact | (1 << i) if contact else node.contact
-                kg = node.gap if contact else node.gap | to_bits(orbit)
-                kg |= self._orbital_fixing(kc, kg)
-                contacts = [i] if contact else []
-                gaps = list(bits_to_nodes(kg & ~node.gap, m))
-                kid = Subtree(node.depth + len(contacts) + len(gaps), kc, kg)
-                kids.append((kid, None if pt is None else self._witness(kid, pt, contacts, gaps, mu)))
-            stack.extend(reversed(kids))
+            stack.extend(reversed(self._children(node, x, no_contact, mu, stats)))
         stats.lps = stats.statuses.get("lp_calls", 0) + stats.statuses.get("screen_lps", 0)
         rest = stack[::-1]
         return Explored(found, [node for node, _ in rest], stats, undecided,
                         open_x=[w for _, w in rest], stopped=stopped)
+
+    def _solve(self, node: Subtree, mu: float, stats: BnBStats) -> Decision:
+        """The decision of `node`'s relaxation: the LP screens when they apply and decide,
+        else a solve (3D, static order: steered to the next node's u_n)."""
+        zu, zr = node.masks(self.m)
+        rows = pattern_rows(self.param, self.m, zu, zr, self.friction)
+        if self._screens is not None and self._screens.applies(zu, zr):
+            dec = self._screens.decide(rows, zu, zr, stats.statuses)
+            if dec is not None:
+                return dec
+        stats.solves += 1
+        steer = self._steer[self._static_next(node)] if node.depth < self.m and self.steer else None
+        return decide(rows, mu, self.options, stats.statuses, objective=steer)
+
+    def _leaf(self, node: Subtree, x: np.ndarray | None, doubt: bool, mu: float, stats: BnBStats,
+              found: list[Subtree], undecided: list[Subtree]) -> None:
+        """A feasible full pattern: into `found` (and `undecided` on doubt); 2D, a point
+        feasible only to HiGHS's tolerance is counted as statuses["near_boundary"]."""
+        found.append(node)
+        if doubt:
+            undecided.append(node)
+        elif self.dim == 2 and self.friction and self._near_boundary(node, x, mu):
+            count(stats.statuses, "near_boundary")
+
+    def _children(self, node: Subtree, x: np.ndarray | None, no_contact: bool, mu: float,
+                  stats: BnBStats) -> list[tuple[Subtree, np.ndarray | None]]:
+        """The children of an inner node whose relaxed point is x (None: undecided), contact
+        child first (left out when `no_contact`: the parent proved min u_n > 0), each with
+        the point that proves it feasible without a solve, or None."""
+        pt = None if x is None else RelaxedPoint.of(self.param, x)
+        i = self._branch_node(node, pt)
+        orbit = [i] if self.symmetry is None else \
+            self.symmetry.stabilizer(node.contact, node.gap).orbit(i).tolist()
+        kids = []
+        for contact in (True, False):
+            if contact and no_contact:
+                count(stats.statuses, "contact_child_infeasible_by_parent")
+                continue
+            kc = node.contact | (1 << i) if contact else node.contact
+            kg = node.gap if contact else node.gap | to_bits(orbit)
+            kg |= self._orbital_fixing(kc, kg)
+            contacts = [i] if contact else []
+            gaps = list(bits_to_nodes(kg & ~node.gap, self.m))
+            kid = Subtree(node.depth + len(contacts) + len(gaps), kc, kg)
+            kids.append((kid, None if pt is None else self._witness(kid, pt, contacts, gaps, mu)))
+        return kids
 
     def _near_boundary(self, node: Subtree, x: np.ndarray, mu: float) -> bool:
         """2D: the full pattern's LP point x violates a row by more than NEAR_BOUNDARY_TOL."""
@@ -298,7 +300,7 @@ class PatternTree:
     def _orbital_fixing(self, contact: int, gap: int) -> int:
         """Orbital fixing (class doc): the free nodes whose orbit under the stabiliser of the
         contact set alone meets the gap set, as bits; 0 without a symmetry."""
-        if self.symmetry is None or not self.orbital_fixing or not gap:
+        if self.symmetry is None or not gap:
             return 0
         reach = int(np.bitwise_or.reduce(self.symmetry.stabilizer(contact, 0).images(gap)))
         return reach & ~(contact | gap)

@@ -53,7 +53,7 @@ WEIGHT_SEED = 20100
 
 
 def screens_available() -> bool:
-    """Whether CLP (cylp, an install requirement) is installed."""
+    """Whether CLP (cylp, the `screens` extra) is installed."""
     return importlib.util.find_spec("cylp") is not None
 
 

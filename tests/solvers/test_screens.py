@@ -201,3 +201,22 @@ def test_screened_run_under_mpirun_finds_the_plain_runs_patterns(tmp_path):
     assert got["mpi"]["stats"]["parallel"]["ranks"] == 3
     for k in ("nodes", "solves", "lps"):
         assert abs(mpi[k] - serial[k]) <= 0.02 * serial[k], k
+
+
+def test_screens_without_clp_exit_2_in_one_line(tmp_path, capsys, monkeypatch):
+    """cylp is an optional extra (`screens`): a scene that asks for the screens where it is not
+    installed (its import spec hidden here) stops `hpcwedge run` with one line, exit 2,
+    nothing written."""
+    import importlib.util
+
+    from hpcwedge.cli import main
+    spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "cylp" else spec(name, *a))
+    s = tmp_path / "s.toml"
+    s.write_text('name = "x"\ndim = 3\n[model]\nkind = "plug3d"\nring = 4\n[friction]\nmu = [0.65]\n'
+                 '[run]\nscreens = true\n')
+    out = tmp_path / "r.h5"
+    assert main(["run", str(s), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "run.screens" in err and "cylp" in err and len(err.splitlines()) == 1
+    assert not out.exists()
