@@ -108,5 +108,5 @@ def test_answer_of_a_result_counts_and_hashes_its_patterns():
     a = harness.answer(r)
     assert a["runs"][0]["n_wedged_rays"] == 44 and a["mu_c"] == r.mu_c
     assert a["runs"][0]["cones_hash"] == harness.pattern_hash(
-        tuple(c["zero_u"]) + tuple(-1 - i for i in c["zero_r"]) for c in r.runs[0].cones)
+        tuple(c.zero_u) + tuple(-1 - i for i in c.zero_r) for c in r.runs[0].cones)
     assert harness.answer(r.to_dict()) == a
