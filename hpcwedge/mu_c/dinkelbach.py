@@ -330,8 +330,8 @@ def _dinkelbach_step(rows: ConeRows, mu: float, weights: np.ndarray, probe: Prob
     problem = ConicProblem(np.hstack([base.A, col]), base.b, base.n_zero, base.n_lin, base.n_soc, q)
     for attempt, sol in attempts(problem, probe.options.tight):
         probe.solves += 1
-        count(probe.statuses, ("dinkelbach_" if not attempt else f"dinkelbach_retry{attempt}_") + sol.status)
-        if sol.status == "Solved":
+        count(probe.statuses, ("dinkelbach_" if not attempt else f"dinkelbach_retry{attempt}_") + sol.name)
+        if sol.status == Status.FEASIBLE:
             x = rows.Z @ sol.x[:p]
             nr = rows.norm @ x
             if nr > 0:

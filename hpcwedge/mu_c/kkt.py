@@ -18,7 +18,7 @@ import numpy as np
 from hpcwedge.parallel.cancel import task_tick
 from hpcwedge.solvers.conic import ConicProblem, solve
 from hpcwedge.solvers.feasibility import DEFAULT_OPTIONS, SolverOptions
-from hpcwedge.solvers.rows import ConeRows
+from hpcwedge.solvers.rows import ConeRows, Status
 from hpcwedge.solvers.socp import violation
 
 #: the polished point must satisfy every row to this (relative to ||x||)
@@ -305,7 +305,7 @@ def _signed_multipliers(G, rn, E, nrm, nA, nL, mu, options):
     A = np.vstack([Aeq, sel])
     b = np.concatenate([beq, np.zeros(sel.shape[0])])
     sol = solve(ConicProblem(A, b, p + 1, nS + nL, nA), 0, options.tight)
-    if sol.status != "Solved":
+    if sol.status != Status.FEASIBLE:
         return None
     v = sol.x
     if np.abs(Aeq @ v - beq).max() > 1e-10 * max(1.0, np.abs(v).max()):

@@ -35,8 +35,10 @@ from hpcwedge.contact.problem import Parametrization, ReactionCoordinates, block
 
 class Status(enum.StrEnum):
     """The answer to a feasibility question (the values reach the stats' counter keys,
-    e.g. "lp_feasible"). UNDECIDED: no solver decided it; callers keep the subtree / take
-    the point as feasible (nothing is pruned on doubt)."""
+    e.g. "lp_feasible"), and the package's reading of every solver's status (each solver's
+    map: conic.CLARABEL_STATUS, lp.HIGHS_STATUS, screens.CLP_STATUS). UNDECIDED: no solver
+    decided it; callers keep the subtree / take the point as feasible (nothing is pruned on
+    doubt)."""
 
     FEASIBLE = "feasible"
     INFEASIBLE = "infeasible"
