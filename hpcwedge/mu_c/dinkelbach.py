@@ -256,7 +256,8 @@ def bracket_3d(rows: ConeRows, hi: float, probe: Probe, rtol: float, first: Deci
     verifies to socp.VERIFY_TOL relative to all the reactions, which at a node carrying a
     small share of them allows a ratio well above mu: random trusses' brackets ended up to
     9e-5 below mu^c); it starts at the ratio of hi's own point (`first`: the decision at hi,
-    if made already), which can lie above hi when hi was feasible only to that tolerance. The lower end is where no such point was found."""
+    if made already), which can lie above hi when hi was feasible only to that tolerance.
+    The lower end is where no such point was found."""
     d = first if first is not None else probe.decide(rows, hi)
     if d.status == Status.FEASIBLE and d.x is not None and math.isfinite(ratio := max_ratio(rows, d.x)):
         hi = ratio               # hi itself may hold to the solver's tolerance only

@@ -189,11 +189,12 @@ class _KeptSolvers(threading.local):
     answer is a new solver's bit for bit: the same KKT ordering and start, and Clarabel
     reads nothing from an earlier solve but the "previous iterate" it restores when a step
     fails, before the first one of this solve has been saved; so only a decided status
-    (FEASIBLE or INFEASIBLE) is taken from a kept solver, any other is solved again on a new one
-    (tests/test_conic.py compares all of them; every SOCP of plug3d 3 x 6's tree the same). Only problems whose pattern is a function of their shape are kept (DenseDiag,
-    dense arrays), and only under settings without equilibration (a data update keeps the
-    first problem's scaling) or presolve (which forbids updates). Process and thread state:
-    each MPI rank and each thread has its own solvers."""
+    (FEASIBLE or INFEASIBLE) is taken from a kept solver, any other is solved again on a
+    new one (tests/solvers/test_conic.py compares all of them; every SOCP of plug3d 3 x 6's
+    tree the same). Only problems whose pattern is a function of their shape are kept
+    (DenseDiag, dense arrays), and only under settings without equilibration (a data update
+    keeps the first problem's scaling) or presolve (which forbids updates). Process and
+    thread state: each MPI rank and each thread has its own solvers."""
 
     def __init__(self, size: int, entries: int):
         self.size, self.entries = size, entries
