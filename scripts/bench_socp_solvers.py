@@ -59,7 +59,7 @@ def tree_socps(levels: int, ring: int, mu: float, sample: int) -> tuple[list, di
         if attempt == 0 and not tight and problem.q is None and len(recorded) < sample:
             A = problem.A.toarray() if hasattr(problem.A, "toarray") else np.array(problem.A)
             recorded.append((A, np.array(problem.b), problem.n_zero, problem.n_lin, problem.n_soc,
-                             long_steps, sol.status))
+                             long_steps, sol.name))
         return sol
 
     prob = contact_problem(scene("enumerate", levels, ring))

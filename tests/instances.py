@@ -242,8 +242,9 @@ def python_calls(build) -> int:
 
 def pyramid_agreement(param, m: int, mu: float, inner, outer) -> None:
     """Every partition of a 3D body (a node out of gap) decided by two pyramid LPs,
-    inner(zu, zr) and outer(zu, zr) -> (status "optimal" / "infeasible" / ..., x or None),
-    and by the SOCP route (feasibility.decide): an inner point that verifies on the circular
+    inner(zu, zr) and outer(zu, zr) -> (status, x or None: the inner LP's point when it has
+    one; the status a `rows.Status`, or the bench's engines' "infeasible", which
+    Status.INFEASIBLE equals as a StrEnum), and by the SOCP route (feasibility.decide): an inner point that verifies on the circular
     cones only where the SOCP is feasible, an outer "infeasible" only where it is not, and
     (pyramids of 64 facets, within 1.2e-3 of the circle, on a body with no full pattern that
     close to its mu^c) every partition decided one way or the other (test_screens.py,
@@ -258,11 +259,11 @@ def pyramid_agreement(param, m: int, mu: float, inner, outer) -> None:
         rows = pattern_rows(param, m, zu, zr)
         status = decide(rows, mu).status
         feasible += status == Status.FEASIBLE
-        s_in, x = inner(zu, zr)
-        if s_in == "optimal" and violation(rows, mu, x) <= VERIFY_TOL:
+        _, x = inner(zu, zr)
+        if x is not None and violation(rows, mu, x) <= VERIFY_TOL:
             assert status == Status.FEASIBLE
             proved_feasible += 1
-        if outer(zu, zr)[0] == "infeasible":
+        if outer(zu, zr)[0] == Status.INFEASIBLE:
             assert status == Status.INFEASIBLE
             proved_infeasible += 1
     assert 0 < feasible < 2 ** m - 1

@@ -3,6 +3,7 @@ README's map, and no module reaching into another's private names."""
 from __future__ import annotations
 
 import ast
+import importlib
 import pathlib
 import re
 
@@ -50,6 +51,88 @@ def test_private_import_check_can_fail(tmp_path):
     src.write_text("from .dd import _secret\nfrom . import dd\nx = dd._other\n")
     assert _private_imports(src) == ["from dd import _secret", "dd._other"]
     assert bad.exists()
+
+
+# ------------------------------------------------ solver statuses: one map per solver (issue 40)
+
+#: modules allowed to read a solver's statuses raw: the independent reference routes (SCIP, and
+#: linprog in other variables), which share nothing with the product's solvers but `decide`
+RAW_STATUS_EXEMPT = {"reference.py"}
+#: calls that return a solver's own status (CLP's code, SCIP's and HiGHS's model status)
+STATUS_CALLS = {"getStatusCode", "getStatusString", "getStatus", "getModelStatus"}
+
+
+def _solver_status_names() -> set[str]:
+    """Every status name of the installed Clarabel and CLP, and "optimal" (SCIP's, HiGHS's)."""
+    import clarabel
+    from cylp.cy import CyClpSimplex
+    clp = importlib.import_module(CyClpSimplex.__module__)
+    return ({str(v) for v in vars(clarabel.SolverStatus).values() if isinstance(v, clarabel.SolverStatus)}
+            | set(clp.problemStatus) | {"optimal"})
+
+
+def _is_status_map(node: ast.AST) -> bool:
+    """A module-level `NAME_STATUS = {...}`: a solver's status map."""
+    return (isinstance(node, ast.Assign) and isinstance(node.value, ast.Dict)
+            and all(isinstance(t, ast.Name) and t.id.endswith("_STATUS") for t in node.targets))
+
+
+def _is_solver_status(node: ast.AST) -> bool:
+    """x.status, str(x.status), or a call of STATUS_CALLS."""
+    if isinstance(node, ast.Call):
+        if isinstance(node.func, ast.Attribute) and node.func.attr in STATUS_CALLS:
+            return True
+        return (isinstance(node.func, ast.Name) and node.func.id == "str" and len(node.args) == 1
+                and _is_solver_status(node.args[0]))
+    return isinstance(node, ast.Attribute) and node.attr == "status"
+
+
+def _is_literal(node: ast.AST) -> bool:
+    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        return all(_is_literal(e) for e in node.elts)
+    return isinstance(node, ast.Constant) or (isinstance(node, ast.UnaryOp) and isinstance(node.operand, ast.Constant))
+
+
+def _raw_statuses(source: str, names: set[str]) -> list[str]:
+    """A solver's raw statuses in `source`, outside its status maps (_is_status_map): a
+    string naming a solver status, or a solver's status compared with a literal."""
+    tree = ast.parse(source)
+    skip = {id(n) for top in tree.body if _is_status_map(top) for n in ast.walk(top)}
+    found = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in names:
+            found.append(f"line {node.lineno}: {node.value!r}")
+        elif isinstance(node, ast.Compare):
+            sides = [node.left, *node.comparators]
+            if any(map(_is_solver_status, sides)) and any(map(_is_literal, sides)):
+                found.append(f"line {node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+@pytest.mark.parametrize("path", [p for p in sorted(PACKAGE.rglob("*.py")) if p.name not in RAW_STATUS_EXEMPT],
+                         ids=_name)
+def test_no_raw_solver_status_outside_its_map(path):
+    """Each solver's statuses are read once, by its map (conic.CLARABEL_STATUS,
+    lp.HIGHS_STATUS, screens.CLP_STATUS) into rows.Status; everything else compares
+    Status members."""
+    assert _raw_statuses(path.read_text(), _solver_status_names()) == []
+
+
+def test_raw_status_check_can_fail():
+    names = _solver_status_names()
+    bad = ('if sol.status == "Solved":\n    pass\n'
+           'SETTLED = ("Solved", "PrimalInfeasible")\n'
+           'ok = res.status in (0, -1)\n'
+           'kind = {0: "optimal"}.get(s.getStatusCode(), "other")\n'
+           'same = 1 != lp.getStatusCode()\n'
+           'def f(sol):\n    return str(sol.status) not in ["Unsolved"]\n')
+    assert sorted(f.split(":")[0] for f in _raw_statuses(bad, names)) == [
+        "line 1", "line 1", "line 3", "line 3", "line 4", "line 5", "line 6", "line 8", "line 8"]
+    good = ('X_STATUS = {"Solved": Status.FEASIBLE, 0: Status.FEASIBLE}\n'
+            'ok = d.status == Status.FEASIBLE\nstatus = X_STATUS.get(res.status, Status.UNDECIDED)\n')
+    assert _raw_statuses(good, names) == []
 
 
 def test_readme_map_names_every_module_once():

@@ -256,7 +256,8 @@ def bracket_3d(rows: ConeRows, hi: float, probe: Probe, rtol: float, first: Deci
     verifies to socp.VERIFY_TOL relative to all the reactions, which at a node carrying a
     small share of them allows a ratio well above mu: random trusses' brackets ended up to
     9e-5 below mu^c); it starts at the ratio of hi's own point (`first`: the decision at hi,
-    if made already), which can lie above hi when hi was feasible only to that tolerance. The lower end is where no such point was found."""
+    if made already), which can lie above hi when hi was feasible only to that tolerance.
+    The lower end is where no such point was found."""
     d = first if first is not None else probe.decide(rows, hi)
     if d.status == Status.FEASIBLE and d.x is not None and math.isfinite(ratio := max_ratio(rows, d.x)):
         hi = ratio               # hi itself may hold to the solver's tolerance only
@@ -330,8 +331,8 @@ def _dinkelbach_step(rows: ConeRows, mu: float, weights: np.ndarray, probe: Prob
     problem = ConicProblem(np.hstack([base.A, col]), base.b, base.n_zero, base.n_lin, base.n_soc, q)
     for attempt, sol in attempts(problem, probe.options.tight):
         probe.solves += 1
-        count(probe.statuses, ("dinkelbach_" if not attempt else f"dinkelbach_retry{attempt}_") + sol.status)
-        if sol.status == "Solved":
+        count(probe.statuses, ("dinkelbach_" if not attempt else f"dinkelbach_retry{attempt}_") + sol.name)
+        if sol.status == Status.FEASIBLE:
             x = rows.Z @ sol.x[:p]
             nr = rows.norm @ x
             if nr > 0:

@@ -229,52 +229,14 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     of lower certified mu^c replaces best (same delta again); none, or one no better
     (blurred), moves to the next delta. The first pattern is the MILP's at mu = inf (r_t
     free), whose mu^c, when finite, saves the MILP at mu_max (the slowest). Before each
-    MILP the tree dives for dive * m + 1 nodes (0: no dive), see `milp` below."""
+    MILP the tree dives for dive * m + 1 nodes (0: no dive), see `_wedge_at`."""
     s = 1.0 if scale is None else float(scale)
     stats.extra["route"] = "milp"
-
-    def milp(mu: float) -> WedgeMilp:
-        # a short dive of the tree first: it settles most steps with a few LPs (a relaxed
-        # vertex that is complementary descends without a solve; an infeasible root proves
-        # none); the MILP only where the dive's budget runs out
-        if dive:
-            tree = PatternTree(param, m, 0.0 if np.isinf(mu) else mu, friction=not np.isinf(mu))
-            out = tree.explore(Subtree(0), budget=dive * m + 1, first_only=True)
-            stats.add(out.stats)
-            if out.found and not out.undecided:
-                count(stats.statuses, "dive_feasible")
-                zu, zr = out.found[0].masks(m)
-                return WedgeMilp(Status.FEASIBLE, math.nan, 0, zu, zr)
-            if not (out.found or out.open or out.stopped or out.stats.undecided):
-                count(stats.statuses, "dive_infeasible")
-                return WedgeMilp(Status.INFEASIBLE, 0.0, 0)
-        ans = wedge_milp(param, m, mu, s)
-        stats.extra["milp_solves"] = stats.extra.get("milp_solves", 0) + 1
-        stats.extra["milp_nodes"] = stats.extra.get("milp_nodes", 0) + ans.nodes
-        count(stats.statuses, "milp_" + ans.status)
-        return ans
-
-    seen: dict = {}
-
-    def certified(ans: WedgeMilp, bound: float) -> float | None:
-        key = (ans.zero_u.tobytes(), ans.zero_r.tobytes())
-        if key in seen:                   # a pattern met again (blurred): its value is known
-            count(stats.statuses, "milp_pattern_again")
-            return seen[key]
-        seen[key] = _certified(ans, bound)
-        return seen[key]
-
-    def _certified(ans: WedgeMilp, bound: float) -> float | None:
-        rows = pattern_rows(param, m, ans.zero_u, ans.zero_r)
-        stats.lps += 1
-        ok = np.isfinite(bound) and decide(rows, bound, counts=stats.statuses).status == Status.FEASIBLE
-        r = solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None)
-        _absorb(stats, r)
-        return r.mu_c
-
+    wedge = partial(_wedge_at, param, m, stats, s, dive)
+    certified = _PatternValues(param, m, solve, stats)
     best = None
     for mu in (np.inf, mu_max):
-        ans = milp(mu)
+        ans = wedge(mu)
         if ans.status != Status.FEASIBLE:
             return None                   # no wedge, or undecided: the tree decides
         best = certified(ans, mu)
@@ -282,11 +244,19 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
             break
     if best is None:
         return None                       # the MILP's pattern at mu_max is no wedge: doubt
+    return _lowered(best, wedge, certified)
+
+
+def _lowered(best: float, wedge, certified: _PatternValues) -> float | None:
+    """global_bracket_milp's steps down from `best`: at best (1 - delta), delta = MILP_STEPS
+    in turn, wedge(mu) (`_wedge_at`) asked again while it returns a pattern of lower
+    certified mu^c. The last best, or None on doubt (an undecided answer, a pattern with
+    no value)."""
     for delta in MILP_STEPS:
         while True:
             task_tick()
             bound = best * (1 - delta)
-            ans = milp(bound)
+            ans = wedge(bound)
             if ans.status == Status.UNDECIDED:
                 return None
             if ans.status == Status.INFEASIBLE:
@@ -298,6 +268,53 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
                 break
             best = mu
     return best
+
+
+def _wedge_at(param: Parametrization, m: int, stats: BnBStats, scale: float, dive: int, mu: float) -> WedgeMilp:
+    """Is there a wedged configuration at mu (inf: r_t free)? A short dive of the tree first
+    (dive * m + 1 nodes; 0: none): it settles most steps with a few LPs (a relaxed vertex
+    that is complementary descends without a solve; an infeasible root proves none); the
+    MILP (milp.wedge_milp, `scale`) only where the dive's budget runs out. Counted into stats."""
+    if dive:
+        tree = PatternTree(param, m, 0.0 if np.isinf(mu) else mu, friction=not np.isinf(mu))
+        out = tree.explore(Subtree(0), budget=dive * m + 1, first_only=True)
+        stats.add(out.stats)
+        if out.found and not out.undecided:
+            count(stats.statuses, "dive_feasible")
+            zu, zr = out.found[0].masks(m)
+            return WedgeMilp(Status.FEASIBLE, math.nan, 0, zu, zr)
+        if not (out.found or out.open or out.stopped or out.stats.undecided):
+            count(stats.statuses, "dive_infeasible")
+            return WedgeMilp(Status.INFEASIBLE, 0.0, 0)
+    ans = wedge_milp(param, m, mu, scale)
+    stats.extra["milp_solves"] = stats.extra.get("milp_solves", 0) + 1
+    stats.extra["milp_nodes"] = stats.extra.get("milp_nodes", 0) + ans.nodes
+    count(stats.statuses, "milp_" + ans.status)
+    return ans
+
+
+class _PatternValues:
+    """The certified mu^c of the patterns the MILP route meets (`solve`: mu_critical), each
+    computed once and counted into stats. Called with a FEASIBLE WedgeMilp found at mu =
+    bound: its pattern's value, the computation started below bound when our LP finds the
+    pattern feasible there. A pattern met again (blurred) gives its known value."""
+
+    def __init__(self, param: Parametrization, m: int, solve, stats: BnBStats):
+        self.param, self.m, self.solve, self.stats = param, m, solve, stats
+        self.seen: dict = {}
+
+    def __call__(self, ans: WedgeMilp, bound: float) -> float | None:
+        key = (ans.zero_u.tobytes(), ans.zero_r.tobytes())
+        if key in self.seen:
+            count(self.stats.statuses, "milp_pattern_again")
+            return self.seen[key]
+        rows = pattern_rows(self.param, self.m, ans.zero_u, ans.zero_r)
+        self.stats.lps += 1
+        ok = np.isfinite(bound) and decide(rows, bound, counts=self.stats.statuses).status == Status.FEASIBLE
+        r = self.solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None)
+        _absorb(self.stats, r)
+        self.seen[key] = r.mu_c
+        return r.mu_c
 
 
 def _absorb(stats: BnBStats, r: MuC) -> None:

@@ -13,12 +13,14 @@ the bracket (_bounds_meet).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from hpcwedge.parallel.cancel import task_tick
 from hpcwedge.solvers.conic import ConicProblem, solve
 from hpcwedge.solvers.feasibility import DEFAULT_OPTIONS, SolverOptions
-from hpcwedge.solvers.rows import ConeRows
+from hpcwedge.solvers.rows import ConeRows, Status
 from hpcwedge.solvers.socp import violation
 
 #: the polished point must satisfy every row to this (relative to ||x||)
@@ -126,21 +128,45 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
     system has no root."""
     p = len(w0)
     E = np.vstack([a[Ap], T[Ap, 0], T[Ap, 1], L[Lin]]) if (len(Ap) or len(Lin)) else np.zeros((0, p))
-    nS, nE = len(S), E.shape[0]
-    nA = len(Ap)
-    aS, TS = a[S], T[S]                                          # (nS, p), (nS, 2, p)
+    system = _ActiveSystem(a[S], T[S], E, nrm)
+    w, mu = w0 / (nrm @ w0), mu0
+    _, nt, _, G = system.parts(w, mu)
+    if np.any(nt <= 0):
+        return None
+    root = _newton(system, w, mu, *system.start_multipliers(w, G), iters)
+    if root is None:
+        return None
+    w, mu, lam, gam, eta, F = root
+    if np.abs(F).max() > 1e-11 * max(1.0, np.abs(lam).max(), abs(mu)) or not np.isfinite(mu) or mu <= 0:
+        return None
+    return _signed_root(system, w, mu, lam, gam, S, Ap, Lin, options)
 
-    def parts(w, mu):
-        Tw = np.einsum("ckp,p->ck", TS, w)
+
+@dataclass(frozen=True)
+class _ActiveSystem:
+    """The KKT system of one active set (kkt_polish), in the span of its rows: the smooth
+    cones' rows aS (nS, p) and TS (nS, 2, p) (||TS_i w|| = mu aS_i w), the equality rows E
+    (the apex cones' r_n, r_t1, r_t2, then the active u_n rows) and the row nrm of sum r_n.
+    Unknowns (w, mu, lam, gam, eta), n = p + 1 + nS + nE + 1 of them; F = (F1 .. F5)."""
+
+    aS: np.ndarray
+    TS: np.ndarray
+    E: np.ndarray
+    nrm: np.ndarray
+
+    def parts(self, w, mu):
+        """(T_i w, ||T_i w||, the unit t_i, the gradients G of g_i = ||T_i w|| - mu aS_i w)."""
+        Tw = np.einsum("ckp,p->ck", self.TS, w)
         nt = np.linalg.norm(Tw, axis=1)
         t = Tw / nt[:, None]
-        G = np.einsum("ckp,ck->cp", TS, t) - mu * aS              # gradients of g_i (nS, p)
+        G = np.einsum("ckp,ck->cp", self.TS, t) - mu * self.aS           # (nS, p)
         return Tw, nt, t, G
 
-    def residual(w, mu, lam, gam, eta):
+    def residual(self, w, mu, lam, gam, eta):
         """F at the point, or None where a cone's ||T_i w|| vanishes (F is not smooth there)."""
+        aS, E, nrm = self.aS, self.E, self.nrm
         with np.errstate(divide="ignore", invalid="ignore"):
-            Tw, nt, t, G = parts(w, mu)
+            Tw, nt, t, G = self.parts(w, mu)
         if np.any(nt <= 0):
             return None
         F1 = G.T @ lam + E.T @ gam + eta * nrm
@@ -150,35 +176,28 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         F5 = nrm @ w - 1.0
         return np.concatenate([F1, [F2], F3, F4, [F5]])
 
-    w, mu = w0 / (nrm @ w0), mu0
-    Tw, nt, t, G = parts(w, mu)
-    if np.any(nt <= 0):
-        return None
-    # multipliers by least squares from stationarity
-    M = np.zeros((p + 1, nS + nE + 1))
-    M[:p, :nS] = G.T
-    M[:p, nS:nS + nE] = E.T
-    M[:p, -1] = nrm
-    M[p, :nS] = aS @ w
-    rhs = np.zeros(p + 1)
-    rhs[p] = 1.0
-    # sum lam_i r_n,i = 1 as a (heavily weighted) hard row: at a degenerate optimum
-    # the cone gradients nearly vanish and plain least squares would shrink lam to 0
-    M[p] *= 1e8
-    rhs[p] *= 1e8
-    y = np.linalg.lstsq(M, rhs, rcond=None)[0]
-    lam, gam, eta = y[:nS], y[nS:nS + nE], y[-1]
-    n = p + 1 + nS + nE + 1
-    F = residual(w, mu, lam, gam, eta)
-    norms = []
-    for _ in range(iters):
-        f0 = np.linalg.norm(F)
-        norms.append(f0)
-        if len(norms) > STALL_STEPS and f0 > STALL_RATIO * norms[-1 - STALL_STEPS]:
-            break
-        Tw, nt, t, G = parts(w, mu)
-        if np.any(nt <= 0):
-            return None
+    def start_multipliers(self, w, G):
+        """(lam, gam, eta) by least squares from stationarity at w (G: `parts`' gradients)."""
+        p, nS, nE = len(w), len(self.aS), self.E.shape[0]
+        M = np.zeros((p + 1, nS + nE + 1))
+        M[:p, :nS] = G.T
+        M[:p, nS:nS + nE] = self.E.T
+        M[:p, -1] = self.nrm
+        M[p, :nS] = self.aS @ w
+        rhs = np.zeros(p + 1)
+        rhs[p] = 1.0
+        # sum lam_i r_n,i = 1 as a (heavily weighted) hard row: at a degenerate optimum
+        # the cone gradients nearly vanish and plain least squares would shrink lam to 0
+        M[p] *= 1e8
+        rhs[p] *= 1e8
+        y = np.linalg.lstsq(M, rhs, rcond=None)[0]
+        return y[:nS], y[nS:nS + nE], y[-1]
+
+    def jacobian(self, w, lam, nt, t, G):
+        """dF / d(w, mu, lam, gam, eta) at the point (nt, t, G: `parts` there)."""
+        aS, TS, E, nrm = self.aS, self.TS, self.E, self.nrm
+        p, nS, nE = len(w), len(aS), E.shape[0]
+        n = p + 1 + nS + nE + 1
         J = np.zeros((n, n))
         iw, imu, il, ig, ie = slice(0, p), p, slice(p + 1, p + 1 + nS), slice(p + 1 + nS, p + 1 + nS + nE), n - 1
         # the Hessian of sum lam_i ||T_i w||: sum lam_i / ||T_i w|| T_i^T (I - t_i t_i^T) T_i
@@ -199,10 +218,32 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         r4 = slice(p + 1 + nS, p + 1 + nS + nE)
         J[r4, iw] = E
         J[n - 1, iw] = nrm
+        return J
+
+
+def _newton(system: _ActiveSystem, w, mu, lam, gam, eta, iters: int):
+    """Newton's iterations on `system` from (w, mu, lam, gam, eta): the last point and its F,
+    (w, mu, lam, gam, eta, F), or None where a cone's ||T_i w|| vanishes. Stops on a root
+    (|F| <= 1e-14 of the unknowns' size), a negligible step, no acceptable trial step
+    (_trial_steps), a stall (STALL_RATIO over STALL_STEPS iterations) or after `iters` iterations."""
+    p, nS = len(w), len(system.aS)
+    iw, imu, il = slice(0, p), p, slice(p + 1, p + 1 + nS)
+    ig, ie = slice(p + 1 + nS, p + 1 + nS + system.E.shape[0]), p + 1 + nS + system.E.shape[0]
+    F = system.residual(w, mu, lam, gam, eta)
+    norms = []
+    for _ in range(iters):
+        f0 = np.linalg.norm(F)
+        norms.append(f0)
+        if len(norms) > STALL_STEPS and f0 > STALL_RATIO * norms[-1 - STALL_STEPS]:
+            break
+        _, nt, t, G = system.parts(w, mu)
+        if np.any(nt <= 0):
+            return None
+        J = system.jacobian(w, lam, nt, t, G)
         for step, ratio in _trial_steps(J, F, f0):
             w1, mu1 = w + step[iw], mu + step[imu]
             lam1, gam1, eta1 = lam + step[il], gam + step[ig], eta + step[ie]
-            F_new = residual(w1, mu1, lam1, gam1, eta1)
+            F_new = system.residual(w1, mu1, lam1, gam1, eta1)
             if F_new is not None and np.linalg.norm(F_new) < ratio * f0:
                 break
         else:
@@ -213,16 +254,23 @@ def _kkt_newton(a, T, L, nrm, w0, mu0, S, Ap, Lin, options, iters: int = 40):
         F = F_new
         if done or small:
             break
-    if np.abs(F).max() > 1e-11 * max(1.0, np.abs(lam).max(), abs(mu)) or not np.isfinite(mu) or mu <= 0:
-        return None
+    return w, mu, lam, gam, eta, F
+
+
+def _signed_root(system: _ActiveSystem, w, mu, lam, gam, S, Ap, Lin, options):
+    """_kkt_newton's answer at a root: (w, mu, support, True, [], []) with multipliers of the
+    right signs (these or, where the active rows are dependent, others found by
+    _signed_multipliers), else (w, mu, apex nodes, False, the smooth cones and u_n rows
+    whose multipliers have the wrong sign)."""
+    nA = len(Ap)
     # signs: cones lam >= 0; u_n rows: constraint L w >= 0 enters as E^T gam with gam <= 0;
     # apex: (gam_a, gam_t) = -(mu zeta_0, zeta_t) with zeta in the second-order cone
     support = _signed_support(lam, gam, S, Ap, nA, len(Lin), mu)
     if support is None:
         # multipliers are not unique where the active rows are dependent: look for
         # signed ones at the converged point (a small conic feasibility problem)
-        Tw, nt, t, G = parts(w, mu)
-        y = _signed_multipliers(G, a[S] @ w, E, nrm, nA, len(Lin), mu, options)
+        _, _, _, G = system.parts(w, mu)
+        y = _signed_multipliers(G, system.aS @ w, system.E, system.nrm, nA, len(Lin), mu, options)
         if y is not None:
             support = _signed_support(y[0], y[1], S, Ap, nA, len(Lin), mu)
         if support is None:
@@ -305,7 +353,7 @@ def _signed_multipliers(G, rn, E, nrm, nA, nL, mu, options):
     A = np.vstack([Aeq, sel])
     b = np.concatenate([beq, np.zeros(sel.shape[0])])
     sol = solve(ConicProblem(A, b, p + 1, nS + nL, nA), 0, options.tight)
-    if sol.status != "Solved":
+    if sol.status != Status.FEASIBLE:
         return None
     v = sol.x
     if np.abs(Aeq @ v - beq).max() > 1e-10 * max(1.0, np.abs(v).max()):

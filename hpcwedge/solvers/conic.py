@@ -42,6 +42,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from hpcwedge.solvers.rows import Status
+
 #: the attempts of the ladder (module doc), and the one that seeks the least-norm point
 ATTEMPTS = 4
 LEAST_NORM_ATTEMPT = 1
@@ -100,13 +102,36 @@ class ConicProblem:
     q: np.ndarray | None = None
 
 
-class Solution:
-    """What Clarabel returned: its status name ("Solved", "PrimalInfeasible", ...), the
-    primal point w and the dual z (numpy arrays, read from Clarabel's answer on first use:
-    a tree node that is Solved without an objective never reads z)."""
+#: Clarabel's statuses, by their names (str of a clarabel.SolverStatus), in the package's
+#: vocabulary: FEASIBLE, a point (an optimum where the problem has an objective);
+#: INFEASIBLE, a certificate of primal infeasibility; every other status decides nothing
+#: (no problem here is unbounded below: DualInfeasible is a numerical answer too)
+CLARABEL_STATUS = {
+    "Solved": Status.FEASIBLE,
+    "PrimalInfeasible": Status.INFEASIBLE,
+    "DualInfeasible": Status.UNDECIDED,
+    "AlmostSolved": Status.UNDECIDED,
+    "AlmostPrimalInfeasible": Status.UNDECIDED,
+    "AlmostDualInfeasible": Status.UNDECIDED,
+    "MaxIterations": Status.UNDECIDED,
+    "MaxTime": Status.UNDECIDED,
+    "NumericalError": Status.UNDECIDED,
+    "InsufficientProgress": Status.UNDECIDED,
+    "CallbackTerminated": Status.UNDECIDED,
+    "Unsolved": Status.UNDECIDED,
+}
 
-    def __init__(self, status: str, answer):
-        self.status, self._answer = status, answer
+
+class Solution:
+    """What Clarabel returned: its status (CLARABEL_STATUS; a status it does not list is
+    UNDECIDED), the status's own name (the key the stats count it under: "Solved",
+    "PrimalInfeasible", ...), the primal point w and the dual z (numpy arrays, read from
+    Clarabel's answer on first use: a tree node solved without an objective never reads z)."""
+
+    def __init__(self, answer):
+        self.name = str(answer.status)
+        self.status = CLARABEL_STATUS.get(self.name, Status.UNDECIDED)
+        self._answer = answer
 
     @functools.cached_property
     def x(self) -> np.ndarray:
@@ -135,8 +160,8 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
             solver.update(A=data, b=_floats(problem.b))
         else:
             solver.update(A=data, b=_floats(problem.b), q=_floats(problem.q))
-        sol = solver.solve()
-        if str(sol.status) not in _SETTLED:
+        sol = Solution(solver.solve())
+        if sol.status == Status.UNDECIDED:
             # a solve that fails on its first step restores Clarabel's "previous iterate",
             # which on a kept solver is the last problem's: again on a new solver
             solver = None
@@ -149,15 +174,10 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
         cones += [clarabel.SecondOrderConeT(3) for _ in range(problem.n_soc)]
         q = np.zeros(n) if problem.q is None else problem.q
         solver = clarabel.DefaultSolver(_csc_square(n, identity), q, A, problem.b, cones, opts)
-        sol = solver.solve()
-    status = str(sol.status)
-    if status in _SETTLED:
+        sol = Solution(solver.solve())
+    if sol.status != Status.UNDECIDED:
         _KEPT.keep(key, solver, entries)
-    return Solution(status, sol)
-
-
-#: the statuses a solve on a kept solver ends with as on a new one (_KeptSolvers)
-_SETTLED = ("Solved", "PrimalInfeasible")
+    return sol
 
 
 class _KeptSolvers(threading.local):
@@ -168,12 +188,13 @@ class _KeptSolvers(threading.local):
     factorisation of its KKT system: ~120 of the ~470 us of a tree SOCP at m = 18). The
     answer is a new solver's bit for bit: the same KKT ordering and start, and Clarabel
     reads nothing from an earlier solve but the "previous iterate" it restores when a step
-    fails, before the first one of this solve has been saved; so only the settled statuses
-    (_SETTLED) are taken from a kept solver, any other is solved again on a new one
-    (tests/test_conic.py compares all of them; every SOCP of plug3d 3 x 6's tree the same). Only problems whose pattern is a function of their shape are kept (DenseDiag,
-    dense arrays), and only under settings without equilibration (a data update keeps the
-    first problem's scaling) or presolve (which forbids updates). Process and thread state:
-    each MPI rank and each thread has its own solvers."""
+    fails, before the first one of this solve has been saved; so only a decided status
+    (FEASIBLE or INFEASIBLE) is taken from a kept solver, any other is solved again on a
+    new one (tests/solvers/test_conic.py compares all of them; every SOCP of plug3d 3 x 6's
+    tree the same). Only problems whose pattern is a function of their shape are kept
+    (DenseDiag, dense arrays), and only under settings without equilibration (a data update
+    keeps the first problem's scaling) or presolve (which forbids updates). Process and
+    thread state: each MPI rank and each thread has its own solvers."""
 
     def __init__(self, size: int, entries: int):
         self.size, self.entries = size, entries

@@ -114,7 +114,7 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
     # to miss a verification)
     for o in pattern_attempts(rows, mu, options.tight, objective, options.long_steps):
         tag = f"retry{o.attempt}_" if o.attempt else ""
-        count(counts, tag + o.status)
+        count(counts, tag + o.name)
         if o.certified is not None:
             if o.certified:
                 return Decision(Status.INFEASIBLE, farkas=o.farkas if farkas else None)

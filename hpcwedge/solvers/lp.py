@@ -25,6 +25,12 @@ X_SPACE_TOL = LP_OPTIONS["primal_feasibility_tolerance"]
 #: under OpenBLAS's Haswell kernels: ||x|| 1.2e6 against 16 for the solution, share x
 #: sqrt(d) 3e-5; the least of plug2d's solutions, m = 20 and 160: 1.5e-3 and 4e-3)
 NORM_SHARE_MIN = 1e-2
+#: HiGHS's statuses, as scipy.optimize's linprog and milp report them (`status`), in the
+#: package's vocabulary: 0 optimal (a point), 2 infeasible; 1 iteration or time limit,
+#: 3 unbounded (no problem here is: a feasibility LP has no objective, the MILP's is
+#: bounded), 4 numerical difficulties or other: nothing decided
+HIGHS_STATUS = {0: Status.FEASIBLE, 1: Status.UNDECIDED, 2: Status.INFEASIBLE, 3: Status.UNDECIDED,
+                4: Status.UNDECIDED}
 
 
 def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str = "highs-ds",
@@ -80,11 +86,8 @@ def _highs(A_ge: np.ndarray, A_eq: np.ndarray, d: int, options: dict | None,
     ge = A_ge.shape[0] > 0
     res = linprog(np.zeros(d), A_ub=-A_ge if ge else None, b_ub=np.zeros(A_ge.shape[0]) if ge else None,
                   A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * d, method=method, options=options)
-    if res.status == 0:
-        return Status.FEASIBLE, res.x
-    if res.status == 2:
-        return Status.INFEASIBLE, None
-    return Status.UNDECIDED, None
+    status = HIGHS_STATUS.get(res.status, Status.UNDECIDED)
+    return status, res.x if status == Status.FEASIBLE else None
 
 
 def lp_violation(rows: Rows, mu: float, x: np.ndarray) -> float:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hpcwedge.contact.problem import Parametrization, blocks
+from hpcwedge.solvers.lp import HIGHS_STATUS
 from hpcwedge.solvers.rows import Status
 
 #: a MILP optimum sum(r_n) below this (the normalisation makes it a share in [0, 1]) is
@@ -78,9 +79,10 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
         res = milp(c, constraints=LinearConstraint(A, lo, hi), integrality=integrality, bounds=bounds,
                    options=options)
     nodes = int(getattr(res, "mip_node_count", 0) or 0)
-    if res.status == 2:                 # P(mu) = {0} (a supported body below mu^c): no wedge
+    status = HIGHS_STATUS.get(res.status, Status.UNDECIDED)
+    if status == Status.INFEASIBLE:     # P(mu) = {0} (a supported body below mu^c): no wedge
         return WedgeMilp(Status.INFEASIBLE, 0.0, nodes)
-    if res.status != 0 or res.x is None:
+    if status != Status.FEASIBLE or res.x is None:
         return WedgeMilp(Status.UNDECIDED, math.nan, nodes)
     value = float(-res.fun)
     if value < MILP_WEDGE_TOL:

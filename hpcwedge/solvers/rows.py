@@ -35,8 +35,10 @@ from hpcwedge.contact.problem import Parametrization, ReactionCoordinates, block
 
 class Status(enum.StrEnum):
     """The answer to a feasibility question (the values reach the stats' counter keys,
-    e.g. "lp_feasible"). UNDECIDED: no solver decided it; callers keep the subtree / take
-    the point as feasible (nothing is pruned on doubt)."""
+    e.g. "lp_feasible"), and the package's reading of every solver's status (each solver's
+    map: conic.CLARABEL_STATUS, lp.HIGHS_STATUS, screens.CLP_STATUS). UNDECIDED: no solver
+    decided it; callers keep the subtree / take the point as feasible (nothing is pruned on
+    doubt)."""
 
     FEASIBLE = "feasible"
     INFEASIBLE = "infeasible"
@@ -201,8 +203,8 @@ class _NodeBlocks:
     """The rows of a 3D parametrisation that every pattern's rows are cut from: rows (4m, d)
     [u_n; r_n; r_t1; r_t2], each row's norm `size` and the rows over it `unit` (zero rows
     stay zero); rn (m, d), rt (m, 2, d) over each node's cone factor `scale` (m,); norm (d,)
-    sum r_n; stacked (7m, d): [unit; rn; rt1; rt2] (ConeRows.at); all_kept: every row above ZERO_ROW_RTOL times the largest (so
-    kept_sizes keeps every row of any selection of them)."""
+    sum r_n; stacked (7m, d): [unit; rn; rt1; rt2] (ConeRows.at); all_kept: every row above
+    ZERO_ROW_RTOL times the largest (so kept_sizes keeps every row of any selection of them)."""
 
     rows: np.ndarray
     size: np.ndarray

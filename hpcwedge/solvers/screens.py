@@ -50,6 +50,12 @@ BIG = float(np.finfo(float).max)
 INNER_TOL = 1e-10
 #: the seed of the inner LP's generic weights (fixed: the tree is a function of the node)
 WEIGHT_SEED = 20100
+#: CLP's statuses (CyClpSimplex.getStatusCode) in the package's vocabulary: 0 optimal (a
+#: point), 1 primal infeasible; 2 dual infeasible (neither LP is unbounded: numerics),
+#: 3 stopped on iterations or time, 4 stopped on errors, 5 stopped by an event handler,
+#: -1 unknown: nothing decided
+CLP_STATUS = {0: Status.FEASIBLE, 1: Status.INFEASIBLE, 2: Status.UNDECIDED, 3: Status.UNDECIDED,
+              4: Status.UNDECIDED, 5: Status.UNDECIDED, -1: Status.UNDECIDED}
 
 
 def screens_available() -> bool:
@@ -80,8 +86,8 @@ def edge_matrix(m: int, mu: float, facets: int, inner: bool) -> np.ndarray:
 
 class PyramidLP:
     """The generator-form LP (module doc) of one pyramid at mu, held warm in CLP.
-    `solve(zu, zr)` -> (status "optimal" / "infeasible" / "other", x-space point or None:
-    the inner LP's optimum; the outer LP returns its status alone); zu, zr: (m,) bool, the
+    `solve(zu, zr)` -> (status (CLP_STATUS), x-space point or None: the inner LP's optimum;
+    the outer LP returns its status alone); zu, zr: (m,) bool, the
     nodes fixed to contact and to gap."""
 
     def __init__(self, param: Parametrization, m: int, mu: float, inner: bool,
@@ -132,7 +138,7 @@ class PyramidLP:
         self._s, self.rc, self.G, self.m, self.k, self.facets, self.fixed = s, rc, G, m, k, facets, f
         self.calls = 0
 
-    def solve(self, zu: np.ndarray, zr: np.ndarray) -> tuple[str, np.ndarray | None]:
+    def solve(self, zu: np.ndarray, zr: np.ndarray) -> tuple[Status, np.ndarray | None]:
         f, k, m, s = self.fixed, self.k, self.m, self._s
         # CLP's own bound arrays, written in place (cylp's setters would hand CLP a numpy
         # buffer that CLP later frees); "x" keeps its work areas: a warm start
@@ -140,8 +146,8 @@ class PyramidLP:
         s.constraintsUpper[k:k + m] = np.where(zu, 0.0, BIG)
         s.dual(startFinishOptions="x")
         self.calls += 1
-        status = {0: "optimal", 1: "infeasible"}.get(s.getStatusCode(), "other")
-        if status != "optimal" or self.split:
+        status = CLP_STATUS.get(s.getStatusCode(), Status.UNDECIDED)
+        if status != Status.FEASIBLE or self.split:
             return status, None
         xp = np.array(s.primalVariableSolution)
         beta = xp[f:]
@@ -180,12 +186,12 @@ class PyramidScreens:
         # the screened nodes are infeasible, 3,485 against 2,761 feasible)
         status, _ = self._lp(False).solve(zu, zr)
         count(counts, "screen_lps")
-        if status == "infeasible":
+        if status == Status.INFEASIBLE:
             count(counts, "screen_infeasible")
             return Decision(Status.INFEASIBLE)
         status, x = self._lp(True).solve(zu, zr)
         count(counts, "screen_lps")
-        x = verified(rows, self.mu, x) if status == "optimal" else None
+        x = verified(rows, self.mu, x) if status == Status.FEASIBLE else None
         if x is None:
             return None
         count(counts, "screen_feasible")

@@ -19,7 +19,7 @@ import numpy as np
 
 from hpcwedge.contact.problem import ReactionCoordinates, kept_on
 from hpcwedge.solvers.conic import ATTEMPTS, LEAST_NORM_ATTEMPT, ConicProblem, DenseDiag, Solution, rmatvec, solve
-from hpcwedge.solvers.rows import ZERO_ROW_RTOL, ConeRows, kept_sizes
+from hpcwedge.solvers.rows import ZERO_ROW_RTOL, ConeRows, Status, kept_sizes
 
 #: a returned x is feasible when every row holds to VERIFY_TOL * ||x|| (the order of
 #: Clarabel's own feasibility tolerance: an optimum on the boundary misses by 1e-9..3e-9;
@@ -251,14 +251,15 @@ def attempts(plain: ConicProblem, tight: bool, steered: ConicProblem | None = No
 
 @dataclass(frozen=True)
 class Outcome:
-    """One attempt at the pattern SOCP, read: status (Clarabel's name); x: the point
-    (x-space, Solved); certified: whether the certificate passed `certificate_ok`
-    (PrimalInfeasible), `farkas` that certificate with its rows laid out as in
-    `pattern_socp` (computed when asked: z and its `layout`); positive: Solved with an
-    objective whose verified dual proves it > 0 on the feasible set."""
+    """One attempt at the pattern SOCP, read: status (conic.CLARABEL_STATUS) and name
+    (Clarabel's, the stats' key); x: the point (x-space, FEASIBLE); certified: whether the
+    certificate passed `certificate_ok` (INFEASIBLE), `farkas` that certificate with its
+    rows laid out as in `pattern_socp` (computed when asked: z and its `layout`); positive:
+    FEASIBLE with an objective whose verified dual proves it > 0 on the feasible set."""
 
     attempt: int
-    status: str
+    status: Status
+    name: str
     x: np.ndarray | None = None
     certified: bool | None = None
     positive: bool = False
@@ -291,17 +292,17 @@ def _outcome(attempt: int, sol: Solution, plain: ConicProblem, steered: ConicPro
              to_x, farkas) -> Outcome:
     """One solution read: its point in x-space (to_x), its certificate checked on `plain`
     and handed on in `pattern_socp`'s layout (farkas)."""
-    if sol.status == "Solved":
+    if sol.status == Status.FEASIBLE:
         positive = False
         if steered is not None:
             # the optimal dual z (A^T z + q = 0, z in K*) with b^T z < 0 is a Farkas
             # certificate of {A w + s = b, q . w = 0}: check it like any other
             positive = certificate_ok(plain.A, plain.b, sol.z, plain.n_zero, plain.n_lin, q=steered.q)
-        return Outcome(attempt, sol.status, x=to_x(sol.x), positive=positive)
-    if sol.status == "PrimalInfeasible":
+        return Outcome(attempt, sol.status, sol.name, x=to_x(sol.x), positive=positive)
+    if sol.status == Status.INFEASIBLE:
         certified = certificate_ok(plain.A, plain.b, sol.z, plain.n_zero, plain.n_lin)
-        return Outcome(attempt, sol.status, certified=certified, z=sol.z, layout=farkas)
-    return Outcome(attempt, sol.status)
+        return Outcome(attempt, sol.status, sol.name, certified=certified, z=sol.z, layout=farkas)
+    return Outcome(attempt, sol.status, sol.name)
 
 
 def certificate_ok(A, b, z, n_zero, n_lin, q: np.ndarray | None = None) -> bool:

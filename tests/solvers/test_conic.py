@@ -3,8 +3,8 @@ it, the kept solvers' answers against new ones."""
 import numpy as np
 from instances import partial_masks, partial_rows, plug3d_param
 
-from hpcwedge.solvers.conic import LONG_STEP, settings
-from hpcwedge.solvers.rows import pattern_rows
+from hpcwedge.solvers.conic import CLARABEL_STATUS, LONG_STEP, settings
+from hpcwedge.solvers.rows import Status, pattern_rows
 from hpcwedge.solvers.socp import pattern_socp
 
 
@@ -17,6 +17,17 @@ def test_settings_are_values():
     assert settings(0, False, True, long_steps=True).max_step_fraction == LONG_STEP > 0.99
     assert settings(0, False, True).max_step_fraction == settings(0, False).max_step_fraction == 0.99
     assert settings(1, False, True, long_steps=True).max_step_fraction == 0.99
+
+
+def test_the_status_map_names_every_clarabel_status():
+    """CLARABEL_STATUS lists every status of the installed Clarabel (one it did not would be
+    read as UNDECIDED unseen), and only a solved problem and a certificate of primal
+    infeasibility decide."""
+    import clarabel
+    names = {str(v) for v in vars(clarabel.SolverStatus).values() if isinstance(v, clarabel.SolverStatus)}
+    assert set(CLARABEL_STATUS) == names
+    decided = {name: s for name, s in CLARABEL_STATUS.items() if s != Status.UNDECIDED}
+    assert decided == {"Solved": Status.FEASIBLE, "PrimalInfeasible": Status.INFEASIBLE}
 
 
 def test_reaction_matrix_is_stored_as_clarabel_reads_it():
@@ -110,7 +121,7 @@ def test_kept_solvers_answer_as_new_ones_bit_for_bit(monkeypatch):
     def answers(kept):
         monkeypatch.setattr(conic, "_KEPT", kept)
         out = [conic.solve(*args) for args in problems]
-        return [(s.status, s.x.tobytes(), s.z.tobytes()) for s in out]
+        return [(s.status, s.name, s.x.tobytes(), s.z.tobytes()) for s in out]
 
     new = answers(conic._KeptSolvers(0, 0))
     reused = 0
@@ -129,4 +140,4 @@ def test_kept_solvers_answer_as_new_ones_bit_for_bit(monkeypatch):
     assert answers(small) == new
     assert 0 < len(small._solvers) <= 4 and small._stored <= 300
     # settled answers and others (solved again on a new solver) both among them
-    assert {s for s, _, _ in new} > {"Solved", "PrimalInfeasible"}
+    assert {name for _, name, _, _ in new} > {"Solved", "PrimalInfeasible"}

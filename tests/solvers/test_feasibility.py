@@ -114,7 +114,6 @@ def test_decide_hands_back_the_certificate_only_when_asked():
 def test_decide_objective_proves_the_contact_child():
     """The branch and bound's steered solve: min u_n,i over a node's problem; a
     verified positive optimum means the contact child is infeasible."""
-    rng = np.random.default_rng(3)
     agree = 0
     for seed in range(30):
         m = 3

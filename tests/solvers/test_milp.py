@@ -24,6 +24,8 @@ def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
     assert ans.status == Status.FEASIBLE and ans.value > 0.5
     assert np.array_equal(ans.zero_u, ~ans.zero_r)
     assert decide(pattern_rows(p, m, ans.zero_u, ans.zero_r), 1.01 * mu_c).status == Status.FEASIBLE
+    stopped = wedge_milp(p, m, 1.01 * mu_c, time_limit=0.0)          # HiGHS's time limit: no answer
+    assert stopped.status == Status.UNDECIDED and stopped.zero_u is None
 
 
 def test_highs_debug_prints_never_reach_stdout():

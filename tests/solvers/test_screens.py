@@ -18,7 +18,7 @@ from hpcwedge.contact.problem import parametrize
 from hpcwedge.patterns.tree import BnBStats, PatternTree
 from hpcwedge.solvers.feasibility import decide
 from hpcwedge.solvers.rows import Status, pyramid_rows
-from hpcwedge.solvers.screens import PyramidLP, PyramidScreens, pyramid_edges, screens_available
+from hpcwedge.solvers.screens import CLP_STATUS, PyramidLP, PyramidScreens, pyramid_edges, screens_available
 from hpcwedge.solvers.socp import VERIFY_TOL, violation
 
 MU = 0.65
@@ -49,6 +49,18 @@ def test_pyramid_edges_span_the_pyramid_of_the_facets(inner):
     assert ((np.abs(slack) < 1e-15).sum(axis=1) == 2).all()
     if inner:   # inscribed: the edges lie on the circular cone
         assert np.allclose(np.hypot(edges[:, 1], edges[:, 2]), 1.0, rtol=0, atol=1e-15)
+
+
+def test_the_status_map_names_every_clp_status():
+    """CLP_STATUS reads every status code of CLP (cylp's list, and -1 before a solve); only
+    optimal (0) and primal infeasible (1) decide."""
+    import importlib
+
+    from cylp.cy import CyClpSimplex
+    codes = range(len(importlib.import_module(CyClpSimplex.__module__).problemStatus))
+    assert set(CLP_STATUS) == {-1, *codes}
+    assert {c: s for c, s in CLP_STATUS.items() if s != Status.UNDECIDED} == {
+        0: Status.FEASIBLE, 1: Status.INFEASIBLE}
 
 
 def test_pyramid_lps_agree_with_the_socp_on_every_partition(body):
