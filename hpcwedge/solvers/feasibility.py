@@ -66,14 +66,11 @@ class Decision:
     """One feasibility decision. status; x: a verified point (sum r_n = 1) when feasible;
     positive: the objective given to `decide` is proven > 0 on the whole feasible set (by
     a verified dual), i.e. the problem with the extra equality objective . x = 0 is
-    infeasible; farkas: INFEASIBLE by a verified Clarabel certificate, and asked for
-    (decide's farkas): that certificate (its rows laid out as in socp.pattern_socp), for
-    cores.infeasible_core."""
+    infeasible."""
 
     status: Status
     x: np.ndarray | None = None
     positive: bool = False
-    farkas: np.ndarray | None = None
 
 
 def pyramid_sides_for(spread: float) -> tuple[int, ...]:
@@ -91,15 +88,14 @@ def pyramid_sides_for(spread: float) -> tuple[int, ...]:
 
 def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OPTIONS,
            counts: dict | None = None, *, objective: np.ndarray | None = None,
-           pyramid_sides: tuple[int, ...] = PYRAMID_SIDES, farkas: bool = False) -> Decision:
+           pyramid_sides: tuple[int, ...] = PYRAMID_SIDES) -> Decision:
     """Feasibility of the pattern problem at mu (module doc), x normalised to sum r_n = 1.
     counts (optional) accumulates how each problem was decided. objective (x-space, 3D only,
     ignored for LPs): minimised over the feasible set: the branch and bound passes the next
     node's u_n row, so that the returned x lies on u_n = 0 when the contact child is
     feasible (the skip-solve rule then takes it), and `positive` proves the contact child
     infeasible when it is not. pyramid_sides: the levels of the pyramid LP fallback (step 3),
-    e.g. pyramid_sides_for(spread). farkas: an INFEASIBLE answer by a verified certificate
-    carries it (Decision.farkas, for cores.py; else None)."""
+    e.g. pyramid_sides_for(spread)."""
     if isinstance(rows, Rows):
         status, x = lp_feasible(rows, mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_" + status)
@@ -117,7 +113,7 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
         count(counts, tag + o.name)
         if o.certified is not None:
             if o.certified:
-                return Decision(Status.INFEASIBLE, farkas=o.farkas if farkas else None)
+                return Decision(Status.INFEASIBLE)
             count(counts, tag + "certificate_failed")
         elif o.x is not None:
             x = verified(rows, mu, o.x)

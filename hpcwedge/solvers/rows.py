@@ -19,7 +19,7 @@ in the coordinates w of the null space of `eq` (x = Z w: the pattern equalities 
 eliminated once, by an SVD, so the solver never meets dependent equality rows). With
 friction=False (r_t free) it is the LP {eq, lin, r_n >= 0} (a `Rows`). `pyramid_rows`:
 the LP with every friction cone replaced by a polyhedral pyramid (feasibility.py's
-fallback). `node_rows`: every node's rows, for the learnt cores (cores.py).
+fallback).
 """
 from __future__ import annotations
 
@@ -270,22 +270,3 @@ def pyramid_rows(rows: ConeRows, sides: int, inner: bool, phase: np.ndarray | No
     a1 = np.vstack([np.zeros((rows.eq.shape[0] + rows.lin.shape[0], d)), f1])
     eq = np.concatenate([np.ones(rows.eq.shape[0], bool), np.zeros(a0.shape[0] - rows.eq.shape[0], bool)])
     return Rows(a0=a0, a1=a1, eq=eq, norm=rows.norm)
-
-
-@dataclass(frozen=True)
-class NodeRows:
-    """Every node's rows of the pattern SOCP in x-space, scaled as `pattern_rows`
-    scales them: un (m, d) unit u_n rows (zero rows stay zero); cone (m, 3, d) the
-    (r_n, r_t1, r_t2) rows over one common factor per node (mu not applied);
-    norm (d,) sum r_n."""
-
-    un: np.ndarray
-    cone: np.ndarray
-    norm: np.ndarray
-
-
-def node_rows(param: Parametrization, m: int) -> NodeRows:
-    """Every node's rows (NodeRows) of the parametrisation's m contact nodes (3D)."""
-    nb = _node_blocks(param, m)
-    un = np.where(kept_sizes(nb.size[:m])[:, None], nb.unit[:m], 0.0)
-    return NodeRows(un=un, cone=np.concatenate([nb.rn[:, None], nb.rt], axis=1), norm=nb.norm)

@@ -27,8 +27,9 @@ from hpcwedge.rays.dd import complementary_rays
 from hpcwedge.run.pipeline import run_scene
 from hpcwedge.scene.values import SceneError
 
-_spec = importlib.util.spec_from_file_location(
-    "stress_grid", os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "..", "scripts", "stress.py"))
+SCRIPTS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "scripts")
+sys.path.insert(0, SCRIPTS)                    # the script's own imports (harness.py)
+_spec = importlib.util.spec_from_file_location("stress_grid", os.path.join(SCRIPTS, "stress.py"))
 grid = importlib.util.module_from_spec(_spec)
 sys.modules["stress_grid"] = grid              # (dataclasses look their module up)
 _spec.loader.exec_module(grid)

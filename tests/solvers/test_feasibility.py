@@ -91,26 +91,6 @@ def test_decide_without_pyramids_decides_what_clarabel_decides():
             assert bare.status == full.status or bare.status == Status.UNDECIDED
 
 
-def test_decide_hands_back_the_certificate_only_when_asked():
-    """farkas=True: an infeasible answer by a verified certificate carries it, laid out as
-    socp.pattern_socp's rows, and it proves that problem infeasible; farkas=False (the tree
-    without learnt cores): the same status, no certificate."""
-    from hpcwedge.solvers.socp import certificate_ok, pattern_socp
-    rng = np.random.default_rng(8)
-    proved = 0
-    for _ in range(60):
-        rows = random_partial_rows(rng)
-        for mu in (0.3, 1.0):
-            asked, plain = decide(rows, mu, farkas=True), decide(rows, mu)
-            assert asked.status == plain.status and plain.farkas is None
-            if asked.farkas is not None:
-                assert asked.status == Status.INFEASIBLE
-                prob = pattern_socp(rows, mu)
-                assert certificate_ok(prob.A, prob.b, asked.farkas, 1, prob.n_lin)
-                proved += 1
-    assert proved >= 10
-
-
 def test_decide_objective_proves_the_contact_child():
     """The branch and bound's steered solve: min u_n,i over a node's problem; a
     verified positive optimum means the contact child is infeasible."""

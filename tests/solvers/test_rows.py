@@ -1,10 +1,10 @@
-"""The pattern problem's rows (rows.py): shapes, the friction-free relaxation, the
-per-node rows of the learnt cores against the pattern rows, the status values."""
+"""The pattern problem's rows (rows.py): shapes, the friction-free relaxation, the status
+values."""
 import numpy as np
 from instances import random_problem, random_problem_3d
 
 from hpcwedge.contact.problem import Parametrization, parametrize
-from hpcwedge.solvers.rows import ConeRows, Rows, Status, eq_null_space, node_rows, pattern_rows
+from hpcwedge.solvers.rows import ConeRows, Rows, Status, eq_null_space, pattern_rows
 
 
 def test_3d_rows_shapes_and_friction_free_relaxation_is_an_lp():
@@ -71,22 +71,6 @@ def test_rows_at_a_point_are_the_products_of_the_rows():
             assert np.allclose(cone[0], rows.rn @ x, rtol=0, atol=1e-13)
             assert np.allclose(cone[1:].T, rows.rt @ x, rtol=0, atol=1e-13)
             assert len(eq) == len(rows.eq) and len(lin) == len(rows.lin) and cone.shape[1] == len(rows.nodes)
-
-
-def test_node_rows_scale_as_the_pattern_rows():
-    """cores.infeasible_core reads a certificate of the pattern SOCP with node_rows: each
-    cone node's (r_n, r_t) rows and each kept u_n row must be the very rows pattern_rows built."""
-    for seed in range(6):
-        m = 4
-        p = parametrize(random_problem_3d(np.random.default_rng(seed), m, bool(seed % 2)))
-        nr = node_rows(p, m)
-        zu = np.array([True, False, False, True])
-        zr = np.array([False, True, False, False])
-        rows = pattern_rows(p, m, zu, zr)
-        assert np.array_equal(nr.cone[rows.nodes, 0], rows.rn)
-        assert np.array_equal(nr.cone[rows.nodes, 1:], rows.rt)
-        assert np.array_equal(nr.un[rows.lin_nodes], rows.lin)
-        assert np.array_equal(nr.norm, rows.norm)
 
 
 def test_status_values_are_the_counter_keys():
