@@ -452,7 +452,7 @@ def test_sigusr1_is_ignored_before_the_command_line_loads():
         "seen = []\n"
         "orig = builtins.__import__\n"
         "def imp(name, globals=None, locals=None, fromlist=(), level=0):\n"
-        "    if level == 1 and name == 'cli':\n"
+        "    if name == 'hpcwedge.cli':\n"
         "        seen.append(signal.getsignal(signal.SIGUSR1))\n"
         "    return orig(name, globals, locals, fromlist, level)\n"
         "builtins.__import__ = imp\n"
