@@ -63,10 +63,13 @@ def test_auto_condenses_together_only_from_the_threshold_on(monkeypatch):
     assert condense_on_ranks(scene, Master(failed_elsewhere=1)) is None
 
 
-def test_a_stop_before_the_handlers_is_acted_on_once_they_are_in(tmp_path, capsys, handlers):
+def test_a_stop_before_the_handlers_is_acted_on_once_they_are_in(tmp_path, capsys, handlers, monkeypatch):
+    """A stop the caller's start-up handler files into `early_stops` up to the moment the
+    run's handlers are in (here: as they go in) stops the run as a later one would."""
     scene = tmp_path / "s.toml"
     scene.write_text(PLUG)
-    stops = [signal.SIGTERM]
+    stops, install = [], batch.Engine.install_signals
+    monkeypatch.setattr(batch.Engine, "install_signals", lambda self: (stops.append(signal.SIGTERM), install(self)))
     assert run_batch(str(scene), str(tmp_path / "r.h5"), quiet=True, early_stops=stops) == EXIT_INTERRUPTED
     assert stops == []
     assert capsys.readouterr().err == "[hpcwedge] SIGTERM: stopped before any checkpointable work\n"
