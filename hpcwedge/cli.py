@@ -1,5 +1,8 @@
 """Command line (SPEC §4): hpcwedge run | show | plot | export.
 
+This module reads the arguments and turns every error into one line and an exit status;
+`run` is one batch run (run/batch.py: the lock, resume, signals, which rank serves).
+
 Exit status: 0 done; 2 a failure the user can fix (one line `hpcwedge: error: ...` naming the
 key or file); 75 stopped by a signal with a checkpoint; 1 an internal error (a bug: one line
 naming the exception, HPCWEDGE_DEBUG=1 prints the traceback); 141 stdout closed by its reader.
