@@ -1,5 +1,8 @@
 """Command line (SPEC §4): hpcwedge run | show | plot | export.
 
+This module reads the arguments and turns every error into one line and an exit status;
+`run` is one batch run (run/batch.py: the lock, resume, signals, which rank serves).
+
 Exit status: 0 done; 2 a failure the user can fix (one line `hpcwedge: error: ...` naming the
 key or file); 75 stopped by a signal with a checkpoint; 1 an internal error (a bug: one line
 naming the exception, HPCWEDGE_DEBUG=1 prints the traceback); 141 stdout closed by its reader.
@@ -14,15 +17,21 @@ import os
 import signal
 import sys
 
+from hpcwedge.errors import Interrupted, UserError
+
+#: stop signals received before the run's handlers were in (main -> run_batch)
+_EARLY_STOP: list = []
+
 
 def main(argv: list[str] | None = None) -> int:
+    """The program: `argv` (None: sys.argv) parsed and its command run; the exit status
+    (module doc). Called with `argv`, every signal handler and sys.stderr are put back on
+    return; as the program, the handlers stay to the exit (a signal after the result is
+    written must not turn a finished run into a failed one)."""
     from hpcwedge.environment import set_thread_variables
     set_thread_variables()          # the thread policy (environment.py), before numpy loads
     # a checkpoint request (SIGUSR1, forwarded by mpirun to every rank) that arrives
-    # during start-up must not kill a rank: ignored until the master's handler is in.
-    # Called in-process (argv given), every handler is put back on return; as the
-    # program (argv None), the handlers stay to the exit: a signal after the result
-    # is written must not turn a finished run into a failed one.
+    # during start-up must not kill a rank: ignored until the master's handler is in
     import threading
     main_thread = threading.current_thread() is threading.main_thread()
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT)
@@ -31,6 +40,18 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(signal.SIGUSR1, signal.SIG_IGN)
     stderr = sys.stderr
     sys.stderr = _Stderr(stderr)
+    parser = _parser()
+    try:
+        return _command(parser, argv, main_thread)
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+        if argv is not None:
+            sys.stderr = stderr
+
+
+def _parser() -> argparse.ArgumentParser:
+    """The command line's arguments: run, show, plot, export."""
     from hpcwedge.version import __version__
     p = _Parser(prog="hpcwedge", description="Wedged configurations and critical friction "
                 "coefficients of elastic bodies in frictional contact.",
@@ -56,6 +77,12 @@ def main(argv: list[str] | None = None) -> int:
     pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
     pl.add_argument("--ray", type=int, help="2D: wedged ray to draw (default 0)")
     pl.add_argument("--pattern", type=int, help="3D: sign pattern to draw (default 0)")
+    _export_arguments(sub)
+    return p
+
+
+def _export_arguments(sub) -> None:
+    """The export command's arguments."""
     ex = sub.add_parser("export", help="write one configuration of the whole body as a VTU file (ParaView)",
                         description="Recover every node's displacement, the contact reactions and the "
                         "element stresses (von Mises / bar axial force) of one item of a result, on the "
@@ -67,53 +94,35 @@ def main(argv: list[str] | None = None) -> int:
     item.add_argument("--ray", type=int, help="2D: wedged ray J")
     item.add_argument("--cone", type=int, help="2D: cone J (the mean of its wedged rays)")
     item.add_argument("--pattern", type=int, help="sign pattern J (a feasible point at the run's mu)")
+
+
+def _command(parser: argparse.ArgumentParser, argv: list[str] | None, main_thread: bool) -> int:
+    """Parse `argv` and run its command; every error as one line and its exit status
+    (SystemExit, argparse's --help and --version, goes through)."""
     try:
-        args = p.parse_args(argv)
+        args = parser.parse_args(argv)
         if main_thread and args.cmd == "run":
             # a stop signal before the run's own handlers are in (imports: ~0.4 s) is kept
-            # for them (_run), not the default death with status 143 and no word
+            # for them (run_batch), not the default death with status 143 and no word
             signal.signal(signal.SIGTERM, lambda signum, frame: _EARLY_STOP.append(signum))
-        code = {"run": _run, "show": _show, "plot": _plot, "export": _export}[args.cmd](args)
-    except _UserError as e:
-        code = _error(str(e), 2)
+        return {"run": _run, "show": _show, "plot": _plot, "export": _export}[args.cmd](args)
+    except UserError as e:                      # a scene key, a file, an index, a launch
+        return _error(str(e), 2)
     except BrokenPipeError:
-        code = _broken_pipe()
+        return _broken_pipe()
     except KeyboardInterrupt:
         # Ctrl-C where no handler of ours is in (start-up, show, plot, export): nothing was
         # written (outputs are atomic); one line and the status of a process ended by SIGINT
-        code = _error("interrupted (nothing written)", 128 + signal.SIGINT)
-    except BaseException as e:                  # noqa: BLE001  (a bug: one line, the traceback on request)
-        from hpcwedge.errors import UserError
-        if not isinstance(e, Exception):
-            from hpcwedge.errors import Interrupted
-            if not isinstance(e, Interrupted):
-                raise                           # SystemExit (argparse's exits)
-            # a stop (parallel.Interrupted) outside _run's own handling of it
-            code = _error(f"{e}: stopped before any checkpointable work", 75)
-        elif isinstance(e, UserError):          # a failure a user can fix (a key, a file, memory)
-            code = _error(str(e), 2)
-        else:
-            if os.environ.get("HPCWEDGE_DEBUG"):
-                import traceback
-                traceback.print_exc()
-            what = (str(e).strip().splitlines() or [""])[0]
-            code = _error(f"internal error: {type(e).__name__}{': ' + what if what else ''} "
-                          "(set HPCWEDGE_DEBUG=1 for the traceback)", 1)
-    finally:
-        for sig, handler in saved.items():
-            signal.signal(sig, handler)
-        if argv is not None:
-            sys.stderr = stderr
-    return code
-
-
-#: modules a worker imports before its first task (the task handlers' heavy imports),
-#: while the master condenses
-WORKER_MODULES = ("hpcwedge.patterns.job", "hpcwedge.mu_c.critical", "hpcwedge.rays.faces",
-                  "hpcwedge.mu_c.global_search")
-
-#: stop signals received before the run's handlers were in (main -> _run)
-_EARLY_STOP: list = []
+        return _error("interrupted (nothing written)", 128 + signal.SIGINT)
+    except Interrupted as e:                    # a stop outside run_batch's own handling of it
+        return _error(f"{e}: stopped before any checkpointable work", 75)
+    except Exception as e:                      # noqa: BLE001  (a bug: one line, the traceback on request)
+        if os.environ.get("HPCWEDGE_DEBUG"):
+            import traceback
+            traceback.print_exc()
+        what = (str(e).strip().splitlines() or [""])[0]
+        return _error(f"internal error: {type(e).__name__}{': ' + what if what else ''} "
+                      "(set HPCWEDGE_DEBUG=1 for the traceback)", 1)
 
 
 class _Stderr:
@@ -145,8 +154,9 @@ class _Stderr:
         return getattr(self._stream, name)
 
 
-class _UserError(Exception):
-    """A failure the user can fix: `hpcwedge: error: <message>` on stderr, exit status 2."""
+class _UserError(UserError):
+    """A failure the user can fix that the command line finds itself: `hpcwedge: error:
+    <message>` on stderr, exit status 2."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -190,121 +200,9 @@ def _to_devnull(stream) -> None:
 
 
 def _run(args) -> int:
-    from hpcwedge.errors import Interrupted, UserError
-    from hpcwedge.parallel.engine import EXIT_INTERRUPTED, Engine
-    from hpcwedge.parallel.mpi import ParallelError, world
-    from hpcwedge.parallel.worker import serve
-    try:
-        comm = world()
-    except ParallelError as e:
-        raise _UserError(str(e)) from None
-    if comm is not None and comm.rank != 0:
-        sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
-        from hpcwedge.run.pipeline import condense
-        condense(None, comm)                    # the master's run_scene: the collective condense stage
-        serve(comm, WORKER_MODULES)
-        return 0
-    from hpcwedge.files import OutputLock, check_output, checkpoint_path, refuse_not_ours, remove_if_there
-    from hpcwedge.progress import Progress
-    from hpcwedge.results.hdf5 import result_state, write_result
-    from hpcwedge.run.pipeline import release_workers, run_scene
-    from hpcwedge.scene.parse import changed_settings, load_scene
-    progress = Progress(quiet=args.quiet)
-    engine = Engine(comm, progress=None if args.quiet else progress)
-    engine.install_signals()
-    ckpt = checkpoint_path(args.output)
-    lock = None
-    try:
-        try:
-            if _EARLY_STOP:
-                engine.signals.replay(_EARLY_STOP.pop())
-            # errors up to the collective call end an mpirun job by MPI_Abort (main's _error)
-            scene = load_scene(args.scene)
-            check_output(args.output, (args.scene, *scene.input_files), replaces_hdf5_only=True)
-            if os.path.islink(args.output):
-                # through a symbolic link: the lock, the checkpoint and the result are the
-                # target's (a second run on the link went unlocked; the link became a file)
-                args.output = os.path.realpath(args.output)
-                ckpt = checkpoint_path(args.output)
-            refuse_not_ours(ckpt, hdf5_ok=True)     # the checkpoint beside it is written too
-            lock = OutputLock(args.output)
-            # the temp file of a result write that a kill -9 cut short (under the lock: ours)
-            remove_if_there(args.output + ".tmp")
-            if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, args.resume,
-                                     inputs=scene.input_digests, changed_settings=changed_settings):
-                done = engine.checkpoints
-                progress.note(f"resuming from {ckpt} (session {done.resumes + 1}; "
-                              f"{done.elapsed_before:.1f} s of work before it)")
-                if done.changed_settings:
-                    progress.note(f"{', '.join(done.changed_settings)} differ from the checkpoint's "
-                                  "scene (settings of the run, not of its answers)")
-            elif args.resume and result_state(args.output, scene) == "complete":
-                # a requeued or chained job whose run has finished: nothing to redo
-                print(f"[hpcwedge] {args.output} is already complete for this scene and its input "
-                      "files; nothing to do (remove it to recompute)", file=sys.stderr)
-                if comm is not None:
-                    release_workers(comm)
-                    engine.serving = True
-                return 0
-            elif os.path.exists(ckpt):
-                print(f"[hpcwedge] note: {ckpt} exists and will be replaced "
-                      f"({'it is missing' if args.resume else 'use --resume to continue from it'})",
-                      file=sys.stderr)
-            # its condense stage is collective under mpirun (the workers' call above); after
-            # the signal handlers, before anything is written
-            result = run_scene(scene, progress, engine=engine, comm=comm)
-            try:
-                write_result(args.output, result, tmp_path=args.output + ".tmp")
-            except (OSError, RuntimeError) as e:     # h5py: RuntimeError for some failed writes
-                raise _UserError(_output_lost(args.output, e, engine, ckpt)) from None
-            engine.remove_checkpoint()
-            engine.mark_done()
-        except UserError as e:
-            raise _UserError(str(e)) from None
-        except Interrupted as e:
-            written = engine.write_checkpoint(str(e))
-            engine.mark_done()
-            if written:
-                what = f"checkpoint written to {ckpt}; rerun with --resume to continue"
-            elif os.path.isfile(ckpt):
-                what = f"no new checkpoint; the previous one, {ckpt}, is kept: rerun with --resume"
-            else:
-                what = "stopped before any checkpointable work"
-            print(f"[hpcwedge] {e}: {what}", file=sys.stderr, flush=True)
-            if not engine.serving:
-                # stopped before the collective start-up: the workers wait in it and would
-                # never read a stop message (the job hung, the workers spinning in MPI)
-                sys.stdout.flush()
-                comm.Abort(EXIT_INTERRUPTED)
-            # the handlers stay SIG_IGN (mark_done): a second SIGTERM now must not kill a run
-            # whose checkpoint is written (exit 143 after 'checkpoint written')
-            engine.close(timeout=5.0, restore_signals=False)
-            return EXIT_INTERRUPTED
-    finally:
-        engine.close(restore_signals=False)
-        if lock is not None:
-            lock.release()
-    if not args.quiet:
-        mu_c = "null" if result.mu_c is None else f"{result.mu_c:.12g}"
-        print(f"[hpcwedge] {scene.name}: mu_c = {mu_c}; wrote {args.output} "
-              f"({result.timings['total']:.2f} s)", file=sys.stderr)
-    return 0
-
-
-def _output_lost(output: str, err: Exception, engine, ckpt: str) -> str:
-    """The message for a result that could not be written at the end of a run, after saving
-    the engine's state as a checkpoint (if it can) so that --resume does not redo the work."""
-    from hpcwedge.files import error_reason
-    why = error_reason(err)
-    try:
-        kept = engine.write_checkpoint("output failed")
-    except Exception as e:                      # noqa: BLE001  (the disk that refused the result)
-        return (f"{output}: cannot write the result ({why}); the checkpoint could not be written "
-                f"either ({error_reason(e)}): the work is lost")
-    if not kept:
-        return f"{output}: cannot write the result ({why})"
-    engine.mark_done()
-    return f"{output}: cannot write the result ({why}); state kept in {ckpt}; rerun with --resume"
+    """hpcwedge run: one batch run (run/batch.py)."""
+    from hpcwedge.run.batch import run_batch
+    return run_batch(args.scene, args.output, resume=args.resume, quiet=args.quiet, early_stops=_EARLY_STOP)
 
 
 def _read(path: str, with_rays: bool = True):

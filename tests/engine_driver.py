@@ -18,12 +18,12 @@ import os
 import sys
 import time
 
-from hpcwedge.cli import WORKER_MODULES
 from hpcwedge.errors import Interrupted
 from hpcwedge.parallel.cancel import task_tick
 from hpcwedge.parallel.engine import Engine, run_tasks
 from hpcwedge.parallel.mpi import world
 from hpcwedge.parallel.worker import serve
+from hpcwedge.run.batch import WORKER_MODULES
 
 
 def spin(ctx, seconds):

@@ -473,7 +473,7 @@ def test_run_through_a_symlink_writes_and_locks_its_target(tmp_path, capsys):
     """-o a symbolic link to a result: the result is written to the target and the link
     stays a link (before: the link was replaced by a regular file, the target left stale),
     and the target's lock is the one taken (a second run on the link was not refused)."""
-    from hpcwedge.files import FileError, OutputLock
+    from hpcwedge.files import OutputLock
     scene = write(tmp_path, _t(PLUG))
     target = tmp_path / "target.h5"
     link = tmp_path / "alias.h5"

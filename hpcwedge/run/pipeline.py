@@ -3,8 +3,8 @@
 run_scene loops over the scene's plan (Scene.plan().steps()), one function per stage, each
 returning a typed record that the loop files into the Result and its SolveStats:
 
-  condense     -> Condensed      the model and its contact problem (serially, or collective
-                                 over the ranks of an MPI run: run.condense)
+  condense     -> Condensed      the model and its contact problem (here, or before the
+                                 pipeline over the ranks of an MPI run: run.condense, batch.py)
   rays         -> list[Rays]     2D: the complementary extreme rays per listed mu
   cones        -> Cones          2D: the maximal cross-complementary cones of one mu's rays
   patterns     -> PatternSets    feasible sign patterns per listed mu (3D; 2D with
@@ -38,7 +38,6 @@ from hpcwedge.contact.problem import (
     ray_vectors,
 )
 from hpcwedge.environment import environment, single_threaded
-from hpcwedge.errors import UserError
 from hpcwedge.mu_c.critical import mu_critical, run_mu_c
 from hpcwedge.mu_c.exact_2d import certify_2d, exact_certifier
 from hpcwedge.mu_c.global_search import global_mu_critical
@@ -74,8 +73,6 @@ from hpcwedge.scene.values import SceneError
 
 #: the engine job of the 2D rays stage (when split over faces)
 RAYS_JOB = "rays"
-#: run.condense = "auto" condenses collectively over all ranks from this many model DOFs on
-DISTRIBUTED_MIN_DOFS = 2_000_000
 #: a plan step -> (its name in Result.stages, its timings key)
 STEP_REPORT = {"condense": ("condense", "condense"), "rays": ("enumerate", "enumerate"),
                "cones": ("cones", "enumerate"), "patterns": ("enumerate", "enumerate"),
@@ -86,27 +83,25 @@ STEP_REPORT = {"condense": ("condense", "condense"), "rays": ("enumerate", "enum
 # ---------------------------------------------------------------------------- the loop
 
 def run_scene(scene: Scene, progress: Progress | None = None, engine: Engine | None = None,
-              comm=None) -> Result:
+              condensed: Condensed | None = None) -> Result:
     """Every answer the scene asks for: its plan's stages in order (Scene.plan). Sign
     patterns and mu^c run as tasks of `engine` (parallel/: in-process by default; the
-    master of an MPI run, with checkpoints, from the command line). The 2D rays run as one
+    master of an MPI run, with checkpoints, in a batch run: batch.py). The 2D rays run as one
     double description per mu, or split over the faces the scene asks for (run.face_split;
     "auto": 3 nodes from m = 16 on) as "face" tasks (faces.run_faces) — the split, and so
     every bit of the result, depends on the scene, not on the rank count; a resumed run keeps
-    its checkpoint's split. `comm`: the master's communicator of an MPI run (the command
-    line), for the collective condense stage (the workers call condense(None, comm)); None:
-    condensed here alone. Runs under the thread policy (environment.single_threaded);
+    its checkpoint's split. `condensed`: the condense stage's record when the caller has
+    it (an MPI run's start-up, collective over the ranks: batch.condense_on_ranks); None:
+    condensed here. Runs under the thread policy (environment.single_threaded);
     stats["environment"] records what it ran on (environment.environment).
 
     Memory: progress.MemoryGuard (run.max_memory_gb) checks every double description step
     and the engine's merges (sign patterns, mu^c: Engine.guard), and a MemoryError that
-    still happens becomes one line (progress.MemoryLimit, a SceneError: exit status 2,
+    still happens becomes one line (progress.MemoryLimit, a UserError: exit status 2,
     nothing written)."""
     scene.input_digests          # the bytes of its files as solved (cached): what the result records
-    condensed = None if comm is None else condense(scene, comm)    # collective: first, as every rank
     progress = progress or Progress(quiet=True)
     engine = engine or Engine()
-    engine.serving = True                        # the workers have gone on to serve tasks
     progress.guard = engine.guard = MemoryGuard(scene.max_memory_gb, ranks_on_host())
     try:
         with single_threaded():
@@ -196,54 +191,16 @@ def _context(scene: Scene, plan: Plan, problem: ContactProblem, engine: Engine, 
 
 # ---------------------------------------------------------------------------- the stages
 
-def release_workers(comm) -> None:
-    """The master's side of `condense` when it runs nothing (the result is complete already):
-    the workers leave the collective start-up for the task loop, where Engine.close stops
-    them."""
-    comm.bcast(None, root=0)
-
-
-def condense(scene: Scene | None, comm=None) -> Condensed | None:
-    """The condense stage. Serially (comm None): the scene's model built and condensed
-    (build.build_model, build.contact_problem), or a raw K read (no model, 0 s).
-
-    Given `comm` (an MPI run, run.condense): collective over it, called by every rank before
-    the task engine's work; the master passes the scene, workers None. Every rank builds the
-    model from the scene the master broadcasts and condenses it with
-    condense.condense_distributed when run.condense = "distributed", or "auto" and the model
-    has >= DISTRIBUTED_MIN_DOFS DOFs. Returns the Condensed on the master if it did, else
-    None (then the master condenses alone, as serially, and reports any error in the scene
-    or model there). A singular K_ii is found on every rank alike: SceneError on the master,
-    None on the workers. Ranks never wait on each other for ever: a model that fails to
-    build on any rank sends everyone on."""
-    if comm is None:
-        if not scene.plan().condense:
-            return Condensed(None, contact_problem(scene))
-        t = time.perf_counter()
-        model = build_model(scene)
-        problem = contact_problem(scene, model)
-        return Condensed(model, problem, time.perf_counter() - t)
-    if comm.rank == 0 and (not scene.plan().condense or scene.condense == "serial"):
-        scene = None
-    scene = comm.bcast(scene, root=0)
-    if scene is None:
-        return None
+def condense(scene: Scene) -> Condensed:
+    """The condense stage: the scene's model built and condensed (build.build_model,
+    build.contact_problem), or a raw K read (no model, 0 s). (Under mpirun the batch may have
+    condensed it over the ranks first: batch.condense_on_ranks.)"""
+    if not scene.plan().condense:
+        return Condensed(None, contact_problem(scene))
     t = time.perf_counter()
-    try:
-        model = build_model(scene)
-    except Exception:                            # noqa: BLE001  (the master's own run reports it)
-        model = None
-    if comm.allreduce(int(model is None)):      # a sum: on any rank
-        return None
-    if scene.condense == "auto" and model.n_dofs < DISTRIBUTED_MIN_DOFS:
-        return None
-    try:
-        problem = contact_problem(scene, model, comm)
-    except UserError:
-        if comm.rank == 0:
-            raise
-        return None
-    return Condensed(model, problem, time.perf_counter() - t) if comm.rank == 0 else None
+    model = build_model(scene)
+    problem = contact_problem(scene, model)
+    return Condensed(model, problem, time.perf_counter() - t)
 
 
 def rays(ctx: Context) -> list[Rays]:
