@@ -1,4 +1,5 @@
-"""Scenes (SPEC §3): TOML -> a validated, frozen Scene, and the plan of stages.
+"""Scenes (SPEC §3): TOML -> a validated, frozen Scene, the plan of stages, and the record
+that checkpoints and results compare (the part of a scene the answers depend on).
 
 Every error is a SceneError whose one-line message names the key and the
 reason; the command line turns it into exit status 2 with nothing written.
@@ -8,7 +9,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib.util
-import inspect
 import math
 import os
 import tomllib
@@ -371,11 +371,12 @@ def _no_booleans(value, key: str) -> None:
 
 
 def _check_builtin(kind: str, params: dict) -> None:
-    sig = inspect.signature(BUILTINS[kind])
+    """A built-in's parameters (keys.py: its generator's, with their defaults) and their types."""
+    allowed = keys.table(f"model.{kind}")
     for k, v in params.items():
-        if k not in sig.parameters:
-            raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(sig.parameters)})")
-        default = sig.parameters[k].default
+        if k not in allowed:
+            raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(allowed)})")
+        default = allowed[k].default
         if isinstance(default, str):
             continue                  # a choice (contact_patch_kind): checked in _check_patch
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
