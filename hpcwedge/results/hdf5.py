@@ -197,8 +197,8 @@ def _read_run(g, m: int, with_rays: bool) -> Run:
 
 def result_state(path: str, scene) -> str:
     """What the file at `path` is for `scene` (a scene.Scene): "missing"; "complete" or
-    "incomplete", a result of this scene (its text, or one that differs only in comments,
-    layout and run settings: scene.changed_settings) and these input files' bytes; else
+    "incomplete", a result of this scene (its text, or one whose record, the part the answers
+    depend on, is the same: scene.parse.changed_settings) and these input files' bytes; else
     "other-scene". FileError for a file that
     is not a readable result; SceneError when an input file cannot be read."""
     if not os.path.exists(path):

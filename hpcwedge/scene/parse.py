@@ -1,4 +1,5 @@
-"""Scenes (SPEC §3): TOML -> a validated, frozen Scene, and the plan of stages.
+"""Scenes (SPEC §3): TOML -> a validated, frozen Scene, the plan of stages, and the record
+that checkpoints and results compare (the part of a scene the answers depend on).
 
 Every error is a SceneError whose one-line message names the key and the
 reason; the command line turns it into exit status 2 with nothing written.
@@ -8,35 +9,24 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib.util
-import inspect
 import math
 import os
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from hpcwedge.models.library import BUILTIN_DIM, BUILTINS, WHOLE_MINIMUM  # the one table of built-ins
-from hpcwedge.scene import tables
+from hpcwedge.scene import keys, tables
+from hpcwedge.scene.keys import CONDENSE_MODES, FACE_SPLIT_MAX, KINDS, MU_C_TOL_MIN, MU_RANGE, SETTINGS
 from hpcwedge.scene.values import COMPUTE_DEFAULTS, NUMBER_TYPES, RUN_DEFAULTS, SceneError
 
-KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
-
-TOP_KEYS = {"name", "dim", "model", "friction", "compute", "run", "contact", "obstacle"}
-#: keys of a kind = "mesh" scene (values are checked when the mesh is read: models/mesh.py)
-MESH_MODEL_KEYS = {"file", "E", "nu", "thickness", "supports", "support_group", "support_dofs",
-                   "contact_patch", "contact_patch_kind"}
-MESH_CONTACT_KEYS = {"group", "nodes", "normals", "tangents", "obstacle", "tolerance"}
-#: the keys of the other kinds' [model] and [contact] tables (a built-in's model keys are its
-#: generator's parameters; stiffness and built-in scenes have no [contact] keys)
-STIFFNESS_MODEL_KEYS = {"K", "file", "null_space"}
-TRUSS_MODEL_KEYS = {"nodes", "bars", "EA", "supports"}
-TRUSS_CONTACT_KEYS = {"nodes", "normals", "tangents"}
-#: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
-CONDENSE_MODES = ("auto", "serial", "distributed")
-#: friction coefficients (friction.mu, compute.mu_max) outside this range overflow or
-#: underflow the cone constraints (mu = 1e300, 1e-300: NaN rays, "cone not pointed")
-MU_RANGE = (1e-6, 1e6)
-#: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
-MU_C_TOL_MIN = 1e-15
+#: the keys of each table (keys.py); a built-in's model keys are its generator's parameters,
+#: and stiffness and built-in scenes have no [contact] keys
+TOP_KEYS = set(keys.table("scene"))
+MESH_MODEL_KEYS = set(keys.table("model.mesh"))     # values checked when the mesh is read: models/mesh.py
+MESH_CONTACT_KEYS = set(keys.table("contact.mesh"))
+STIFFNESS_MODEL_KEYS = set(keys.table("model.stiffness"))
+TRUSS_MODEL_KEYS = set(keys.table("model.truss"))
+TRUSS_CONTACT_KEYS = set(keys.table("contact.truss"))
 
 
 @dataclass(frozen=True)
@@ -71,27 +61,26 @@ class Scene:
     model: dict
     contact: dict
     mu: tuple[float, ...]
+    # [compute] (keys.py: the meanings and defaults of these and of [run])
     enumerate: bool | str
     mu_c: str
     mu_c_method: str
     mu_c_tol: float
     mu_max: float
     exact: bool
+    exact_fallback_max_m: int   # a 2D float enumeration too close to call is redone exactly up to this m
+    # [run]
     checkpoint_every_s: float
+    task_budget: int            # tree nodes per sign-pattern task (parallel/)
+    symmetry: bool              # use the node symmetries of K (symmetry.py)
+    screens: bool               # 3D tree, LP screens before deep SOCPs (screens.py)
+    face_split: int | str       # branching nodes of the 2D DD split (faces.branching_nodes)
+    condense: str               # auto | serial | distributed (under mpirun)
+    max_memory_gb: float | str  # "auto": from the machine's (progress.MemoryGuard)
     text: str = field(repr=False, default="")
     base_dir: str = "."
-    task_budget: int = 64          # run.task_budget: tree nodes per sign-pattern task (parallel/)
-    symmetry: bool = True          # run.symmetry: use the node symmetries of K (symmetry.py)
-    screens: bool = False          # run.screens: 3D tree, LP screens before deep SOCPs (screens.py)
-    face_split: int | str = "auto"  # run.face_split: branching nodes of the 2D DD split (faces.branching_nodes)
-    condense: str = "auto"         # run.condense: auto | serial | distributed (under mpirun)
     obstacles: list | None = None  # mesh: obstacle tables ([[obstacle]] or contact.obstacle), raw
     obstacle_key: str = "obstacle"  # where they came from, for messages
-    #: compute.exact_fallback_max_m: a 2D float enumeration whose decisions were too close to
-    #: call is redone in exact arithmetic when m is at most this (0: never; pipeline.py)
-    exact_fallback_max_m: int = 10
-    #: run.max_memory_gb: memory a run may use ("auto": from the machine's; progress.MemoryGuard)
-    max_memory_gb: float | str = "auto"
 
     @property
     def hash(self) -> str:
@@ -188,26 +177,48 @@ def load_scene(path: str) -> Scene:
 
 
 def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
+    """The Scene of a scene table (TOML's structure, SPEC §3): every check, in a fixed order,
+    one table at a time; SceneError naming the first bad key."""
     _unknown(data, TOP_KEYS, "")
+    name, dim = _name_and_dim(data)
+    kind = _model_kind(data, dim)
+    mu = _friction(data)
+    compute = _compute(data.get("compute", {}), dim)
+    run = _run(data.get("run", {}))
+    params, contact, obstacles, obstacle_key = _body(data, kind, dim)
+    return Scene(name=name, dim=dim, kind=kind, model=params, contact=contact, mu=mu, **compute, **run,
+                 text=text, base_dir=base_dir, obstacles=obstacles, obstacle_key=obstacle_key)
+
+
+def _name_and_dim(data: dict) -> tuple[str, int]:
     name = data.get("name")
     if not isinstance(name, str) or not name:
         raise SceneError("name: required, a non-empty string")
     dim = data.get("dim")
     if isinstance(dim, bool) or not isinstance(dim, int) or dim not in (2, 3):
         raise SceneError(f"dim: must be 2 or 3, got {dim!r}")
-    model = _table_with(data, "model", "kind")
-    kind = model["kind"]
+    return name, dim
+
+
+def _model_kind(data: dict, dim: int) -> str:
+    """model.kind, one of KINDS, a built-in only in its own dimension."""
+    kind = _table_with(data, "model", "kind")["kind"]
     if kind not in KINDS:
         raise SceneError(f"model.kind: unknown kind {kind!r} (one of {', '.join(KINDS)})")
     if kind in BUILTIN_DIM and BUILTIN_DIM[kind] != dim:
         raise SceneError(f"dim: {kind} is a {BUILTIN_DIM[kind]}D model, scene says dim = {dim}")
+    return kind
+
+
+def _friction(data: dict) -> tuple[float, ...]:
+    """friction.mu: one value or a list, each in MU_RANGE and listed once; sorted."""
     friction = _table_with(data, "friction", "mu", " (one value or a list)")
-    _unknown(friction, {"mu"}, "friction.")
+    _unknown(friction, set(keys.table("friction")), "friction.")
     mus = friction["mu"] if isinstance(friction["mu"], list) else [friction["mu"]]
     if not mus:
         raise SceneError("friction.mu: empty list")
     for v in mus:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        if not _positive(v):
             raise SceneError(f"friction.mu: every value must be a finite number > 0, got {v!r}")
         if not MU_RANGE[0] <= v <= MU_RANGE[1]:
             raise SceneError(f"friction.mu: every value must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {v!r}")
@@ -216,22 +227,21 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     if twice is not None:
         # each value is one run: a repeated one would be computed again for the same answer
         raise SceneError(f"friction.mu: {twice!r} is listed twice (each value is one run)")
-    compute = dict(COMPUTE_DEFAULTS)
-    given = data.get("compute", {})
+    return tuple(values)
+
+
+def _compute(given, dim: int) -> dict:
+    """The [compute] table with its defaults, checked: {key: value}, Scene's fields."""
     _unknown(given, set(COMPUTE_DEFAULTS), "compute.")
-    compute.update(given)
-    if not isinstance(compute["enumerate"], (bool, str)) or compute["enumerate"] not in (True, False, "rays",
-                                                                                       "patterns"):
-        raise SceneError(f"compute.enumerate: true, false, \"rays\" or \"patterns\", "
-                         f"got {compute['enumerate']!r}")
-    if compute["mu_c"] not in ("none", "global", "cones"):
-        raise SceneError(f"compute.mu_c: \"none\", \"global\" or \"cones\", got {compute['mu_c']!r}")
-    if compute["mu_c_method"] not in ("accurate", "bisection"):
-        raise SceneError(f"compute.mu_c_method: \"accurate\" or \"bisection\", got {compute['mu_c_method']!r}")
+    compute = {**COMPUTE_DEFAULTS, **given}
+    if not isinstance(compute["enumerate"], (bool, str)) or compute["enumerate"] not in keys.ENUMERATE:
+        raise SceneError(f"compute.enumerate: {keys.choices(keys.ENUMERATE)}, got {compute['enumerate']!r}")
+    for key, allowed in (("mu_c", keys.MU_C), ("mu_c_method", keys.MU_C_METHODS)):
+        if compute[key] not in allowed:
+            raise SceneError(f"compute.{key}: {keys.choices(allowed)}, got {compute[key]!r}")
     for key in ("mu_c_tol", "mu_max"):
-        v = compute[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-            raise SceneError(f"compute.{key}: must be a finite number > 0, got {v!r}")
+        if not _positive(compute[key]):
+            raise SceneError(f"compute.{key}: must be a finite number > 0, got {compute[key]!r}")
     if not MU_RANGE[0] <= compute["mu_max"] <= MU_RANGE[1]:
         raise SceneError(f"compute.mu_max: must lie in [{MU_RANGE[0]:g}, {MU_RANGE[1]:g}], got {compute['mu_max']!r}")
     if not MU_C_TOL_MIN <= compute["mu_c_tol"] < 1:
@@ -239,38 +249,55 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
                          f"got {compute['mu_c_tol']!r}")
     if not isinstance(compute["exact"], bool):
         raise SceneError(f"compute.exact: true or false, got {compute['exact']!r}")
-    v = compute["exact_fallback_max_m"]
-    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-        raise SceneError(f"compute.exact_fallback_max_m: must be a whole number >= 0, got {v!r}")
+    if not _whole(compute["exact_fallback_max_m"], 0):
+        raise SceneError(f"compute.exact_fallback_max_m: must be a whole number >= 0, "
+                         f"got {compute['exact_fallback_max_m']!r}")
     if compute["exact"] and dim == 3:
         raise SceneError("compute.exact: exact arithmetic is for 2D scenes (3D problems are conic)")
-    given = data.get("run", {})
+    return {**compute, "mu_c_tol": float(compute["mu_c_tol"]), "mu_max": float(compute["mu_max"])}
+
+
+def _run(given) -> dict:
+    """The [run] table with its defaults, checked: {key: value}, Scene's fields."""
     _unknown(given, set(RUN_DEFAULTS), "run.")
-    run = dict(RUN_DEFAULTS)
-    run.update(given)
-    v = run["checkpoint_every_s"]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-        raise SceneError(f"run.checkpoint_every_s: must be a finite number > 0, got {v!r}")
-    v = run["task_budget"]
-    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-        raise SceneError(f"run.task_budget: must be a whole number >= 1, got {v!r}")
+    run = {**RUN_DEFAULTS, **given}
+    if not _positive(run["checkpoint_every_s"]):
+        raise SceneError(f"run.checkpoint_every_s: must be a finite number > 0, got {run['checkpoint_every_s']!r}")
+    if not _whole(run["task_budget"], 1):
+        raise SceneError(f"run.task_budget: must be a whole number >= 1, got {run['task_budget']!r}")
     for key in ("symmetry", "screens"):
         if not isinstance(run[key], bool):
             raise SceneError(f"run.{key}: true or false, got {run[key]!r}")
     if run["screens"] and importlib.util.find_spec("cylp") is None:
         raise SceneError("run.screens: needs COIN-OR CLP, which is not installed (pip install cylp)")
     v = run["face_split"]
-    if v != "auto" and (isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 8):
-        raise SceneError(f"run.face_split: \"auto\" or a whole number 0..8 (branching nodes), got {v!r}")
+    if v != "auto" and (not _whole(v, 0) or v > FACE_SPLIT_MAX):
+        raise SceneError(f"run.face_split: \"auto\" or a whole number 0..{FACE_SPLIT_MAX} (branching nodes), got {v!r}")
     v = run["max_memory_gb"]
     if v != "auto" and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < float("inf")):
         raise SceneError(f"run.max_memory_gb: \"auto\" or a number of GB > 0, got {v!r}")
     if run["condense"] not in CONDENSE_MODES:
         raise SceneError(f"run.condense: one of {', '.join(CONDENSE_MODES)}, got {run['condense']!r}")
+    return {**run, "checkpoint_every_s": float(run["checkpoint_every_s"])}
+
+
+def _positive(v) -> bool:
+    """v is a finite number > 0 (not a boolean)."""
+    return not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and v > 0
+
+
+def _whole(v, lo: int) -> bool:
+    """v is a whole number >= lo (not a boolean)."""
+    return not isinstance(v, bool) and isinstance(v, int) and v >= lo
+
+
+def _body(data: dict, kind: str, dim: int) -> tuple[dict, dict, list | None, str]:
+    """(model parameters, [contact], obstacle tables or None, where they came from): the keys
+    of the kind's tables and their value types; the mesh's values are checked when it is read."""
     contact = data.get("contact", {})
     if not isinstance(contact, dict):
         raise SceneError(f"contact: must be a table, got {contact!r}")
-    params = {k: v for k, v in model.items() if k != "kind"}
+    params = {k: v for k, v in data["model"].items() if k != "kind"}
     _no_booleans(params, "model.")
     _no_booleans(contact, "contact.")
     if kind in BUILTINS:
@@ -284,30 +311,28 @@ def parse_scene(data: dict, text: str = "", base_dir: str = ".") -> Scene:
     elif kind == "truss":
         _unknown(params, TRUSS_MODEL_KEYS, "model.")
         _unknown(contact, TRUSS_CONTACT_KEYS, "contact.")
-    obstacles, obstacle_key = None, "obstacle"
-    if "obstacle" in data or (kind == "mesh" and "obstacle" in contact):
-        if kind != "mesh":
-            raise SceneError("obstacle: obstacle surfaces are for kind = \"mesh\" (give contact.normals)")
-        if "obstacle" in data and "obstacle" in contact:
-            raise SceneError("obstacle: give [[obstacle]] tables or contact.obstacle, not both")
-        obstacle_key = "obstacle" if "obstacle" in data else "contact.obstacle"
-        obstacles = data["obstacle"] if "obstacle" in data else contact["obstacle"]
-        from hpcwedge.models.obstacle import parse_obstacles
-        try:
-            parse_obstacles(obstacles, dim, obstacle_key)
-        except ValueError as e:
-            raise SceneError(str(e)) from None
+    obstacles, obstacle_key = _obstacles(data, kind, contact, dim)
     if kind == "mesh":
         _check_mesh(params, contact, dim, obstacles is not None)
-    return Scene(name=name, dim=dim, kind=kind, model=params, contact=contact,
-                 mu=tuple(values), enumerate=compute["enumerate"],
-                 mu_c=compute["mu_c"], mu_c_method=compute["mu_c_method"],
-                 mu_c_tol=float(compute["mu_c_tol"]), mu_max=float(compute["mu_max"]),
-                 exact=compute["exact"], checkpoint_every_s=float(run["checkpoint_every_s"]),
-                 text=text, base_dir=base_dir, task_budget=run["task_budget"],
-                 symmetry=run["symmetry"], screens=run["screens"], face_split=run["face_split"], condense=run["condense"],
-                 obstacles=obstacles, obstacle_key=obstacle_key,
-                 exact_fallback_max_m=compute["exact_fallback_max_m"], max_memory_gb=run["max_memory_gb"])
+    return params, contact, obstacles, obstacle_key
+
+
+def _obstacles(data: dict, kind: str, contact: dict, dim: int) -> tuple[list | None, str]:
+    """The obstacle tables ([[obstacle]] or contact.obstacle, of a mesh), checked, and their key."""
+    if not ("obstacle" in data or (kind == "mesh" and "obstacle" in contact)):
+        return None, "obstacle"
+    if kind != "mesh":
+        raise SceneError("obstacle: obstacle surfaces are for kind = \"mesh\" (give contact.normals)")
+    if "obstacle" in data and "obstacle" in contact:
+        raise SceneError("obstacle: give [[obstacle]] tables or contact.obstacle, not both")
+    obstacle_key = "obstacle" if "obstacle" in data else "contact.obstacle"
+    obstacles = data["obstacle"] if "obstacle" in data else contact["obstacle"]
+    from hpcwedge.models.obstacle import parse_obstacles
+    try:
+        parse_obstacles(obstacles, dim, obstacle_key)
+    except ValueError as e:
+        raise SceneError(str(e)) from None
+    return obstacles, obstacle_key
 
 
 def _table_with(data: dict, name: str, key: str, hint: str = "") -> dict:
@@ -346,11 +371,12 @@ def _no_booleans(value, key: str) -> None:
 
 
 def _check_builtin(kind: str, params: dict) -> None:
-    sig = inspect.signature(BUILTINS[kind])
+    """A built-in's parameters (keys.py: its generator's, with their defaults) and their types."""
+    allowed = keys.table(f"model.{kind}")
     for k, v in params.items():
-        if k not in sig.parameters:
-            raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(sig.parameters)})")
-        default = sig.parameters[k].default
+        if k not in allowed:
+            raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(allowed)})")
+        default = allowed[k].default
         if isinstance(default, str):
             continue                  # a choice (contact_patch_kind): checked in _check_patch
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
@@ -409,26 +435,27 @@ def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> No
         raise SceneError(f"contact.tolerance: must be a finite number > 0, got {v!r}")
 
 
-#: [run] keys that change neither the answers nor their bits (SPEC §5), only how the run goes:
-#: a checkpoint resumes, and a complete result stands, under other values of them
-SETTINGS = ("max_memory_gb", "checkpoint_every_s")
+#: Scene fields that are no key of the scene: its text, where it lies, where its obstacles came from
+_NOT_KEYS = ("text", "base_dir", "obstacle_key")
+
+
+def scene_record(scene: Scene) -> dict[str, object]:
+    """The part of a scene that the answers depend on: every field but the run settings
+    (keys.SETTINGS) and what is no key (the text, its folder). Two scenes with equal records
+    have the same answers, bit for bit (SPEC §5)."""
+    skip = {*_NOT_KEYS, *(path.split(".")[-1] for path in SETTINGS)}
+    return {f.name: getattr(scene, f.name) for f in fields(scene) if f.name not in skip}
 
 
 def changed_settings(saved: str, now: str) -> list[str] | None:
-    """The SETTINGS keys ("run.<key>") in which two scene texts differ when they differ in
-    nothing else, parsed (comments and layout aside: [] when only those differ); None when
-    they are other scenes (or either is not TOML). The one rule of "the same scene" for
-    checkpoints and results."""
+    """The run settings (keys.SETTINGS, "run.<key>") in which two scene texts differ when
+    their records (scene_record) are equal: [] when they differ in comments, layout or
+    defaults written out only; None when they are other scenes (or either is not a valid
+    scene). The one rule of "the same scene" for checkpoints and results."""
     try:
-        old, new = tomllib.loads(saved.lstrip("\ufeff")), tomllib.loads(now.lstrip("\ufeff"))
-    except tomllib.TOMLDecodeError:
+        old, new = (parse_scene(tomllib.loads(t.lstrip("\ufeff"))) for t in (saved, now))
+    except (tomllib.TOMLDecodeError, SceneError):
         return None
-    changed = []
-    for key in SETTINGS:
-        a, b = old.get("run", {}).pop(key, None), new.get("run", {}).pop(key, None)
-        if a != b:
-            changed.append(f"run.{key}")
-    for scene in (old, new):
-        if scene.get("run") == {}:
-            del scene["run"]
-    return changed if old == new else None
+    if scene_record(old) != scene_record(new):
+        return None
+    return [path for path in SETTINGS if getattr(old, path.split(".")[-1]) != getattr(new, path.split(".")[-1])]

@@ -1,16 +1,15 @@
-"""The scene's shared vocabulary: its error, the defaults of [compute] and [run], and the
-checks of plain values that the parser and the table builders both use (a leaf of scene/)."""
+"""The scene's shared vocabulary: its error, the defaults of [compute] and [run] (from the
+table of keys, keys.py), and the checks of plain values that the parser and the table
+builders both use."""
 from __future__ import annotations
 
 import numpy as np
 
 from hpcwedge.errors import UserError
+from hpcwedge.scene.keys import defaults
 
-COMPUTE_DEFAULTS = {"enumerate": True, "mu_c": "cones", "mu_c_method": "accurate",
-                    "mu_c_tol": 1e-6, "mu_max": 100.0, "exact": False,
-                    "exact_fallback_max_m": 10}
-RUN_DEFAULTS = {"checkpoint_every_s": 60.0, "task_budget": 64, "symmetry": True, "face_split": "auto",
-                "condense": "auto", "max_memory_gb": "auto", "screens": False}
+COMPUTE_DEFAULTS = defaults("compute")
+RUN_DEFAULTS = defaults("run")
 
 
 class SceneError(UserError):
