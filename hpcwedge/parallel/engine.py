@@ -149,7 +149,7 @@ class Engine:
         self.guard = None
         self.checkpoints = Checkpointer()
         self.signals = SignalState()
-        #: every rank is past the collective start-up (pipeline.condense) and the workers
+        #: every rank is past the collective start-up (run/batch.py) and the workers
         #: serve tasks: the master can stop them with a message (else only MPI_Abort can)
         self.serving = comm is None
         self.master = Master(comm) if comm is not None and self.rank == 0 else None

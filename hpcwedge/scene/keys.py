@@ -39,7 +39,7 @@ FACE_SPLIT_MAX = 8
 ENUMERATE = (True, False, "rays", "patterns")
 MU_C = ("none", "global", "cones")
 MU_C_METHODS = ("accurate", "bisection")
-#: run.condense: where the condensation runs under mpirun (cli.py, condense.condense_distributed)
+#: run.condense: where the condensation runs under mpirun (run/batch.py, condense.condense_distributed)
 CONDENSE_MODES = ("auto", "serial", "distributed")
 #: the run settings, in the order a note on changed settings names them
 SETTINGS = ("run.max_memory_gb", "run.checkpoint_every_s")

@@ -269,7 +269,7 @@ def _run(given) -> dict:
         if not isinstance(run[key], bool):
             raise SceneError(f"run.{key}: true or false, got {run[key]!r}")
     if run["screens"] and importlib.util.find_spec("cylp") is None:
-        raise SceneError("run.screens: needs COIN-OR CLP, which is not installed (pip install cylp)")
+        raise SceneError("run.screens: needs COIN-OR CLP, which is not installed (pip install 'hpcwedge[screens]', or cylp)")
     v = run["face_split"]
     if v != "auto" and (not _whole(v, 0) or v > FACE_SPLIT_MAX):
         raise SceneError(f"run.face_split: \"auto\" or a whole number 0..{FACE_SPLIT_MAX} (branching nodes), got {v!r}")
