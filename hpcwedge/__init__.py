@@ -1,19 +1,21 @@
 """hpcwedge: wedged configurations of elastic bodies in frictional contact (Fujita & Kanno 2010).
 
 The public API is `hpcwedge.api`, re-exported here on first use (so that `import hpcwedge`
-loads no numpy). The package, bottom to top (data flow one way; tests/test_layers.py
+loads no numpy). The package, bottom to top (data flow one way; tests/test_layout.py
 holds every import to this order):
 
 - errors, version, nodesets, exact, files, environment, progress: leaves.
 - parallel/: the engine (serial, or master and workers over MPI), its jobs, cancellation and
   checkpoints; it knows nothing of wedging.
 - models/: bodies (trusses, meshes, built-ins) as a Model record.
-- scene/: TOML -> a validated Scene.
+- scene/: the table of scene keys, TOML -> a validated Scene.
 - contact/: Scene -> Model -> ContactProblem (condensation with PETSc).
-- solvers/: a pattern's feasibility problem on Clarabel, HiGHS and CLP, and `decide`.
+- results/: the Result record (runs, typed cones and patterns) and its HDF5 file.
+- solvers/: a pattern's feasibility problem on Clarabel, HiGHS and CLP (one status map
+  each), and `decide`.
 - rays/: 2D rays and cones; patterns/: 3D sign patterns; mu_c/: mu^c of each, and global.
-- results/: the Result record and its HDF5 file; post/: configurations, figures, VTU.
-- run/: the pipeline; api.py, cli.py: the faces.
+- post/: configurations, figures, VTU.
+- run/: the pipeline and a batch run's lifecycle; api.py, cli.py: the faces.
 """
 from hpcwedge.version import __version__
 
