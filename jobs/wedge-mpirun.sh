@@ -113,12 +113,11 @@ done
 wait "$child"; rc=$?
 
 complete=$("$PY" - "$SCENE" "$RESULT" <<'PYEOF' 2>/dev/null
-import os, sys
-from hpcwedge.results.hdf5 import read_result
+import sys
+from hpcwedge.results.hdf5 import result_state
 from hpcwedge.scene.parse import load_scene
 scene, result = sys.argv[1:3]
-r = read_result(result, with_rays=False) if os.path.exists(result) else {}
-print(int(bool(r.get("complete")) and r.get("scene_hash") == load_scene(scene).hash))
+print(int(result_state(result, load_scene(scene)) == "complete"))      # as jobs/wedge.sbatch
 PYEOF
 )
 if [ $rc = 0 ] && [ "$complete" = 1 ]; then
