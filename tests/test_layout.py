@@ -265,7 +265,8 @@ SOLVER_MODULES = ["hpcwedge.solvers.conic", "hpcwedge.solvers.socp", "hpcwedge.s
                   "hpcwedge.solvers.milp", "hpcwedge.solvers.screens", "hpcwedge.solvers.feasibility",
                   "hpcwedge.mu_c.critical", "hpcwedge.mu_c.dinkelbach", "hpcwedge.mu_c.kkt",
                   "hpcwedge.mu_c.global_search", "hpcwedge.patterns.tree", "hpcwedge.patterns.job",
-                  "hpcwedge.rays.faces", "hpcwedge.rays.dd"]
+                  "hpcwedge.rays.faces", "hpcwedge.rays.dd", "hpcwedge.rays.numerics", "hpcwedge.mu_c.bracket",
+                  "hpcwedge.mu_c.exact_2d", "hpcwedge.reference", "hpcwedge.post.recovery", "hpcwedge.run.pipeline"]
 
 
 @pytest.mark.parametrize("module", SOLVER_MODULES)
