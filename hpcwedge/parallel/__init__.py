@@ -4,7 +4,8 @@ handler (a module-level callable, sent to the workers by reference), and merges 
 results. Importing this package loads nothing; each module is imported by name:
 
 - cancel.py: what a running task polls (task_stopping, task_tick); no MPI, no HDF5.
-- jobs.py: the job protocol, and TaskJob (a fixed list of independent tasks).
+- jobs.py: the job protocol; TaskJob (a fixed list of independent tasks) and TreeJob (a
+  budgeted tree search whose open nodes go back to the pool).
 - engine.py: Engine.run(job), in-process or as the master under mpirun; run_tasks.
 - worker.py: serve(comm), the loop of ranks >= 1.
 - mpi.py: world(), probing without spinning, the wire's tags.

@@ -6,10 +6,14 @@ result``, sent to the workers by reference, as mpi4py.futures does), ``context``
 job's shared read-only data, sent once to each worker), ``counters``, and pending(),
 take(n_workers) -> (token, payload) | None, merge(token, result), save(in_flight) /
 load(state) to and from plain arrays and attributes (checkpoint.py writes them),
-progress() and output(). The engine knows nothing else of a job.
+progress() and output(). The engine knows nothing else of a job. Two generic jobs:
+`TaskJob`, a fixed list of independent tasks, and `TreeJob`, a budgeted tree search whose
+open nodes travel between the master's pool and the tasks (its subclass gives their
+checkpoint encoding).
 """
 from __future__ import annotations
 
+import heapq
 import json
 
 import numpy as np
@@ -107,3 +111,80 @@ class TaskJob:
 def _json_value(v):
     """v as it reads back from JSON (tuples become lists), for comparisons."""
     return json.loads(json.dumps(v))
+
+
+#: a TreeJob's budget multiplier when its pool holds enough tasks for every worker
+BUDGET_SCALE = 16
+
+
+class TreeJob:
+    """A budgeted search over the trees of one or more groups (after mplrs' budgets).
+
+    handler(context, (group, node, budget, witness)) explores at most `budget` nodes below
+    `node` and returns (found, open, counters, flagged, witnesses): the leaves it found, the
+    nodes it left open with one witness each (data the node's exploration may reuse, or
+    None), its counters (summed into the job's), and the found leaves it doubts. A node
+    has a `depth`; the pool hands out the shallowest first, in push order among equals. A
+    task gets `budget` nodes while the pool is short (fewer than 2 tasks per worker), so the
+    work is split and handed back open, and budget * BUDGET_SCALE when it is long. Tasks
+    are always bounded, so a checkpoint never waits long and loses little.
+
+    A subclass gives save() / load() from `saved_nodes` / `restore` and output()."""
+
+    kind = "tree"
+
+    def __init__(self, name: str, handler, context, roots: list, budget: int, counters: dict):
+        self.name, self.handler, self.context, self.budget = name, handler, context, int(budget)
+        self.found: list[list] = [[] for _ in roots]
+        self.flagged: list[list] = [[] for _ in roots]
+        self.counters = {"tasks": 0, "handed_back": 0, **counters}
+        self._pool: list = []
+        self._seq = 0
+        for group, node in enumerate(roots):
+            self._push(group, node)
+
+    def _push(self, group: int, node, witness=None) -> None:
+        heapq.heappush(self._pool, (node.depth, self._seq, group, node, witness))
+        self._seq += 1
+
+    def pending(self) -> int:
+        return len(self._pool)
+
+    def take(self, n_workers: int):
+        if not self._pool:
+            return None
+        _, _, group, node, witness = heapq.heappop(self._pool)
+        budget = self.budget if len(self._pool) < 2 * n_workers else self.budget * BUDGET_SCALE
+        return (group, node, witness), (group, node, budget, witness)
+
+    def merge(self, token, result) -> None:
+        group = token[0]
+        found, open_, counters, flagged, witnesses = result
+        self.found[group].extend(found)
+        self.flagged[group].extend(flagged)
+        for node, witness in zip(open_, witnesses, strict=True):
+            self._push(group, node, witness)
+        self.counters["tasks"] += 1
+        self.counters["handed_back"] += len(open_)
+        for k, v in counters.items():
+            self.counters[k] = self.counters.get(k, 0) + v
+
+    def saved_nodes(self, in_flight) -> tuple[list, list]:
+        """What a checkpoint keeps: [(group, leaf, flagged)] found, and [(group, node,
+        witness)] open (the pool, then the tasks in flight, whose tokens are these)."""
+        doubt = [set(f) for f in self.flagged]
+        found = [(g, leaf, leaf in doubt[g]) for g, leaves in enumerate(self.found) for leaf in leaves]
+        return found, [(g, n, w) for _, _, g, n, w in self._pool] + [tuple(t) for t in in_flight]
+
+    def restore(self, found: list, opens: list) -> None:
+        """The state of saved_nodes' lists (a resumed job)."""
+        self.found = [[] for _ in self.found]
+        self.flagged = [[] for _ in self.flagged]
+        for group, leaf, flagged in found:
+            self.found[group].append(leaf)
+            if flagged:
+                self.flagged[group].append(leaf)
+        self._pool, self._seq = [], 0
+        for group, node, witness in opens:
+            self._push(group, node, witness)
+

@@ -1,14 +1,9 @@
-"""The sign-pattern search as a job of the parallel engine: budgeted subtree tasks, and
-their checkpoint encoding (SPEC §5).
-
-Budgets (after mplrs): a subtree task gets ``budget`` tree nodes while the pool is short
-(fewer than 2 tasks per worker), so work is split and handed back as open subtrees;
-``budget * BUDGET_SCALE`` when the pool is long. Tasks are always bounded, so a checkpoint
-never waits long and loses little.
+"""The sign-pattern search as a job of the parallel engine: the engine's generic budgeted
+tree search (parallel.jobs.TreeJob) over PatternTree subtrees, and their checkpoint
+encoding (SPEC §5).
 """
 from __future__ import annotations
 
-import heapq
 import math
 from dataclasses import dataclass, field
 
@@ -17,16 +12,16 @@ import numpy as np
 from hpcwedge.nodesets import bits_to_words, pattern_key, words_to_bits
 from hpcwedge.parallel.checkpoint import CheckpointError
 from hpcwedge.parallel.engine import Engine
+from hpcwedge.parallel.jobs import TreeJob
 from hpcwedge.patterns.tree import STAT_KEYS, PatternContext, Subtree, explore_task
 
-#: budget multiplier when the pool holds enough tasks for every worker
-BUDGET_SCALE = 16
 #: default node budget of a subtree task (scene key run.task_budget)
 DEFAULT_BUDGET = 64
 
 
-class SubtreeJob:
-    """The sign-pattern trees of every mu, explored by budgeted subtree tasks.
+class SubtreeJob(TreeJob):
+    """The sign-pattern trees of every mu (a group each), explored by budgeted subtree tasks
+    (parallel.jobs.TreeJob): a leaf is a feasible full pattern, a flagged one is undecided.
 
     An open subtree travels with its root's witness (the parent's point that proves
     it feasible, or None), so that the tree, and every counter of it (nodes, solves,
@@ -42,27 +37,14 @@ class SubtreeJob:
     kind = "subtree"
 
     def __init__(self, name: str, make_tree, mus, budget: int = DEFAULT_BUDGET):
-        self.handler = explore_task
-        self.name, self.mus, self.budget = name, [float(v) for v in mus], int(budget)
-        self.context = PatternContext(make_tree, self.mus)
-        trees = [self.context.tree(i) for i in range(len(self.mus))]
+        self.mus = [float(v) for v in mus]
+        context = PatternContext(make_tree, self.mus)
+        trees = [context.tree(i) for i in range(len(self.mus))]
         self.m = trees[0].m if trees else 0
         #: the trees find orbit representatives (a symmetry), expanded at the end
         self._representatives = any(getattr(t, "symmetry", None) is not None for t in trees)
-        self.found = [[] for _ in self.mus]
-        self.undecided = [[] for _ in self.mus]
-        self.counters = {"tasks": 0, "handed_back": 0, **{k: 0 for k in STAT_KEYS}}
-        self._pool: list = []
-        self._seq = 0
-        for i, tree in enumerate(trees):
-            self._push(i, tree.root())
-
-    def _push(self, i, subtree, x=None):
-        heapq.heappush(self._pool, (subtree.depth, self._seq, i, subtree, x))
-        self._seq += 1
-
-    def pending(self) -> int:
-        return len(self._pool)
+        super().__init__(name, explore_task, context, [t.root() for t in trees], budget,
+                         {k: 0 for k in STAT_KEYS})
 
     def progress(self) -> str:
         """What the engine's progress line adds for this job: patterns found so far (the
@@ -72,38 +54,17 @@ class SubtreeJob:
         return (f", {sum(map(len, self.found))} {what} found, "
                 f"{self.counters.get('nodes', 0)} tree nodes")
 
-    def take(self, n_workers: int):
-        if not self._pool:
-            return None
-        _, _, i, subtree, x = heapq.heappop(self._pool)
-        budget = self.budget if len(self._pool) < 2 * n_workers else self.budget * BUDGET_SCALE
-        return (i, subtree, x), (i, subtree, budget, x)
-
-    def merge(self, token, result) -> None:
-        i = token[0]
-        found, open_, stats, undecided, open_x = result
-        self.found[i].extend(found)
-        self.undecided[i].extend(undecided)
-        for s, x in zip(open_, open_x, strict=True):
-            self._push(i, s, x)
-        self.counters["tasks"] += 1
-        self.counters["handed_back"] += len(open_)
-        for k, v in stats.items():
-            self.counters[k] = self.counters.get(k, 0) + v
-
     def save(self, in_flight) -> dict:
         words = max(1, math.ceil(self.m / 64))
-        doubt = [set(u) for u in self.undecided]
-        found = [(i, s) for i, lst in enumerate(self.found) for s in lst]
-        opens = [(i, s, x) for _, _, i, s, x in self._pool] + [tuple(t) for t in in_flight]
+        found, opens = self.saved_nodes(in_flight)
         xs = [x for _, _, x in opens]
         d = next((len(x) for x in xs if x is not None), 0)
         data = {"mus": np.array(self.mus, dtype=float),
-                "found_mu": np.array([i for i, _ in found], dtype=np.int32),
-                "found_depth": np.array([s.depth for _, s in found], dtype=np.int32),
-                "found_contact": bits_to_words([s.contact for _, s in found], words),
-                "found_gap": bits_to_words([s.gap for _, s in found], words),
-                "found_undecided": np.array([s in doubt[i] for i, s in found], dtype=bool),
+                "found_mu": np.array([i for i, _, _ in found], dtype=np.int32),
+                "found_depth": np.array([s.depth for _, s, _ in found], dtype=np.int32),
+                "found_contact": bits_to_words([s.contact for _, s, _ in found], words),
+                "found_gap": bits_to_words([s.gap for _, s, _ in found], words),
+                "found_undecided": np.array([u for _, _, u in found], dtype=bool),
                 "open_mu": np.array([i for i, _, _ in opens], dtype=np.int32),
                 "open_depth": np.array([s.depth for _, s, _ in opens], dtype=np.int32),
                 "open_contact": bits_to_words([s.contact for _, s, _ in opens], words),
@@ -117,27 +78,22 @@ class SubtreeJob:
         a, d = state["attrs"], state["data"]
         if int(a["m"]) != self.m or list(np.asarray(d["mus"], dtype=float)) != self.mus:
             raise CheckpointError(f"job {self.name!r}: the checkpoint was taken on other mu values or m")
-        self.found = [[] for _ in self.mus]
-        self.undecided = [[] for _ in self.mus]
-        for i, depth, c, g, u in zip(d["found_mu"], d["found_depth"], words_to_bits(d["found_contact"]),
-                                     words_to_bits(d["found_gap"]), d["found_undecided"]):
-            s = Subtree(int(depth), c, g)
-            self.found[int(i)].append(s)
-            if u:
-                self.undecided[int(i)].append(s)
-        self._pool, self._seq = [], 0
+        found = [(int(i), Subtree(int(depth), c, g), bool(u))
+                 for i, depth, c, g, u in zip(d["found_mu"], d["found_depth"], words_to_bits(d["found_contact"]),
+                                              words_to_bits(d["found_gap"]), d["found_undecided"])]
         n = len(d["open_mu"])
         has_x = d.get("open_has_x", np.zeros(n, dtype=bool))
         xs = d.get("open_x", np.zeros((n, 0)))
-        for i, depth, c, g, h, x in zip(d["open_mu"], d["open_depth"], words_to_bits(d["open_contact"]),
-                                        words_to_bits(d["open_gap"]), has_x, xs):
-            self._push(int(i), Subtree(int(depth), c, g), np.array(x, dtype=np.float64) if h else None)
+        opens = [(int(i), Subtree(int(depth), c, g), np.array(x, dtype=np.float64) if h else None)
+                 for i, depth, c, g, h, x in zip(d["open_mu"], d["open_depth"], words_to_bits(d["open_contact"]),
+                                                 words_to_bits(d["open_gap"]), has_x, xs)]
+        self.restore(found, opens)
 
     def output(self) -> "Patterns":
         key = lambda s: pattern_key(s.contact)
         return Patterns(mus=self.mus, m=self.m,
                         found=[sorted(lst, key=key) for lst in self.found],
-                        undecided=[sorted(lst, key=key) for lst in self.undecided],
+                        undecided=[sorted(lst, key=key) for lst in self.flagged],
                         counters=dict(self.counters))
 
 

@@ -5,7 +5,7 @@ import numpy as np
 from instances import tree_factory
 
 from hpcwedge.parallel.engine import Engine
-from hpcwedge.parallel.jobs import TaskJob
+from hpcwedge.parallel.jobs import TaskJob, TreeJob
 from hpcwedge.patterns.job import SubtreeJob, run_patterns
 
 
@@ -61,3 +61,57 @@ def test_task_job_resumed_from_results_with_fewer_keys_saves_the_common_ones():
     again = TaskJob("t", _task, None, list(range(3)))
     again.load(resumed.save([]))
     assert again.results[0] == {"mu_c": 0.25, "lps": 4} and again.results[2] == {"mu_c": 0.5, "lps": 3}
+
+
+# ---------------------------------------------------------------- the generic tree job
+
+class _Node(tuple):
+    """A node of the full binary tree of depth DEPTH: its path of 0/1 choices."""
+
+    @property
+    def depth(self) -> int:
+        return len(self)
+
+
+DEPTH = 5
+
+
+def _explore(ctx, payload):
+    """Visit at most `budget` nodes below the given one, depth first; leaves with an odd path
+    sum are flagged; the rest is handed back open, each with its parent's path as witness."""
+    group, node, budget, witness = payload
+    assert witness is None or witness == node[:-1]
+    stack, found, flagged, visited = [node], [], [], 0
+    while stack and visited < budget:
+        n = stack.pop()
+        visited += 1
+        if n.depth == DEPTH:
+            found.append(n)
+            if sum(n) % 2:
+                flagged.append(n)
+        else:
+            stack += [_Node(n + (1,)), _Node(n + (0,))]
+    return found, stack, {"nodes": visited}, flagged, [s[:-1] for s in stack]
+
+
+def test_tree_job_finds_every_leaf_for_any_budget_and_resumes_mid_way():
+    """The engine's generic tree job, without any domain: every leaf of two trees found once,
+    the odd ones flagged, the node count the same for every budget; saved with tasks in flight
+    and restored into a fresh job, it finishes with the answers of one pass."""
+    leaves = sorted(_Node(tuple((k >> i) & 1 for i in reversed(range(DEPTH)))) for k in range(2 ** DEPTH))
+    for budget in (1, 3, 64):
+        job = TreeJob("t", _explore, None, [_Node(()), _Node(())], budget, {"nodes": 0})
+        out = Engine().run(job)
+        assert [sorted(f) for f in out.found] == [leaves, leaves]
+        assert all(sorted(f) == [x for x in leaves if sum(x) % 2] for f in out.flagged)
+        assert out.counters["nodes"] == 2 * (2 ** (DEPTH + 1) - 1)
+    job = TreeJob("t", _explore, None, [_Node(()), _Node(())], 2, {"nodes": 0})
+    for _ in range(9):
+        token, payload = job.take(1)
+        job.merge(token, _explore(None, payload))
+    in_flight = [job.take(1)[0] for _ in range(2)]            # taken, never merged
+    again = TreeJob("t", _explore, None, [_Node(()), _Node(())], 2, {"nodes": 0})
+    again.restore(*job.saved_nodes(in_flight))
+    out = Engine().run(again)
+    assert [sorted(f) for f in out.found] == [leaves, leaves]
+    assert all(sorted(f) == [x for x in leaves if sum(x) % 2] for f in out.flagged)
