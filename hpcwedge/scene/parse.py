@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, fields
 from hpcwedge.models.library import BUILTIN_DIM, BUILTINS, WHOLE_MINIMUM  # the one table of built-ins
 from hpcwedge.scene import keys, tables
 from hpcwedge.scene.keys import CONDENSE_MODES, FACE_SPLIT_MAX, KINDS, MU_C_TOL_MIN, MU_RANGE, SETTINGS
-from hpcwedge.scene.values import COMPUTE_DEFAULTS, NUMBER_TYPES, RUN_DEFAULTS, SceneError
+from hpcwedge.scene.values import COMPUTE_DEFAULTS, NUMBER_TYPES, RUN_DEFAULTS, SceneError, did_you_mean, near_misses
 
 #: the keys of each table (keys.py); a built-in's model keys are its generator's parameters,
 #: and stiffness and built-in scenes have no [contact] keys
@@ -341,7 +341,9 @@ def _table_with(data: dict, name: str, key: str, hint: str = "") -> dict:
     if table is not None and not isinstance(table, dict):
         raise SceneError(f"{name}: must be a table, got {table!r}")
     if table is None or key not in table:
-        raise SceneError(f"{name}.{key}: required{hint}")
+        near = near_misses(key, table or {})
+        given = f"; found {' and '.join(f'`{k}`' for k in near)}: did you mean `{key}`?" if near else ""
+        raise SceneError(f"{name}.{key}: required{hint}{given}")
     return table
 
 
@@ -350,7 +352,8 @@ def _unknown(table, allowed, prefix):
         raise SceneError(f"{prefix.rstrip('.') or 'scene'}: must be a table")
     for k in table:
         if k not in allowed:
-            raise SceneError(f"{prefix}{k}: unknown key (allowed: {', '.join(sorted(allowed))})" if allowed
+            raise SceneError(f"{prefix}{k}: unknown key{did_you_mean(k, allowed)} (allowed: {', '.join(sorted(allowed))})"
+                             if allowed
                              else f"{prefix}{k}: unknown key (this table takes no keys here)")
 
 
@@ -375,7 +378,8 @@ def _check_builtin(kind: str, params: dict) -> None:
     allowed = keys.table(f"model.{kind}")
     for k, v in params.items():
         if k not in allowed:
-            raise SceneError(f"model.{k}: unknown parameter of {kind} (allowed: {', '.join(allowed)})")
+            raise SceneError(f"model.{k}: unknown parameter of {kind}{did_you_mean(k, allowed)} "
+                             f"(allowed: {', '.join(allowed)})")
         default = allowed[k].default
         if isinstance(default, str):
             continue                  # a choice (contact_patch_kind): checked in _check_patch

@@ -203,3 +203,60 @@ def test_file_encoding(tmp_path):
     assert (b.name, b.text, b.hash) == (a.name, a.text, a.hash) == ("café", text, a.hash)
     with pytest.raises(SceneError, match=r"c\.toml: not UTF-8 text \(byte 0xe9 on line 2\)"):
         load_scene(str(latin))
+
+
+# ---- near misses: "did you mean" ------------------------------------------------------------
+
+def _osa_distance(a: str, b: str) -> int:
+    """Optimal string alignment distance (edits: insert, delete, replace, swap neighbours), by
+    the textbook dynamic programme: the independent route for values.one_edit_apart."""
+    d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
+    for i in range(1, len(a) + 1):
+        for j in range(1, len(b) + 1):
+            d[i][j] = min(d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1]))
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
+    return d[len(a)][len(b)]
+
+
+def test_one_edit_apart_is_distance_one():
+    """one_edit_apart(a, b) holds exactly when the edit distance is 1, over every pair of
+    strings of length <= 3 over {a, b, c} (brute force)."""
+    import itertools
+
+    from hpcwedge.scene.values import one_edit_apart
+    words = [""] + ["".join(w) for n in (1, 2, 3) for w in itertools.product("abc", repeat=n)]
+    for a in words:
+        for b in words:
+            assert one_edit_apart(a, b) == (_osa_distance(a, b) == 1), (a, b)
+
+
+@pytest.mark.parametrize("where, data, message", [
+    ("top", {**BASE, "nmae": "x"}, "nmae: unknown key; did you mean `name`?"),
+    ("compute", scene(compute={"mu_cc": "cones"}), "compute.mu_cc: unknown key; did you mean `mu_c`?"),
+    ("builtin", scene(model={"kind": "plug2d", "row": 3}), "model.row: unknown parameter of plug2d; did you mean `rows`?"),
+])
+def test_unknown_key_one_edit_away_says_did_you_mean(where, data, message):
+    with pytest.raises(SceneError) as e:
+        parse_scene(data)
+    assert str(e.value).startswith(message), str(e.value)
+    assert "(allowed:" in str(e.value)
+
+
+def test_unknown_key_far_from_all_names_none():
+    with pytest.raises(SceneError) as e:
+        parse_scene(scene(compute={"zzzz": 1}))
+    assert "did you mean" not in str(e.value)
+
+
+def test_missing_required_key_names_its_near_miss():
+    """`mus = [...]` instead of `mu`: the error for the missing mu names `mus` (issue 44)."""
+    with pytest.raises(SceneError) as e:
+        parse_scene({**BASE, "friction": {"mus": [0.5]}})
+    assert str(e.value) == "friction.mu: required (one value or a list); found `mus`: did you mean `mu`?"
+    with pytest.raises(SceneError) as e:
+        parse_scene({**BASE, "model": {"knd": "plug2d"}})
+    assert "model.kind: required" in str(e.value) and "`knd`" in str(e.value)
+    with pytest.raises(SceneError) as e:
+        parse_scene({**BASE, "friction": {"coefficient": [0.5]}})
+    assert str(e.value) == "friction.mu: required (one value or a list)"
