@@ -71,10 +71,13 @@ def _parser() -> argparse.ArgumentParser:
                    "(RESULT.h5.ckpt)")
     s.add_argument("--json", action="store_true", help="one JSON object (SPEC §4)")
     s.add_argument("--no-rays", action="store_true", help="with --json: leave the ray vectors out")
+    s.add_argument("--all", action="store_true", help="list every cone and pattern (default: a run with "
+                   "more than 8 gives the first, the least mu^c and their spread)")
     pl = sub.add_parser("plot", help="draw a wedged configuration and the cones' / patterns' mu^c")
     pl.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
     pl.add_argument("-o", "--output", required=True, help="the figure to write (its format from the suffix: .png, .pdf, .svg)")
-    pl.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
+    pl.add_argument("--run", type=int, default=-1, help="run J, numbered from 0 as `show` lists them "
+                    "(default: the last, the largest mu)")
     pl.add_argument("--ray", type=int, help="2D: wedged ray to draw (default 0)")
     pl.add_argument("--pattern", type=int, help="3D: sign pattern to draw (default 0)")
     _export_arguments(sub)
@@ -89,7 +92,8 @@ def _export_arguments(sub) -> None:
                         "body rebuilt from the stored scene, and write them as a VTK XML unstructured grid.")
     ex.add_argument("result", help="a result file (HDF5) that `hpcwedge run` wrote")
     ex.add_argument("-o", "--output", required=True, help="the file to write (its name ends in .vtu)")
-    ex.add_argument("--run", type=int, default=-1, help="run index (default: the last)")
+    ex.add_argument("--run", type=int, default=-1, help="run J, numbered from 0 as `show` lists them "
+                    "(default: the last, the largest mu)")
     item = ex.add_mutually_exclusive_group(required=True)
     item.add_argument("--ray", type=int, help="2D: wedged ray J")
     item.add_argument("--cone", type=int, help="2D: cone J (the mean of its wedged rays)")
@@ -217,6 +221,7 @@ def _read(path: str, with_rays: bool = True):
 def _show(args) -> int:
     from hpcwedge.files import CheckpointGiven, FileError
     from hpcwedge.results.hdf5 import dump_result_json, read_result
+    from hpcwedge.results.summary import show_lines
     if args.no_rays and not args.json:
         raise _UserError("show: --no-rays only applies with --json (the text summary has no rays)")
     try:
@@ -228,52 +233,8 @@ def _show(args) -> int:
         return _show_checkpoint(args)
     except FileError as e:
         raise _UserError(str(e)) from None
-    mu_c = "null" if res.mu_c is None else f"{res.mu_c:.12g}"
-    status = ", ".join(x for x in (res.mu_c_status, _global_caveat(res)) if x)
-    print(f"{res.scene.name}: dim {res.scene.dim}, m {res.m}, mu_c = {mu_c}" + (f" ({status})" if status else ""))
-    # mu as given (shortest round-trip digits): runs 1e-11 apart stay apart
-    w = max([8] + [len(repr(float(run.mu))) for run in res.runs])
-    print(f"{'mu':>{w}} {'wedged':>8} {'trivial':>8} {'cones':>6} {'patterns':>9}")
-    for run in res.runs:
-        cells = [run.n_wedged_rays, run.n_trivial_rays, run.n_cones, run.n_patterns]
-        print(f"{float(run.mu)!r:>{w}} " + " ".join(f"{'-' if v is None else v:>{w}}"
-                                                 for v, w in zip(cells, (8, 8, 6, 9))))
-        for j, cone in enumerate(run.cones or []):
-            print(f"         cone {j}: {len(cone.rays)} rays, zero_u {cone.zero_u}, "
-                  f"zero_r {cone.zero_r}, mu_c {_mu_c_text(cone)}")
-        for j, pat in enumerate(run.patterns or []):
-            flag = " (undecided)" if pat.undecided else ""
-            print(f"         pattern {j}: contact {pat.contact}, mu_c {_mu_c_text(pat)}{flag}")
-    t = res.timings
-    print("timings: " + ", ".join(f"{k} {v:.3f} s" for k, v in t.items()))
+    print("\n".join(show_lines(res, args.result, every_item=args.all)))
     return 0
-
-
-def _global_caveat(res) -> str:
-    """What `show` adds to the global mu^c when it is not certified to 1e-9: the listed value
-    it is is not polished, or the global search left values unpolished or patterns' mu^c
-    undecided (stats.bnb.unsettled; a file without it: any solve undecided)."""
-    if res.mu_c is None:
-        return ""
-    items = [it for run in res.runs for it in (run.cones or []) + (run.patterns or [])]
-    source = [it for it in items if it.mu_c == res.mu_c]
-    if source:
-        return "" if all(it.mu_c_polished is not False for it in source) else "not polished: an upper bound"
-    st = res.stats
-    bnb, unpolished = st.get("bnb") or {}, st.get("mu_c_unpolished", 0)
-    if "unsettled" in bnb:
-        doubt, what = bnb["unsettled"], "pattern(s) with mu^c undecided"
-    else:
-        doubt, what = bnb.get("undecided", 0), "solve(s) undecided"
-    return f"not certified to 1e-9: {unpolished} value(s) not polished, {doubt} {what}" if unpolished or doubt else ""
-
-
-def _mu_c_text(item) -> str:
-    """A cone's or pattern's mu^c for `show`: "-" when not computed; a value not certified
-    to 1e-9 (an upper bound: a bisection bracket's end, or a 3D point not polished) says so."""
-    if item.mu_c is None:
-        return "-"
-    return f"{item.mu_c:.12g}" + (" (not polished: an upper bound)" if item.mu_c_polished is False else "")
 
 
 def _show_checkpoint(args) -> int:
@@ -318,11 +279,12 @@ def _plot(args) -> int:
     check_output(args.output, (args.result,), figure_format)
     _read(args.result, with_rays=False)
     try:
-        plot_result(args.result, args.output, run=args.run, ray=args.ray, pattern=args.pattern)
+        label = plot_result(args.result, args.output, run=args.run, ray=args.ray, pattern=args.pattern)
     except ValueError as e:
         raise _UserError(str(e)) from None
     except OSError as e:
         raise _cannot_write(args.output, e) from None
+    print(f"[hpcwedge] {label}: wrote {args.output}", file=sys.stderr)
     return 0
 
 

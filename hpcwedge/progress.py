@@ -159,8 +159,10 @@ class Progress:
         if now - self._last >= self.every or done == total:
             self._last = now
             elapsed = info.get("elapsed", 0.0)
+            # the rays so far (the last count is the run's, in show's words: pipeline.rays)
+            so_far = f"{info.get('rays', 0)} rays so far, " if done < total else ""
             print(f"[hpcwedge] {self.label}: {done}/{total} constraints, "
-                  f"{info.get('rays', 0)} live rays, {elapsed:.1f} s{eta(elapsed, done, total)}",
+                  f"{so_far}{elapsed:.1f} s{eta(elapsed, done, total)}",
                   file=self.stream, flush=True)
 
     def note(self, text: str) -> None:

@@ -69,9 +69,10 @@ def scene_reference() -> str:
     """The Markdown page of every scene key: table, type, allowed values, default, unit, meaning."""
     from hpcwedge.scene import keys
     lines = ["# Scene reference", "",
-             "Every key a scene file may hold, generated at build time from the table of scene keys",
-             "that the parser reads (`hpcwedge/scene/keys.py`; a built-in's keys are its generator's",
-             "parameters in `models/library.py`). Any other key is an error naming it. A built-in",
+             "Every key a scene file may hold, generated from the table of scene keys that the parser",
+             "reads (`hpcwedge/scene/keys.py`; a built-in's keys are its generator's parameters in",
+             "`models/library.py`) by `python scripts/docs_pages.py scene`; the docs build and",
+             "tests/test_docs.py fail when this page is stale. Any other key is an error naming it. A built-in",
              "`model.kind` takes only its generator's parameters; its `[contact]` is fixed by the model.", "",
              "*required*: no default. *—*: optional, no default (absent has its own meaning,",
              "given in the text). *Values*: what the type admits (blank: any). Units: the scene's own",
@@ -552,6 +553,20 @@ def render_markers(markdown: str) -> str:
         else:
             out.append(line)
     return "\n".join(out)
+
+
+SCENE_PAGE = os.path.join(ROOT, "docs", "reference", "scene.md")
+
+
+def stale_scene_reference() -> str:
+    """'' when docs/reference/scene.md (committed, so that links to it resolve on the
+    repository too) is what scene_reference() renders; else the one line that says how to
+    regenerate it."""
+    page = open(SCENE_PAGE).read() if os.path.exists(SCENE_PAGE) else ""
+    if page == scene_reference() + "\n":
+        return ""
+    return ("docs/reference/scene.md is not the scene reference of hpcwedge/scene/keys.py: "
+            "regenerate it with `PYTHONPATH=. python scripts/docs_pages.py scene > docs/reference/scene.md`")
 
 
 if __name__ == "__main__":

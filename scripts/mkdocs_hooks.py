@@ -1,19 +1,20 @@
-"""MkDocs hooks (mkdocs.yml `hooks:`): pages generated at build time, never committed.
+"""MkDocs hooks (mkdocs.yml `hooks:`). Every page a link names is a file under docs/, so that
+links resolve on the repository as on the site:
 
 - reference/scene.md: the scene reference (scripts/docs_pages.scene_reference), from the
-  parser's own key sets and defaults.
-- results/*.png, results/demo/*.png: the committed figures, served beside the pages.
-- guide/jobs.md: jobs/README.md (the batch scripts' documentation, kept beside them).
+  parser's own key sets and defaults; committed, and the build stops when it is stale
+  (`python scripts/docs_pages.py scene > docs/reference/scene.md` regenerates it).
+- results/ (a symlink to the repository's results/; mkdocs.yml serves only its figures) and
+  guide/jobs.md (a symlink to jobs/README.md, kept beside the batch scripts).
 - `<!-- bench: NAME -->` in a page: replaced by the table docs_pages.BENCHMARKS[NAME] renders
   from results/*.json.
 """
 from __future__ import annotations
 
-import glob
 import os
 import sys
 
-from mkdocs.structure.files import File
+from mkdocs.exceptions import PluginError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path[:0] = [p for p in (ROOT, os.path.join(ROOT, "scripts")) if p not in sys.path]
@@ -22,12 +23,9 @@ import docs_pages  # noqa: E402
 
 
 def on_files(files, config):
-    files.append(File.generated(config, "reference/scene.md", content=docs_pages.scene_reference()))
-    for png in sorted(glob.glob(os.path.join(ROOT, "results", "*.png"))
-                      + glob.glob(os.path.join(ROOT, "results", "demo", "*.png"))):
-        files.append(File.generated(config, os.path.relpath(png, ROOT), abs_src_path=png))
-    with open(os.path.join(ROOT, "jobs", "README.md")) as f:     # the job scripts' own page
-        files.append(File.generated(config, "guide/jobs.md", content=f.read()))
+    stale = docs_pages.stale_scene_reference()
+    if stale:
+        raise PluginError(stale)
     return files
 
 

@@ -51,7 +51,7 @@ def test_show_marks_the_mu_c_left_at_a_bracket(tmp_path, capsys, method):
     the JSON says mu_c_polished is false."""
     out, got = run_show_json(tmp_path, capsys, 'name = "p"\ndim = 3\n[model]\nkind = "plug3d"\nring = 4\n'
                              f'[friction]\nmu = [0.65]\n[compute]\nmu_c_method = "{method}"\n')
-    assert main(["show", out]) == 0
+    assert main(["show", out, "--all"]) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if "pattern " in ln]
     pats = got["runs"][0]["patterns"]
     assert len(lines) == len(pats) > 0
@@ -70,8 +70,8 @@ def test_show_says_when_the_global_search_left_mu_c_uncertified():
     show says it is not certified; with none, nothing is added."""
     from types import SimpleNamespace
 
-    from hpcwedge.cli import _global_caveat
     from hpcwedge.results.record import Run
+    from hpcwedge.results.summary import global_caveat as _global_caveat
     res = SimpleNamespace(mu_c=0.5, runs=[Run(mu=1.0)], stats={"mu_c_unpolished": 4, "bnb": {"undecided": 98}})
     assert _global_caveat(res) == "not certified to 1e-9: 4 value(s) not polished, 98 solve(s) undecided"
     res.stats = {"mu_c_unpolished": 0, "bnb": {"undecided": 0}}
@@ -834,7 +834,7 @@ def test_show_prints_each_mu_as_given(tmp_path, capsys):
     res = _run_quiet(tmp_path, _t(PLUG).replace("mu = [0.65]", "mu = [0.1763269807, 0.17632698071, 0.65]"), "mus")
     capsys.readouterr()
     assert main(["show", res]) == 0
-    rows = [ln.split()[0] for ln in capsys.readouterr().out.splitlines()[2:] if not ln.lstrip().startswith("cone")]
+    rows = [ln.split()[1] for ln in capsys.readouterr().out.splitlines()[2:] if not ln.lstrip().startswith("cone")]
     assert rows[:3] == ["0.1763269807", "0.17632698071", "0.65"]
 
 
@@ -859,3 +859,60 @@ def test_sigterm_before_the_runs_handlers_are_in(tmp_path):
     assert p.returncode == 75, p.stderr
     assert p.stderr == "[hpcwedge] SIGTERM: stopped before any checkpointable work\n", p.stderr
     assert sorted(os.listdir(tmp_path)) == ["s.toml"]
+
+
+# ----------------------------------------------------------------------------- a new user's first hour (issue 44)
+
+def _cli(cwd, *args, timeout=600):
+    """The command line as a user runs it (a subprocess, in `cwd`)."""
+    return subprocess.run([sys.executable, "-m", "hpcwedge", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=timeout, env={**os.environ, "PYTHONPATH": os.path.dirname(os.path.dirname(
+                              os.path.abspath(__file__)))})
+
+
+def test_show_summarises_plug3d_3x6(tmp_path):
+    """plug3d 3 x 6 at mu = 1 (3,796 patterns): `show` prints at most 40 lines (before: 3,800),
+    naming the first and the least-mu^c pattern, the spread and `--all`; `--all` lists every
+    pattern of the JSON, and the least is the JSON's least."""
+    (tmp_path / "p.toml").write_text('name = "p3"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = 3\nring = 6\n'
+                                     '[friction]\nmu = 1.0\n')
+    assert _cli(tmp_path, "run", "p.toml", "-o", "p.h5", "-q").returncode == 0
+    out = _cli(tmp_path, "show", "p.h5").stdout.splitlines()
+    pats = json.loads(_cli(tmp_path, "show", "p.h5", "--json", "--no-rays").stdout)["runs"][0]["patterns"]
+    least = min(range(len(pats)), key=lambda j: (pats[j]["mu_c"], j))
+    assert len(pats) == 3796 and len(out) <= 40
+    assert f"pattern {least}: contact {pats[least]['contact']}, mu_c {pats[least]['mu_c']:.12g} (the least mu_c)" in out[4]
+    assert out[3].endswith("(the first)") and "pattern 0: contact" in out[3]
+    assert "3,796 patterns" in out[5] and out[6].endswith("hpcwedge show p.h5 --all")
+    every = _cli(tmp_path, "show", "p.h5", "--all").stdout.splitlines()
+    assert sum(ln.lstrip().startswith("pattern ") for ln in every) == 3796
+
+
+def test_progress_uses_shows_words_and_plot_says_what_it_wrote(tmp_path):
+    """The run's progress gives the rays per mu as `show` counts them ("68 wedged + 4 trivial
+    rays", before "72 live rays"); `plot` says what it drew and wrote as `export` does, with
+    the run numbered as `show` numbers it (from 0; the default is the last run)."""
+    (tmp_path / "plug.toml").write_text('name = "p"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 4\n'
+                                        '[friction]\nmu = [0.3, 0.65]\n')
+    p = _cli(tmp_path, "run", "plug.toml", "-o", "plug.h5")
+    assert p.returncode == 0, p.stderr
+    assert "live rays" not in p.stderr
+    said = [ln.split(": ", 1)[1] for ln in p.stderr.splitlines() if "trivial rays" in ln]
+    rows = [ln.split() for ln in _cli(tmp_path, "show", "plug.h5").stdout.splitlines()[2:] if ln[:3].strip().isdigit()]
+    assert said == [f"{r[2]} wedged + {r[3]} trivial rays" for r in rows] == ["68 wedged + 4 trivial rays",
+                                                                         "244 wedged + 4 trivial rays"]
+    assert [(r[0], r[1]) for r in rows] == [("0", "0.3"), ("1", "0.65")]
+    for args, line in ((["--run", "0", "--ray", "3"], "[hpcwedge] run 0 (mu = 0.3), wedged ray 3: wrote f.png"),
+                       ([], "[hpcwedge] run 1 (mu = 0.65), wedged ray 0: wrote f.png")):
+        p = _cli(tmp_path, "plot", "plug.h5", "-o", "f.png", *args)
+        assert p.returncode == 0 and p.stderr.splitlines() == [line], p.stderr
+    p = _cli(tmp_path, "export", "plug.h5", "--run", "0", "--ray", "3", "-o", "f.vtu")
+    assert p.stderr.startswith("[hpcwedge] run 0 (mu = 0.3), wedged ray 3 of 68")
+
+
+def test_figure_titles_number_runs_from_zero():
+    """The figures' run title: the index `--run` takes, and the range of runs, never a count
+    that reads as a 1-based number ("run 0 of 1", "run 1 of 2" before)."""
+    from hpcwedge.post.plot import run_title
+    assert run_title(1, 2, 0.65) == "run 1 (mu = 0.65) of runs 0-1"
+    assert run_title(0, 1, 1.0) == "run 0 (mu = 1), the only run"

@@ -42,11 +42,12 @@ FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg", "": "png"}
 
 
 def plot_result(path: str, output: str, run: int = -1, ray: int | None = None,
-                pattern: int | None = None) -> None:
+                pattern: int | None = None) -> str:
     """Draw run `run` (Python-style index, -1 = last) of the result file `path` and save the
     figure to `output` (atomically; PNG, PDF or SVG by its suffix, `figure_format`): for a
     2D result its wedged ray `ray` (default 0), for a 3D result its sign pattern `pattern`
-    (default 0).
+    (default 0). Returns what was drawn, as export's label says it: "run 1 (mu = 0.65),
+    wedged ray 0" (runs numbered from 0, as `show` lists them).
 
     ValueError (one line) for an output suffix of no known format, a bad run, ray or
     pattern index, `pattern` given for a 2D or `ray` for a 3D result (PlotError), or a file
@@ -69,11 +70,19 @@ def plot_result(path: str, output: str, run: int = -1, ray: int | None = None,
         FigureCanvasAgg(fig)
         from hpcwedge.post.plot3d import figure_3d
         figure_3d(fig, data)
-    fig.suptitle(f"{data['name']}: run {data['run']} of {data['n_runs']} (mu = {data['mu']:.6g}), {what}",
-                 fontsize=12)
+    fig.suptitle(f"{data['name']}: {run_title(data['run'], data['n_runs'], data['mu'])}, {what}", fontsize=12)
     if data["dim"] == 2:
         fig.tight_layout()
     replace_atomic(output, lambda tmp: fig.savefig(tmp, format=fmt), "." + fmt)
+    kind = "ray" if data["dim"] == 2 else "pattern"
+    item = "" if data.get(kind) is None else f", {'wedged ray' if kind == 'ray' else 'sign pattern'} {data[kind]}"
+    return f"run {data['run']} (mu = {data['mu']:.6g}){item}"
+
+
+def run_title(k: int, n_runs: int, mu: float) -> str:
+    """A figure's run, numbered from 0 as `show`, `--run` and the JSON's runs list number it:
+    "run 1 (mu = 0.65) of runs 0-1", "run 0 (mu = 0.65), the only run"."""
+    return f"run {k} (mu = {mu:.6g})" + (", the only run" if n_runs == 1 else f" of runs 0-{n_runs - 1}")
 
 
 def figure_format(output: str) -> str:

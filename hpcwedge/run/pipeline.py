@@ -222,7 +222,12 @@ def rays(ctx: Context) -> list[Rays]:
                 for dd, (p, cond_T), mu in zip(dds, coords, scene.mu)]
     else:                                        # one mu at a time: each DD dropped once filed
         done = (_rays_whole(ctx, mu) for mu in scene.mu)
-    return [_rays_of(dd, p_run, m, mu, e) for mu, (dd, p_run) in zip(scene.mu, done)]
+    found = []
+    for mu, (dd, p_run) in zip(scene.mu, done):
+        found.append(r := _rays_of(dd, p_run, m, mu, e))
+        # the counts in show's words (cli.py)
+        ctx.progress.note(f"rays mu={mu:g}: {len(r.rays)} wedged + {len(r.trivial_rays)} trivial rays")
+    return found
 
 
 def _rays_whole(ctx: Context, mu: float):

@@ -146,6 +146,7 @@ def test_cli_plot(stiffness_h5, tmp_path, capsys):
     png = str(tmp_path / "cli.png")
     assert main(["plot", stiffness_h5, "-o", png]) == 0
     check_png(png)
+    assert capsys.readouterr().err == f"[hpcwedge] run 0 (mu = 2.5), wedged ray 0: wrote {png}\n"
     bad = str(tmp_path / "bad.png")
     assert main(["plot", stiffness_h5, "-o", bad, "--ray", "7"]) == 2
     err = capsys.readouterr().err

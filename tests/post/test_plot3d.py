@@ -88,6 +88,7 @@ def test_plug3d_png(tmp_path, capsys):
     _check_3d_png(png)
     assert main(["plot", h5, "-o", str(tmp_path / "cli.png"), "--run", "0", "--pattern", "-1"]) == 0
     _check_3d_png(tmp_path / "cli.png", contact_and_gap=False)   # mu 0.3: all nodes in contact
+    assert capsys.readouterr().err.startswith("[hpcwedge] run 0 (mu = 0.3), sign pattern ")
     bad = str(tmp_path / "bad.png")
     for args, say in ((["--pattern", "100000"], "pattern 100000 out of range (run 1 has "),
                       (["--run", "5"], "run 5 out of range (the result has 2 run(s)"),
