@@ -25,7 +25,10 @@ MISSING = [m for m in DOCS_TOOLS if importlib.util.find_spec(m.split(".")[0]) is
 needs_docs_tools = pytest.mark.skipif(
     bool(MISSING), reason=f"docs tools not installed ({', '.join(MISSING)}): make setup-docs (make test does it)")
 
-PAGES = sorted(glob.glob(os.path.join(ROOT, "docs", "**", "*.md"), recursive=True)) + [os.path.join(ROOT, "README.md")]
+# docs/ itself, not what its symlinks show (results/, guide/jobs.md = jobs/README.md)
+PAGES = sorted(p for p in glob.glob(os.path.join(ROOT, "docs", "**", "*.md"), recursive=True)
+               if os.path.realpath(p) == os.path.join(os.path.realpath(ROOT), os.path.relpath(p, ROOT))) + [
+    os.path.join(ROOT, "README.md")]
 BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 
