@@ -195,7 +195,8 @@ def test_tutorial_table_is_what_show_prints(tmp_path):
     (tmp_path / "plug.toml").write_text(TOML.findall(text)[0])
     shown = text.split("    $ hpcwedge show plug.h5\n", 1)[1].split("\n\n", 1)[0]
     expected = [ln[4:] for ln in shown.splitlines() if not ln.strip().startswith("timings:")]
-    run = lambda *a: subprocess.run([sys.executable, "-m", "hpcwedge", *a], cwd=tmp_path,  # noqa: E731
+    env = {**os.environ, "PYTHONPATH": ROOT}          # this checkout, not an installed copy
+    run = lambda *a: subprocess.run([sys.executable, "-m", "hpcwedge", *a], cwd=tmp_path, env=env,  # noqa: E731
                                     capture_output=True, text=True, timeout=300)
     p = run("run", "plug.toml", "-o", "plug.h5")
     assert p.returncode == 0, p.stderr

@@ -205,3 +205,12 @@ def test_generated_pages_are_committed_and_current():
     assert docs_pages.stale_scene_reference() == ""
     assert os.path.samefile(os.path.join(ROOT, "docs", "guide", "jobs.md"), os.path.join(ROOT, "jobs", "README.md"))
     assert os.path.samefile(os.path.join(ROOT, "docs", "results"), os.path.join(ROOT, "results"))
+
+
+def test_tutorial_cork_scene_is_the_file_it_names():
+    """The tutorial's cork scene is scripts/examples/cork2d.toml byte for byte (before: the
+    tutorial's copy left out `thickness` and `[compute]`)."""
+    text = open(os.path.join(ROOT, "docs", "tutorial.md")).read()
+    shown = [b for b in blocks(text) if b.fenced and b.why == "scripts/examples/cork2d.toml"]
+    assert len(shown) == 1
+    assert "\n".join(shown[0].lines) + "\n" == open(os.path.join(ROOT, "scripts", "examples", "cork2d.toml")).read()
