@@ -204,7 +204,8 @@ def _model_kind(data: dict, dim: int) -> str:
     """model.kind, one of KINDS, a built-in only in its own dimension."""
     kind = _table_with(data, "model", "kind")["kind"]
     if kind not in KINDS:
-        raise SceneError(f"model.kind: unknown kind {kind!r} (one of {', '.join(KINDS)})")
+        near = did_you_mean(kind, KINDS) if isinstance(kind, str) else ""
+        raise SceneError(f"model.kind: unknown kind {kind!r}{near} (one of {', '.join(KINDS)})")
     if kind in BUILTIN_DIM and BUILTIN_DIM[kind] != dim:
         raise SceneError(f"dim: {kind} is a {BUILTIN_DIM[kind]}D model, scene says dim = {dim}")
     return kind

@@ -243,6 +243,11 @@ def test_unknown_key_one_edit_away_says_did_you_mean(where, data, message):
     assert "(allowed:" in str(e.value)
 
 
+def test_unknown_kind_one_edit_away_says_did_you_mean():
+    with pytest.raises(SceneError, match=r"^model.kind: unknown kind 'plug2'; did you mean `plug2d`\? \(one of "):
+        parse_scene(scene(model={"kind": "plug2"}))
+
+
 def test_unknown_key_far_from_all_names_none():
     with pytest.raises(SceneError) as e:
         parse_scene(scene(compute={"zzzz": 1}))
