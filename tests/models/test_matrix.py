@@ -1,0 +1,149 @@
+"""kind = "matrix": a stiffness assembled outside hpcwedge (scikit-fem plane stress in 2D, a
+truss in 3D), read from MatrixMarket, .npz and PETSc binary, against the same body condensed
+by dense numpy and given as kind = "stiffness" (tests/matrix_bodies.py)."""
+import os
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from matrix_bodies import matrix_scene, plug_2d, plug_3d, stiffness_scene, write_matrix
+from mpi_helpers import needs_mpirun, run, show_json
+
+from hpcwedge import api
+from hpcwedge.models.matrix import check_stiffness, largest_entry, read_nodes, read_stiffness
+from hpcwedge.scene.parse import load_scene
+
+REL = 1e-9
+FORMATS = ("mtx", "npz", "petsc")
+
+
+@pytest.fixture(scope="module")
+def body2d():
+    return plug_2d()
+
+
+@pytest.fixture(scope="module")
+def reference2d(tmp_path_factory, body2d):
+    return api.solve(stiffness_scene(tmp_path_factory.mktemp("ref2d"), body2d))
+
+
+def _cones(result):
+    """Per run: {zero_u of the cone: its mu^c} and the counts of wedged rays and cones."""
+    return [({tuple(c.zero_u): c.mu_c for c in run.cones}, len(run.rays), len(run.cones)) for run in result.runs]
+
+
+def _same_2d(got, ref):
+    assert got.mu_c == pytest.approx(ref.mu_c, rel=REL)
+    for (cones, rays, n), (cones_ref, rays_ref, n_ref) in zip(_cones(got), _cones(ref)):
+        assert (rays, n) == (rays_ref, n_ref)
+        assert cones.keys() == cones_ref.keys()
+        for key, mu_c in cones_ref.items():
+            assert (cones[key] is None) == (mu_c is None)
+            if mu_c is not None:
+                assert cones[key] == pytest.approx(mu_c, rel=REL)
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_2d_formats_give_the_condensed_routes_answers(tmp_path, body2d, reference2d, fmt):
+    got = api.solve(matrix_scene(tmp_path, body2d, fmt))
+    assert sum(n for _, _, n in _cones(reference2d)) > 1            # cones to compare
+    _same_2d(got, reference2d)
+
+
+def test_3d_truss_as_a_matrix_gives_the_condensed_routes_answers(tmp_path):
+    body = plug_3d()
+    got = api.solve(matrix_scene(tmp_path, body, "petsc", mu=(0.6,)))
+    ref = api.solve(stiffness_scene(tmp_path, body, mu=(0.6,)))
+    assert got.mu_c == pytest.approx(ref.mu_c, rel=REL)
+    pats = {tuple(p.contact): p.mu_c for p in got.runs[0].patterns}
+    pats_ref = {tuple(p.contact): p.mu_c for p in ref.runs[0].patterns}
+    assert pats.keys() == pats_ref.keys() and len(pats) > 1
+    for key, mu_c in pats_ref.items():
+        assert pats[key] == pytest.approx(mu_c, rel=REL)
+
+
+def _answers(path):
+    d = show_json(path, rays=False)
+    return d["mu_c"], [[(c["zero_u"], c["mu_c"]) for c in r.get("cones") or []] +
+                       [(p["contact"], p["mu_c"]) for p in r.get("patterns") or []] for r in d["runs"]]
+
+
+@pytest.mark.mpi
+@needs_mpirun
+@pytest.mark.parametrize("fmt,condense", [("petsc", "distributed"), ("mtx", "distributed"), ("npz", "serial")])
+def test_2d_under_mpirun_n3(tmp_path, body2d, fmt, condense):
+    # under mpirun -n 3 (PETSc binary: each rank MatLoads its third of the rows) the answers of
+    # the condensed-K route run serially
+    ref = str(tmp_path / "ref.h5")
+    run(None, "run", stiffness_scene(tmp_path, body2d), "-o", ref, "-q")
+    out = str(tmp_path / "m.h5")
+    run(3, "run", matrix_scene(tmp_path, body2d, fmt, extra=f'[run]\ncondense = "{condense}"\n'), "-o", out, "-q",
+        timeout=300)
+    _compare(_answers(out), _answers(ref))
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_3d_truss_under_mpirun_n3_distributed(tmp_path):
+    body = plug_3d()
+    ref = str(tmp_path / "ref.h5")
+    run(None, "run", stiffness_scene(tmp_path, body, mu=(0.6,)), "-o", ref, "-q")
+    out = str(tmp_path / "m.h5")
+    run(3, "run", matrix_scene(tmp_path, body, "petsc", mu=(0.6,), extra='[run]\ncondense = "distributed"\n'),
+        "-o", out, "-q", timeout=300)
+    _compare(_answers(out), _answers(ref))
+
+
+def _compare(got, ref):
+    assert got[0] == pytest.approx(ref[0], rel=REL)
+    for a, b in zip(got[1], ref[1]):
+        assert [k for k, _ in a] == [k for k, _ in b] and a
+        assert [v for _, v in a] == pytest.approx([v for _, v in b], rel=REL)
+
+
+def test_the_three_formats_read_the_same_matrix(tmp_path, body2d):
+    K = body2d[0]
+    for fmt, rel in (("mtx", 1e-15), ("npz", 0)):
+        # symmetric storage keeps one triangle: skfem's K is symmetric to rounding only
+        write_matrix(K, tmp_path / f"k.{fmt}")
+        assert abs(read_stiffness(str(tmp_path / f"k.{fmt}"), "k") - K).max() <= rel * abs(K).max()
+    write_matrix(K, tmp_path / "k.petsc")
+    from hpcwedge.contact.condense import load_petsc
+    assert abs(load_petsc(str(tmp_path / "k.petsc")) - K).max() == 0
+    # the streamed largest entry of the PETSc file against scipy's
+    assert largest_entry(str(tmp_path / "k.petsc")) == abs(K).max()
+
+
+def test_nodes_csv_with_and_without_header_npy_and_inline(tmp_path):
+    X = np.array([[0.0, 1.5], [2.0, -1.0], [3.25, 0.5]])
+    (tmp_path / "h.csv").write_text("x,y\n" + "\n".join(f"{a},{b}" for a, b in X))
+    (tmp_path / "n.csv").write_text("\n".join(f"{a},{b}" for a, b in X))
+    np.save(tmp_path / "n.npy", X)
+    for value in ("h.csv", "n.csv", "n.npy", X.tolist()):
+        assert np.array_equal(read_nodes(value, str(tmp_path), 2), X)
+    with pytest.raises(ValueError, match="model.nodes: expected"):
+        read_nodes(X.tolist(), str(tmp_path), 3)
+
+
+def test_check_stiffness_symmetrises_and_refuses():
+    K = sp.csr_matrix(np.array([[2.0, -1.0], [-1.0 + 1e-14, 2.0]]))
+    S = check_stiffness(K, 2)
+    assert abs(S - S.T).max() == 0 and abs(S - K).max() <= 1e-14
+    for bad, what in [(np.array([[1.0, 2.0], [0.0, 1.0]]), "not symmetric"), (np.zeros((2, 2)), "all zero"),
+                      (np.array([[np.nan, 0], [0, 1.0]]), "NaN"), (np.ones((2, 3)), "square")]:
+        with pytest.raises(ValueError, match=f"model.K: .*{what}"):
+            check_stiffness(sp.csr_matrix(bad), 2)
+    with pytest.raises(ValueError, match="size 2, expected dim x nodes = 4"):
+        check_stiffness(K, 4)
+
+
+def test_the_identity_covers_every_file(tmp_path, body2d):
+    path = matrix_scene(tmp_path, body2d, "mtx", extra="")
+    scene = load_scene(path)
+    assert [os.path.basename(f) for f in scene.input_files] == ["body.mtx", "nodes.csv"]
+    before = scene.input_digests
+    assert set(before) == {"model.K body.mtx", "model.nodes nodes.csv"}
+    with open(tmp_path / "nodes.csv", "a") as f:
+        f.write("\n")
+    assert load_scene(path).input_digests["model.nodes nodes.csv"] != before["model.nodes nodes.csv"]
+    assert load_scene(path).input_digests["model.K body.mtx"] == before["model.K body.mtx"]
