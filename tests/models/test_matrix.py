@@ -147,3 +147,87 @@ def test_the_identity_covers_every_file(tmp_path, body2d):
         f.write("\n")
     assert load_scene(path).input_digests["model.nodes nodes.csv"] != before["model.nodes nodes.csv"]
     assert load_scene(path).input_digests["model.K body.mtx"] == before["model.K body.mtx"]
+
+
+def _with_isolated_node(body):
+    """body with one more node, not connected to anything: two zero modes beyond the rigid ones."""
+    K, X, contact, normals = body
+    return sp.block_diag([K, sp.csr_matrix((2, 2))]).tocsr(), np.vstack([X, [0.0, 0.5]]), contact, normals
+
+
+def _bad_cases(body):
+    K, X, contact, normals = body
+    n = K.shape[0]
+    asym = K.tolil()
+    asym[0, 1] += 1e-3 * abs(K).max()
+    nan = K.tolil()
+    nan[3, 3] = np.nan
+    grounded = K + sp.csr_matrix(([abs(K).max()], ([0], [0])), shape=K.shape)
+    return {
+        "missing file": ({"K": "nothere.mtx"}, None, "model.K: nothere.mtx not found"),
+        "garbage .mtx": ({}, ("body.mtx", b"%%MatrixMarket garbage\n"), "model.K: cannot read body.mtx"),
+        "garbage .petsc": ({"K": "body.petsc"}, ("body.petsc", b"\x00" * 64), "model.K: body.petsc is not a PETSc"),
+        "unknown format": ({"K": "body.txt"}, ("body.txt", b"1 2\n"), "model.K: body.txt: unsupported"),
+        "not square": ({"K": "k.npz"}, ("k.npz", sp.random(n, n + 2, density=0.1)), "model.K: must be square"),
+        "wrong size": ({"K": "k.npz"}, ("k.npz", sp.eye(n + 2)), f"model.K: size {n + 2}, expected dim x nodes"),
+        "not symmetric": ({"K": "k.npz"}, ("k.npz", asym.tocsr()), "model.K: not symmetric"),
+        "NaN": ({"K": "k.npz"}, ("k.npz", nan.tocsr()), "model.K: NaN"),
+        "grounded without supports": ({"K": "k.npz"}, ("k.npz", grounded), "model.K: does not annihilate"),
+        "nodes missing": ({"nodes": "nothere.csv"}, None, "model.nodes: nothere.csv not found"),
+        "node out of range": ({"contact.nodes": [len(X)] + contact[1:].tolist()}, None,
+                              f"contact.nodes: node {len(X)} does not exist"),
+        "normals count": ({"contact.normals": normals[1:].tolist()}, None, "contact.normals: expected shape"),
+    }
+
+
+def _bad_scene(tmp_path, body, change, content):
+    path = matrix_scene(tmp_path, body, "mtx")
+    text = open(path).read()
+    for key, value in change.items():
+        table, _, name = key.rpartition(".")
+        old = next(ln for ln in text.splitlines() if ln.startswith(f"{name} = ") and
+                   text.index(ln) > text.index(f"[{table or 'model'}]"))
+        text = text.replace(old, f"{name} = {value!r}".replace("'", '"'))
+    open(path, "w").write(text)
+    if content is not None:
+        name, data = content
+        if isinstance(data, bytes):
+            (tmp_path / name).write_bytes(data)
+        else:
+            write_matrix(data, tmp_path / name)
+    return path
+
+
+@pytest.mark.parametrize("case", list(_bad_cases(plug_2d(2, 1))))
+def test_bad_input_is_one_line_exit_2_nothing_written(tmp_path, capsys, case):
+    from hpcwedge.cli import main
+    body = plug_2d(2, 1)
+    change, content, message = _bad_cases(body)[case]
+    path = _bad_scene(tmp_path, body, change, content)
+    out = tmp_path / "r.h5"
+    capsys.readouterr()
+    assert main(["run", path, "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not [f for f in os.listdir(tmp_path) if f.startswith("r.h5")]
+
+
+@pytest.mark.parametrize("fmt", ["mtx", "petsc"])
+def test_a_mechanism_names_its_extra_zero_modes(tmp_path, capsys, fmt):
+    from hpcwedge.cli import main
+    path = matrix_scene(tmp_path, _with_isolated_node(plug_2d(2, 1)), fmt)
+    capsys.readouterr()
+    assert main(["run", path, "-o", str(tmp_path / "r.h5"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "model.K" in err[0] and "2 null pivot(s)" in err[0], err
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_a_mechanism_distributed_is_one_line_exit_2(tmp_path):
+    path = matrix_scene(tmp_path, _with_isolated_node(plug_2d(2, 1)), "petsc", extra='[run]\ncondense = "distributed"\n')
+    p = run(3, "run", path, "-o", str(tmp_path / "r.h5"), "-q", check=False, timeout=120)
+    # one message from the master (mpirun adds its MPI_ABORT banner), status 2, no hang
+    assert p.returncode == 2 and p.stderr.count("hpcwedge: error: model.K: ") == 1, p.stderr
+    assert "2 null pivot(s)" in p.stderr
+    assert not [f for f in os.listdir(tmp_path) if f.startswith("r.h5")]
