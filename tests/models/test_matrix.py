@@ -231,3 +231,28 @@ def test_a_mechanism_distributed_is_one_line_exit_2(tmp_path):
     assert p.returncode == 2 and p.stderr.count("hpcwedge: error: model.K: ") == 1, p.stderr
     assert "2 null pivot(s)" in p.stderr
     assert not [f for f in os.listdir(tmp_path) if f.startswith("r.h5")]
+
+
+def test_pictures_of_nodes_only_and_with_a_mesh(tmp_path, body2d):
+    # plot and export: without model.mesh the nodes (no cells), with it the whole body
+    import meshio
+    import skfem
+
+    from hpcwedge.cli import main
+    K, X, contact, normals = body2d
+    grid = skfem.MeshTri.init_tensor(np.linspace(0, 1, 5), np.linspace(0, 1, 4))     # plug_2d's cells
+    meshio.write(tmp_path / "body.vtu", meshio.Mesh(np.column_stack([X, np.zeros(len(X))]), [("triangle", grid.t.T)]))
+    for name, extra in (("nodes", ""), ("mesh", 'mesh = "body.vtu"\n')):
+        path = matrix_scene(tmp_path, body2d, "npz", mu=(0.8,), name=name)
+        text = open(path).read().replace('nodes = "nodes.csv"\n', 'nodes = "nodes.csv"\n' + extra)
+        open(path, "w").write(text)
+        out = str(tmp_path / f"{name}.h5")
+        assert main(["run", path, "-o", out, "-q"]) == 0
+        assert main(["plot", out, "-o", str(tmp_path / f"{name}.png"), "--ray", "0"]) == 0
+        assert (tmp_path / f"{name}.png").stat().st_size > 0
+        assert main(["export", out, "-o", str(tmp_path / f"{name}.vtu"), "--ray", "0"]) == 0
+        vtu = meshio.read(tmp_path / f"{name}.vtu")
+        assert len(vtu.points) == len(X)
+        assert np.abs(vtu.point_data["reaction"][contact]).max() > 0
+        kinds = {b.type: len(b.data) for b in vtu.cells}
+        assert kinds == ({"triangle": grid.t.shape[1]} if name == "mesh" else {"vertex": len(X)})
