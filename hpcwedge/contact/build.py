@@ -5,7 +5,6 @@ model, no condensation); every other kind builds a Model and condenses it.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 
@@ -109,7 +108,7 @@ def build_model(scene: Scene) -> Model:
         model = _build_model(scene, params)
         material = {k: np.ldexp(np.asarray(v, dtype=float), e) if k in MATERIAL_MODULI else v
                     for k, v in model.material.items()}
-        model = dataclasses.replace(model, material=material)
+        model = model.replace(material=material)        # K stays unassembled (distributed rows)
     guard_condensed(scene, len(model.contact_nodes), model.dim)
     return model
 
