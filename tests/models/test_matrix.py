@@ -222,14 +222,32 @@ def test_a_mechanism_names_its_extra_zero_modes(tmp_path, capsys, fmt):
     assert len(err) == 1 and "model.K" in err[0] and "2 null pivot(s)" in err[0], err
 
 
+def _distributed_bad(body, case):
+    """(body, message) of a bad PETSc binary K for the distributed checks (condense._check_loaded)."""
+    K, X, contact, normals = body
+    if case == "mechanism":
+        return _with_isolated_node(body), "2 null pivot(s)"
+    K = K.tolil()
+    if case == "not symmetric":
+        K[0, 1] += 1e-3 * abs(K).max()
+    elif case == "NaN":
+        K[3, 3] = np.nan
+    else:                                   # a spring to ground that no support lists
+        K[0, 0] += abs(K).max()
+    return (K.tocsr(), X, contact, normals), {"grounded": "does not annihilate"}.get(case, case)
+
+
 @pytest.mark.mpi
 @needs_mpirun
-def test_a_mechanism_distributed_is_one_line_exit_2(tmp_path):
-    path = matrix_scene(tmp_path, _with_isolated_node(plug_2d(2, 1)), "petsc", extra='[run]\ncondense = "distributed"\n')
+@pytest.mark.parametrize("case", ["mechanism", "not symmetric", "NaN", "grounded"])
+def test_bad_matrix_distributed_is_one_line_exit_2(tmp_path, case):
+    # checked on the ranks' rows (no rank holds the whole K): one message from the master
+    # (mpirun adds its MPI_ABORT banner), status 2, no hang, nothing written
+    body, message = _distributed_bad(plug_2d(2, 1), case)
+    path = matrix_scene(tmp_path, body, "petsc", extra='[run]\ncondense = "distributed"\n')
     p = run(3, "run", path, "-o", str(tmp_path / "r.h5"), "-q", check=False, timeout=120)
-    # one message from the master (mpirun adds its MPI_ABORT banner), status 2, no hang
     assert p.returncode == 2 and p.stderr.count("hpcwedge: error: model.K: ") == 1, p.stderr
-    assert "2 null pivot(s)" in p.stderr
+    assert message in p.stderr
     assert not [f for f in os.listdir(tmp_path) if f.startswith("r.h5")]
 
 
