@@ -205,6 +205,9 @@ def _mesh_3d(ax, cells: dict, X: np.ndarray, Y: np.ndarray, values: dict, label:
         else:
             lc.set_color("tab:blue")
         ax.add_collection3d(lc)
+    if not cells:                                       # nodes only (a matrix body without a mesh)
+        ax.scatter(*X.T, s=4, color="0.7", depthshade=False, zorder=1)
+        ax.scatter(*Y.T, s=6, color="tab:blue", depthshade=False, zorder=2, label=label)
 
 
 def _contact_nodes_3d(ax, P: np.ndarray, in_c: np.ndarray, reac: np.ndarray, n: np.ndarray,
