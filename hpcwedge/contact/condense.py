@@ -170,8 +170,8 @@ def _check_loaded(B: sp.csr_matrix, model: Model, comm) -> None:
     collectively: ValueError naming model.K on every rank alike when K holds a NaN, is all zero,
     is not symmetric to SYM_RTOL (PETSc's MatIsSymmetric on the parallel matrix), or does not
     annihilate the model's rigid modes to RIGID_RTOL."""
-    finite = comm.allreduce(int(not np.all(np.isfinite(B.data))))
-    if finite:
+    bad_ranks = comm.allreduce(int(not np.all(np.isfinite(B.data))))
+    if bad_ranks:
         raise ValueError("model.K: NaN or infinite entries")
     scale = comm.allreduce(float(np.abs(B.data).max()) if B.nnz else 0.0, op=_mpi_max())
     if scale == 0:
@@ -286,7 +286,9 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
     [r n_i / P, (r+1) n_i / P) of K_ii (and of K_ic) into a parallel PETSc MPIAIJ matrix on
     `comm`: with a comm, a model with element data (model.assembly: continuum meshes, with or
     without contact patches) assembles only these rows and the contact rows, from the elements
-    incident to their nodes, never the whole K (`_distributed_blocks`); other models (trusses,
+    incident to their nodes, never the whole K (`_distributed_blocks`); a stiffness in a PETSc
+    binary file (models.matrix.StiffnessFile) is read by MatLoad, rank r its rows
+    [r N / P, (r+1) N / P) only (`_loaded_blocks`); other models (trusses,
     hand-made K) and comm None slice them from the whole model.K (comm None: exactly as
     before, bit for bit). K_ii is factored once by parallel MUMPS ("petsc" native LU is serial
     only: ValueError with more than one rank); each rank multiplies its rows of X = K_ii^-1 K_ic by
