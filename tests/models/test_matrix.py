@@ -285,3 +285,20 @@ def test_3d_picture_of_nodes_only(tmp_path):
     assert main(["run", path, "-o", out, "-q"]) == 0
     assert main(["plot", out, "-o", str(tmp_path / "p.png"), "--pattern", "0"]) == 0
     assert (tmp_path / "p.png").stat().st_size > 0
+
+
+def test_a_result_is_another_scenes_once_a_files_bytes_change(tmp_path):
+    # the identity of a run (checkpoints, results: SPEC §5) covers model.K and model.nodes
+    from hpcwedge.cli import main
+    from hpcwedge.results.hdf5 import result_state
+    body = plug_2d(2, 1)
+    path = matrix_scene(tmp_path, body, "petsc", mu=(0.8,))
+    out = str(tmp_path / "r.h5")
+    assert main(["run", path, "-o", out, "-q"]) == 0
+    assert result_state(out, load_scene(path)) == "complete"
+    for name, change in (("nodes.csv", lambda b: b + b"\n"), ("body.petsc", lambda b: b[:-8] + bytes(8))):
+        before = (tmp_path / name).read_bytes()
+        (tmp_path / name).write_bytes(change(before))
+        assert result_state(out, load_scene(path)) == "other-scene"
+        (tmp_path / name).write_bytes(before)
+        assert result_state(out, load_scene(path)) == "complete"
