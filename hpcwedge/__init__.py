@@ -7,7 +7,7 @@ holds every import to this order):
 - errors, version, nodesets, exact, files, environment, progress: leaves.
 - parallel/: the engine (serial, or master and workers over MPI), its jobs, cancellation and
   checkpoints; it knows nothing of wedging.
-- models/: bodies (trusses, meshes, built-ins) as a Model record.
+- models/: bodies (trusses, meshes, built-ins, stiffness matrices from other FE codes) as a Model record.
 - scene/: the table of scene keys, TOML -> a validated Scene.
 - contact/: Scene -> Model -> ContactProblem (condensation with PETSc).
 - results/: the Result record (runs, typed cones and patterns) and its HDF5 file.

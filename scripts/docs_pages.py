@@ -61,7 +61,8 @@ TITLES = {
     "model.stiffness": '[model] kind = "stiffness"', "model.truss": '[model] kind = "truss"',
     "contact.truss": "[contact] of a truss", "model.mesh": '[model] kind = "mesh"',
     "contact.mesh": "[contact] of a mesh", "obstacle.plane": '[[obstacle]] type = "plane"',
-    "obstacle.cone": '[[obstacle]] type = "cone"',
+    "obstacle.cone": '[[obstacle]] type = "cone"', "model.matrix": '[model] kind = "matrix"',
+    "contact.matrix": "[contact] of a matrix",
 }
 
 

@@ -577,6 +577,68 @@ def scene_cases() -> list[Case]:
     return cases
 
 
+def matrix_body(folder: str, K=None, nodes=None) -> dict:
+    """kind = "matrix": plug2d rows 3 (a truss) written as body.mtx and nodes.csv in folder
+    (K, nodes: other arrays to write instead); the scene table."""
+    import numpy as np
+    import scipy.io
+    import scipy.sparse as sp
+
+    from hpcwedge.models.library import plug2d
+    mdl = plug2d(rows=3)
+    scipy.io.mmwrite(os.path.join(folder, "body.mtx"), sp.coo_matrix(mdl.K if K is None else K))
+    np.savetxt(os.path.join(folder, "nodes.csv"), mdl.coords if nodes is None else nodes, delimiter=",")
+    return {"name": "matrix", "dim": 2, "model": {"kind": "matrix", "K": "body.mtx", "nodes": "nodes.csv"},
+            "contact": {"nodes": mdl.contact_nodes.tolist(), "normals": mdl.normals.tolist()},
+            "friction": {"mu": [0.65]}}
+
+
+def matrix_cases() -> list[Case]:
+    """Bad input of a kind = "matrix" scene: every one a line naming the key, exit 2, nothing written."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    from hpcwedge.models.library import plug2d
+    cases = []
+    mdl = plug2d(rows=3)
+    K, n = sp.csr_matrix(mdl.K), mdl.K.shape[0]
+
+    def add(name, make, token):
+        cases.append(Case(f"matrix {name}", "matrix", f"error naming {token}", scene_error(make, token)))
+
+    def with_matrix(M=None, nodes=None, **changes):
+        def make(ctx: Context):
+            d = matrix_body(ctx.folder, M, nodes)
+            for path, value in changes.items():
+                d = with_(d, path.replace("__", "."), value)
+            return d
+        return make
+
+    def garbage(name, data):
+        return lambda ctx: (ctx.write(name, data), with_(matrix_body(ctx.folder), "model.K", name))[1]
+
+    asym, nan = K.tolil(), K.tolil()
+    asym[0, 1] += 0.01
+    nan[2, 2] = float("nan")
+    add("K missing", with_matrix(model__K="nothere.mtx"), "nothere.mtx")
+    add("K garbage .mtx", garbage("bad.mtx", b"%%MatrixMarket garbage\n"), "bad.mtx")
+    add("K garbage .petsc", garbage("bad.petsc", b"\0" * 64), "bad.petsc")
+    add("K a directory", lambda ctx: (os.mkdir(os.path.join(ctx.folder, "d.mtx")),
+                                      with_(matrix_body(ctx.folder), "model.K", "d.mtx"))[1], "d.mtx")
+    add("K not square", with_matrix(sp.random(n, n + 2, density=0.2, random_state=1)), "model.K")
+    add("K of the wrong size", with_matrix(sp.eye(n + 2)), "model.K")
+    add("K not symmetric", with_matrix(asym.tocsr()), "model.K")
+    add("K NaN", with_matrix(nan.tocsr()), "model.K")
+    add("K a mechanism", with_matrix(sp.block_diag([K, sp.csr_matrix((2, 2))]),
+                                     np.vstack([mdl.coords, [[0.0, 0.5]]])), "model.K")
+    add("nodes missing", with_matrix(model__nodes="nothere.csv"), "nothere.csv")
+    add("contact node out of range", with_matrix(contact__nodes=[99] + mdl.contact_nodes.tolist()[1:]),
+        "contact.nodes")
+    add("normals of the wrong count", with_matrix(contact__normals=mdl.normals.tolist()[1:]), "contact.normals")
+    add("unknown model key", with_matrix(model__Kfile="x"), "model.Kfile")
+    return cases
+
+
 def file_cases() -> list[Case]:
     def add(name, content, token, is_dir=False):
         return Case(name, "scene file", f"error naming {token}", raw_error(content, token, is_dir))
@@ -1067,7 +1129,7 @@ def size_cases() -> list[Case]:
 
 
 def catalogue() -> list[Case]:
-    cases = (scene_cases() + file_cases() + output_cases()
+    cases = (scene_cases() + matrix_cases() + file_cases() + output_cases()
              + [Case("run -o on a read-only file system", "output", "error naming r.h5", mounted("readonly")),
                 Case("run -o on a full file system", "output", "error naming r.h5", mounted("full"))]
              + result_cases() + checkpoint_cases() + signal_cases() + mpi_cases() + magnitude_cases()

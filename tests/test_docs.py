@@ -71,6 +71,8 @@ MESH = {"name": "s", "dim": 2, "model": {"kind": "mesh", "file": "m.msh"}, "fric
 TRUSS = {"name": "s", "dim": 2, "friction": {"mu": 0.5},
          "model": {"kind": "truss", "nodes": [[0.0, 0.0], [1.0, 0.0], [0.5, 1.0]], "bars": [[0, 1], [1, 2], [0, 2]]},
          "contact": {"nodes": [0, 1], "normals": [[0.0, 1.0], [0.0, 1.0]]}}
+MATRIX = {"name": "s", "dim": 2, "friction": {"mu": 0.5}, "model": {"kind": "matrix", "K": "k.mtx", "nodes": "n.csv"},
+          "contact": {"nodes": [0], "normals": [[0.0, 1.0]]}}
 STIFF = {"name": "s", "dim": 2, "friction": {"mu": 0.5}, "model": {"kind": "stiffness", "K": [[2.0, 1.0], [1.0, 4.0]]}}
 
 
@@ -101,7 +103,8 @@ def _probe(data: dict) -> set[str] | None:
 CASES = {"scene": (BASE, ""), "friction": (BASE, "friction"), "compute": (BASE, "compute"),
          "run": (BASE, "run"), "model.mesh": (MESH, "model"), "contact.mesh": (MESH, "contact"),
          "obstacle.cone": (MESH, "obstacle[0]"), "model.stiffness": (STIFF, "model"),
-         "model.truss": (TRUSS, "model"), "contact.truss": (TRUSS, "contact")}
+         "model.truss": (TRUSS, "model"), "contact.truss": (TRUSS, "contact"),
+         "model.matrix": (MATRIX, "model"), "contact.matrix": (MATRIX, "contact")}
 CASES["obstacle.plane"] = ({**MESH, "obstacle": [{"type": "plane", "point": [0.0, 0.0], "normal": [0.0, 1.0]}]},
                            "obstacle[0]")
 for _kind in ("vgroove_bar", "plug2d", "plug3d", "block2d"):

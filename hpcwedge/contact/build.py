@@ -5,7 +5,6 @@ model, no condensation); every other kind builds a Model and condenses it.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 
@@ -50,6 +49,12 @@ def stiffness_exponent(scene: Scene) -> int:
         except UserError:
             return 0
         return _exponent(K)
+    if scene.kind == "matrix":
+        from hpcwedge.models.matrix import largest_entry
+        try:
+            return _exponent(np.array([largest_entry(os.path.join(scene.base_dir, scene.model["K"]))]))
+        except (OSError, ValueError):
+            return 0
     vals = []
     for key, default in MODULI.get(scene.kind, {}).items():
         v = scene.model.get(key, default)
@@ -103,7 +108,7 @@ def build_model(scene: Scene) -> Model:
         model = _build_model(scene, params)
         material = {k: np.ldexp(np.asarray(v, dtype=float), e) if k in MATERIAL_MODULI else v
                     for k, v in model.material.items()}
-        model = dataclasses.replace(model, material=material)
+        model = model.replace(material=material)        # K stays unassembled (distributed rows)
     guard_condensed(scene, len(model.contact_nodes), model.dim)
     return model
 
@@ -126,6 +131,8 @@ def _build_model(scene: Scene, params: dict) -> Model:
                                      c["nodes"], c["normals"], c.get("tangents"))
         if scene.kind == "mesh":
             return _mesh_model(scene, params)
+        if scene.kind == "matrix":
+            return _matrix_model(scene)
         guard_condensed(scene, library.contact_count(scene.kind, params), scene.dim)
         return library.builtin(scene.kind, params)
     except UserError:
@@ -160,6 +167,35 @@ def _mesh_model(scene: Scene, m: dict) -> Model:
                            contact_patch_kind=m.get("contact_patch_kind", "rigid"))
 
 
+def _matrix_model(scene: Scene) -> Model:
+    """kind = "matrix": model.K, model.nodes and model.mesh read (relative to the scene file),
+    K scaled by 2**-stiffness_exponent(scene); a PETSc binary K is only opened (its header)
+    and loaded when needed (models.matrix.StiffnessFile, condense.load_petsc)."""
+    from hpcwedge.contact.condense import load_petsc
+    from hpcwedge.models import matrix
+    m, c, e = scene.model, scene.contact, stiffness_exponent(scene)
+    coords = matrix.read_nodes(m["nodes"], scene.base_dir, scene.dim)
+    path = os.path.join(scene.base_dir, m["K"])
+    if path.lower().endswith(".petsc"):
+        if not os.path.isfile(path):
+            raise SceneError(f"model.K: {m['K']} not found")
+        rows, cols, _ = matrix.petsc_header(path, m["K"])
+        if rows != cols:
+            raise SceneError(f"model.K: must be square, got shape ({rows}, {cols})")
+        K = matrix.StiffnessFile(path, rows, e, load_petsc)
+    else:
+        K = matrix.read_stiffness(path, m["K"])
+    cells = None
+    if "mesh" in m:
+        from hpcwedge.models.mesh import read_mesh
+        data = read_mesh(os.path.join(scene.base_dir, m["mesh"]), scene.dim, name=m["mesh"], key="model.mesh")
+        if len(data.points) != len(coords):
+            raise SceneError(f"model.mesh: {m['mesh']} has {len(data.points)} nodes, model.nodes {len(coords)}")
+        cells = data.cells
+    return matrix.matrix_model(K, coords, m.get("supports"), c["nodes"], c["normals"], c.get("tangents"),
+                               cells, exponent=e)
+
+
 def contact_problem(scene: Scene, model: Model | None = None, comm=None) -> ContactProblem:
     """ContactProblem of a scene: condensed from `model`, or the raw K of a stiffness scene.
     comm (mpi4py communicator, or None): condense collectively over it (every rank calls this
@@ -168,11 +204,18 @@ def contact_problem(scene: Scene, model: Model | None = None, comm=None) -> Cont
         from hpcwedge.contact.condense import condense_distributed
         if model is None:
             model = build_model(scene)
+        key = "model.K" if scene.kind == "matrix" else "model"
         try:
+            if scene.kind == "matrix" and (comm is None or comm.size == 1) and model.assembly is not None:
+                from hpcwedge.models.matrix import check_rigid
+                check_rigid(model.K, model.rigid_modes)     # a PETSc binary K, loaded whole here
             K, N = condense_distributed(model, comm)
         except ValueError as e:
-            raise SceneError(f"model: {str(e).splitlines()[0]}") from None
+            line = str(e).splitlines()[0]
+            raise SceneError(line if line.startswith(key) else f"{key}: {line}") from None
         problem = ContactProblem(scene.dim, K, N)
+        if scene.kind == "matrix":
+            check_no_extra_zero_modes(problem)
         check_not_mechanism(problem)
         return problem
     return raw_stiffness(scene)
@@ -187,6 +230,17 @@ def check_not_mechanism(problem: ContactProblem) -> None:
         raise SceneError(f"model: the condensed stiffness is singular apart from the {problem.N.shape[1]} "
                          f"rigid mode(s) (smallest/largest eigenvalue {lo / hi:.1e} <= {MECHANISM_RTOL:g}): "
                          "the body is a mechanism (add bars/elements or supports)")
+
+
+def check_no_extra_zero_modes(problem: ContactProblem) -> None:
+    """SceneError naming model.K and how many zero modes the condensed stiffness of a matrix
+    body has beyond the rigid modes of its nodes and supports (eigenvalues on range(K) at most
+    MECHANISM_RTOL times the largest)."""
+    lam, k = problem.spectrum, problem.N.shape[1]
+    extra = int((lam[k:] <= MECHANISM_RTOL * lam[-1]).sum()) if lam.size > k else 0
+    if extra:
+        raise SceneError(f"model.K: the body is a mechanism: {extra} zero mode(s) beyond the {k} rigid mode(s) "
+                         "of model.nodes and model.supports (add supports, or check the FE model's constraints)")
 
 
 def _raw_arrays(scene: Scene):

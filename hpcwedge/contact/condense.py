@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from hpcwedge.models.matrix import RIGID_RTOL as RIGID_RTOL_K
+from hpcwedge.models.matrix import SYM_RTOL, StiffnessFile
 from hpcwedge.models.record import Model, check_contact_free
 from hpcwedge.models.rigid import orthonormalise
 
@@ -121,6 +123,81 @@ def _distributed_blocks(model: Model, sp_: DofSplit, lo: int, hi: int):
     return 0.5 * (Kcc + Kcc.T), Kic, Bi[:, sp_.interior].tocsr(), True
 
 
+def load_petsc(path: str, comm=None, rows: tuple[int, int] | None = None) -> sp.csr_matrix:
+    """A PETSc binary matrix read by PETSc's MatLoad, collective over the mpi4py communicator
+    `comm` (None: this process alone): this rank's rows [rows[0], rows[1]) (default all) as CSR
+    (rows[1] - rows[0], N), global columns. The ranks' row ranges must be consecutive."""
+    PETSc = _petsc()
+    viewer = PETSc.Viewer().createBinary(path, "r", comm=PETSc.COMM_SELF if comm is None else comm)
+    A = PETSc.Mat().create(comm=viewer.getComm())
+    try:
+        if rows is not None:
+            A.setSizes(((rows[1] - rows[0], None), (rows[1] - rows[0], None)))
+        A.setType(PETSc.Mat.Type.AIJ)
+        A.load(viewer)
+        lo, hi = A.getOwnershipRange()
+        indptr, indices, data = A.getValuesCSR()
+        return sp.csr_matrix((data, indices, indptr), shape=(hi - lo, A.getSize()[1]))
+    finally:
+        A.destroy()
+        viewer.destroy()
+
+
+def _loaded_blocks(model: Model, sp_: DofSplit, comm):
+    """`_distributed_blocks` of a stiffness in a PETSc binary file (models.matrix.StiffnessFile):
+    rank r loads the rows [r N / P, (r+1) N / P) of K with MatLoad (never the whole K), checks
+    them (`_check_loaded`), and keeps its interior rows; the contact rows are gathered on every
+    rank. K_cc and K_ic are symmetrised from the contact rows, K_ii by the caller (flag True)."""
+    src, N, P, r = model.assembly, model.n_dofs, comm.size, comm.rank
+    g0, g1 = N * r // P, N * (r + 1) // P
+    B = load_petsc(src.path, comm, (g0, g1))
+    B.data = np.ldexp(B.data, -src.exponent)
+    _check_loaded(B, model, comm)
+    c, interior = sp_.contact, sp_.interior
+    mine = interior[np.searchsorted(interior, g0):np.searchsorted(interior, g1)]
+    here = c[(c >= g0) & (c < g1)]
+    pieces = comm.allgather((here, B[here - g0]))
+    ids = np.concatenate([h for h, _ in pieces])
+    Bc = sp.vstack([b for _, b in pieces]).tocsr()[np.argsort(ids)[np.searchsorted(np.sort(ids), c)]]
+    Bi = B[mine - g0]
+    Kcc = Bc[:, c].toarray()
+    Kic = (0.5 * (Bi[:, c] + Bc[:, mine].T)).tocsr()
+    return 0.5 * (Kcc + Kcc.T), Kic, Bi[:, interior].tocsr(), True
+
+
+def _check_loaded(B: sp.csr_matrix, model: Model, comm) -> None:
+    """The checks of models.matrix (check_stiffness, check_rigid) on the ranks' rows B of K,
+    collectively: ValueError naming model.K on every rank alike when K holds a NaN, is all zero,
+    is not symmetric to SYM_RTOL (PETSc's MatIsSymmetric on the parallel matrix), or does not
+    annihilate the model's rigid modes to RIGID_RTOL."""
+    bad_ranks = comm.allreduce(int(not np.all(np.isfinite(B.data))))
+    if bad_ranks:
+        raise ValueError("model.K: NaN or infinite entries")
+    scale = comm.allreduce(float(np.abs(B.data).max()) if B.nnz else 0.0, op=_mpi_max())
+    if scale == 0:
+        raise ValueError("model.K: all zero")
+    PETSc = _petsc()
+    A = _petsc_matrix(PETSc, B, comm, symmetrise=False)
+    try:
+        symmetric = A.isSymmetric(SYM_RTOL * scale)
+    finally:
+        A.destroy()
+    if not symmetric:
+        raise ValueError(f"model.K: not symmetric (|K - K^T| above {SYM_RTOL:g} max |K| = {SYM_RTOL * scale:.3g})")
+    R = model.rigid_modes
+    if R.shape[1]:
+        res = comm.allreduce(float(np.abs(B @ R).max()) if B.shape[0] else 0.0, op=_mpi_max()) / scale
+        if res > RIGID_RTOL_K:
+            raise ValueError(f"model.K: does not annihilate the {R.shape[1]} rigid mode(s) of model.nodes and "
+                             f"model.supports (relative residual {res:.1e}): a support or a spring to ground "
+                             "that model.supports does not list, or nodes that are not K's")
+
+
+def _mpi_max():
+    from mpi4py import MPI
+    return MPI.MAX
+
+
 def to_local(model: Model, sp_: DofSplit, S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotate the condensed (global, node-major) S into K_local, symmetrise, and build N_local."""
     T = sp_.T
@@ -209,7 +286,9 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
     [r n_i / P, (r+1) n_i / P) of K_ii (and of K_ic) into a parallel PETSc MPIAIJ matrix on
     `comm`: with a comm, a model with element data (model.assembly: continuum meshes, with or
     without contact patches) assembles only these rows and the contact rows, from the elements
-    incident to their nodes, never the whole K (`_distributed_blocks`); other models (trusses,
+    incident to their nodes, never the whole K (`_distributed_blocks`); a stiffness in a PETSc
+    binary file (models.matrix.StiffnessFile) is read by MatLoad, rank r its rows
+    [r N / P, (r+1) N / P) only (`_loaded_blocks`); other models (trusses,
     hand-made K) and comm None slice them from the whole model.K (comm None: exactly as
     before, bit for bit). K_ii is factored once by parallel MUMPS ("petsc" native LU is serial
     only: ValueError with more than one rank); each rank multiplies its rows of X = K_ii^-1 K_ic by
@@ -225,6 +304,8 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
     lo, hi = n * rank // size, n * (rank + 1) // size
     if comm is None:
         (Kcc, Kic, Kii), symmetrise = _blocks(model, sp_, lo, hi), False
+    elif isinstance(model.assembly, StiffnessFile):
+        Kcc, Kic, Kii, symmetrise = _loaded_blocks(model, sp_, comm)
     else:
         Kcc, Kic, Kii, symmetrise = _distributed_blocks(model, sp_, lo, hi)
     if n == 0:

@@ -1,4 +1,4 @@
-"""Model families (truss, continuum meshes) and the built-in scenes of SPEC §6."""
+"""Model families (truss, continuum meshes, matrices assembled elsewhere) and the built-in scenes of SPEC §6."""
 from hpcwedge.models.continuum import continuum_stiffness, q4_stiffness
 from hpcwedge.models.library import BUILTIN_DIM, BUILTINS, block2d, builtin, plug2d, plug3d, vgroove_bar
 from hpcwedge.models.rigid import rigid_modes

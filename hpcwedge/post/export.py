@@ -28,7 +28,8 @@ def write_vtu(config: Configuration, path: str) -> None:
     "reaction" (n, 3) (global axes, padded with 0 in 2D; reaction nonzero at contact nodes
     only), "contact" (n,) int: position in the contact list, -1 elsewhere. Cell data per
     block of model.cells: "von_mises" (continuum) and/or "axial_force" (bars), NaN on blocks
-    of the other family.
+    of the other family. A body without cells gets one "vertex" cell per node (ParaView draws
+    no points without cells).
     """
     check_vtu_name(path)
     import meshio
@@ -43,6 +44,8 @@ def write_vtu(config: Configuration, path: str) -> None:
     contact = np.full(n, -1, dtype=np.int64)
     contact[mdl.contact_nodes] = np.arange(mdl.m)
     blocks = [(c, np.asarray(q, dtype=np.int64)) for c, q in mdl.cells.items()]
+    if not blocks:                     # a body of nodes only (kind = "matrix" without a mesh)
+        blocks = [("vertex", np.arange(n, dtype=np.int64)[:, None])]
     cell_data = {name: [np.asarray(vals[c], dtype=float) if c in vals else np.full(len(q), math.nan)
                         for c, q in blocks]
                  for name, vals in config.element_values.items()}

@@ -200,8 +200,10 @@ def _body_panel(ax, mdl: dict, un, ut, rn, rt, head: str, config=None, note: str
     else:
         ax.add_collection(LineCollection(_outlines(mdl.cells, Y), colors="tab:blue", linewidths=1.4, zorder=2,
                                          label=f"{what} displaced (x{scale:.3g})"))
-    if not mdl.cells:
+    if not mdl.cells:                                   # nodes only (a matrix body without a mesh)
         ax.plot(X[:, 0], X[:, 1], ".", color="0.7")
+        if config is not None:
+            ax.plot(Y[:, 0], Y[:, 1], ".", ms=4, color="tab:blue", zorder=3)
     h = WALL_FRACTION * size / 2
     _walls(ax, X[c], n, t, h)
     ax.plot(Y[c, 0], Y[c, 1], "o", ms=4, color="tab:blue", zorder=4)

@@ -181,7 +181,8 @@ def _mesh_3d(ax, cells: dict, X: np.ndarray, Y: np.ndarray, values: dict, label:
     from hpcwedge.post.recovery import AXIAL_FORCE, VON_MISES
     faces, owner, bars = _boundary(cells)
     edges = [X[b] for b in bars] + [X[np.append(f, f[0])] for f in faces]
-    ax.add_collection3d(Line3DCollection(edges, colors="0.72", linewidths=0.6, zorder=1, label="undeformed"))
+    if edges:
+        ax.add_collection3d(Line3DCollection(edges, colors="0.72", linewidths=0.6, zorder=1, label="undeformed"))
     if faces:
         vm = values.get(VON_MISES)
         pc = Poly3DCollection([Y[f] for f in faces], edgecolors="0.3", linewidths=0.2, alpha=0.6, zorder=3,
@@ -205,6 +206,9 @@ def _mesh_3d(ax, cells: dict, X: np.ndarray, Y: np.ndarray, values: dict, label:
         else:
             lc.set_color("tab:blue")
         ax.add_collection3d(lc)
+    if not cells:                                       # nodes only (a matrix body without a mesh)
+        ax.scatter(*X.T, s=4, color="0.7", depthshade=False, zorder=1, label="undeformed")
+        ax.scatter(*Y.T, s=6, color="tab:blue", depthshade=False, zorder=2, label=label)
 
 
 def _contact_nodes_3d(ax, P: np.ndarray, in_c: np.ndarray, reac: np.ndarray, n: np.ndarray,

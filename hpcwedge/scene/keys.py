@@ -4,7 +4,7 @@ nor their bits) or changes the answers. The parser's defaults and unknown-key ch
 API's options and the generated scene reference (scripts/docs_pages.py) read it.
 
 Tables: "scene" (top level), "model", "friction", "compute", "run", "model.<kind>" and
-"contact.<kind>" of the stiffness, truss and mesh kinds, "obstacle.<type>"; a built-in's
+"contact.<kind>" of the stiffness, truss, mesh and matrix kinds, "obstacle.<type>"; a built-in's
 [model] keys are its generator's parameters (models/library.py), their meanings in BUILTIN.
 """
 from __future__ import annotations
@@ -33,7 +33,7 @@ MU_RANGE = (1e-6, 1e6)
 #: compute.mu_c_tol is relative: below a few rounding units (2.2e-16) a bisection would never end
 MU_C_TOL_MIN = 1e-15
 #: model.kind: the kinds of body, the built-ins last
-KINDS = ("stiffness", "truss", "mesh") + tuple(BUILTINS)
+KINDS = ("stiffness", "truss", "mesh", "matrix") + tuple(BUILTINS)
 #: run.face_split: at most this many branching nodes
 FACE_SPLIT_MAX = 8
 ENUMERATE = (True, False, "rays", "patterns")
@@ -163,6 +163,22 @@ KEYS: tuple[Key, ...] = (
     Key("contact.mesh", "tangents", "array (m, dim)", OPTIONAL, "", "", "3D: t1 per contact node, with `normals`."),
     Key("contact.mesh", "tolerance", "number", DEFAULT_TOLERANCE, "> 0", "× median element size",
         "Contact nodes must lie this close to an obstacle."),
+    Key("model.matrix", "K", "path", REQUIRED, "", "",
+        "Stiffness assembled by another FE code: MatrixMarket .mtx (symmetric or general storage), PETSc "
+        "binary .petsc or scipy.sparse .npz, (dim·nodes)², node-major DOFs (node i: dim·i .. dim·i + dim - 1), "
+        "supports not applied; relative to the scene file."),
+    Key("model.matrix", "nodes", "path or array (n, dim)", REQUIRED, "", "length",
+        "Node coordinates: .csv (x,y[,z] per line, one header line allowed), .npy, or inline; "
+        "they give the rigid modes and the pictures."),
+    Key("model.matrix", "supports", "array of [node, dof]", OPTIONAL, "", "",
+        "Fixed DOFs; none: a free body (K must annihilate the nodes' rigid modes)."),
+    Key("model.matrix", "mesh", "path", OPTIONAL, "", "",
+        "Cells for pictures and VTU (a file meshio reads), the same node numbering; none: nodes only."),
+    Key("contact.matrix", "nodes", "array of integers", REQUIRED, "", "", "Contact nodes (0-based node ids)."),
+    Key("contact.matrix", "normals", "array (m, dim)", REQUIRED, "", "",
+        "Obstacle normal at each contact node, into the body."),
+    Key("contact.matrix", "tangents", "array (m, dim)", OPTIONAL, "", "",
+        "3D: t1 per contact node (t2 = n × t1); default: the axis least aligned with n."),
     Key("obstacle.plane", "type", "string", REQUIRED, '"plane"', "", "A plane (a line in 2D)."),
     Key("obstacle.plane", "point", "array (dim,)", REQUIRED, "", "length", "A point of the plane."),
     Key("obstacle.plane", "normal", "array (dim,)", REQUIRED, "", "", "Its normal (either sign)."),

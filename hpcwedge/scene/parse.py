@@ -27,6 +27,8 @@ MESH_CONTACT_KEYS = set(keys.table("contact.mesh"))
 STIFFNESS_MODEL_KEYS = set(keys.table("model.stiffness"))
 TRUSS_MODEL_KEYS = set(keys.table("model.truss"))
 TRUSS_CONTACT_KEYS = set(keys.table("contact.truss"))
+MATRIX_MODEL_KEYS = set(keys.table("model.matrix"))     # values checked when read: contact/build.py
+MATRIX_CONTACT_KEYS = set(keys.table("contact.matrix"))
 
 
 @dataclass(frozen=True)
@@ -89,9 +91,11 @@ class Scene:
     @property
     def input_files(self) -> tuple[str, ...]:
         """Absolute paths of the data files the scene names (model.file of a stiffness or mesh
-        model), in a fixed order; the scene file itself is not among them."""
-        f = self.model.get("file") if self.kind in ("stiffness", "mesh") else None
-        return (os.path.abspath(os.path.join(self.base_dir, f)),) if isinstance(f, str) and f else ()
+        model; model.K, model.nodes when a file, model.mesh of a matrix), in a fixed order; the
+        scene file itself is not among them."""
+        names = {"stiffness": ("file",), "mesh": ("file",), "matrix": ("K", "nodes", "mesh")}.get(self.kind, ())
+        files = [self.model.get(k) for k in names]
+        return tuple(os.path.abspath(os.path.join(self.base_dir, f)) for f in files if isinstance(f, str) and f)
 
     @functools.cached_property
     def input_digests(self) -> dict[str, str]:
@@ -312,6 +316,8 @@ def _body(data: dict, kind: str, dim: int) -> tuple[dict, dict, list | None, str
     elif kind == "truss":
         _unknown(params, TRUSS_MODEL_KEYS, "model.")
         _unknown(contact, TRUSS_CONTACT_KEYS, "contact.")
+    elif kind == "matrix":
+        _check_matrix(params, contact)
     obstacles, obstacle_key = _obstacles(data, kind, contact, dim)
     if kind == "mesh":
         _check_mesh(params, contact, dim, obstacles is not None)
@@ -405,6 +411,21 @@ def _check_patch(params: dict) -> None:
     if "contact_patch_kind" in params and params["contact_patch_kind"] not in KINDS:
         raise SceneError(f"model.contact_patch_kind: one of {', '.join(repr(k) for k in KINDS)}, "
                          f"got {params['contact_patch_kind']!r}")
+
+
+def _check_matrix(params: dict, contact: dict) -> None:
+    """Keys of a kind = "matrix" scene and which of them name files; the files are read and
+    checked when the model is built (models/matrix.py)."""
+    _unknown(params, MATRIX_MODEL_KEYS, "model.")
+    _unknown(contact, MATRIX_CONTACT_KEYS, "contact.")
+    for k in ("K", "mesh"):
+        if (k == "K" or k in params) and (not isinstance(params.get(k), str) or not params[k]):
+            raise SceneError(f"model.{k}: a file name (relative to the scene file), got {params.get(k)!r}")
+    if "nodes" not in params or params["nodes"] == "":
+        raise SceneError("model.nodes: required for a matrix, a .csv or .npy file or the coordinates")
+    for k in ("nodes", "normals"):
+        if k not in contact:
+            raise SceneError(f"contact.{k}: required for a matrix")
 
 
 def _check_mesh(params: dict, contact: dict, dim: int, has_obstacle: bool) -> None:

@@ -37,7 +37,8 @@ def test_toml_writer_round_trips(campaign):
     assert back["model"] == d["model"] and back["friction"] == d["friction"]
 
 
-@pytest.mark.parametrize("only", ["dim 2.0 (a float)", "run -o the scene itself", "show --json | head"])
+@pytest.mark.parametrize("only", ["dim 2.0 (a float)", "run -o the scene itself", "show --json | head",
+                                  "matrix K a mechanism"])
 def test_cases_pass_end_to_end(campaign, tmp_path, only):
     out = str(tmp_path / "faults")
     assert campaign.main(["--only", only, "--out", out, "--timeout", "120"]) == 0
