@@ -50,14 +50,14 @@ def test_lp_point_meets_its_rows_and_violation_measures_a_wrong_one():
 
 
 def test_a_highs_solve_stopped_short_decides_nothing():
-    """HIGHS_STATUS: stopped at its iteration limit (scipy's status 1), HiGHS leaves feasible
+    """HIGHS_STATUS: stopped at its iteration limit (kIterationLimit), HiGHS leaves feasible
     and infeasible patterns alike UNDECIDED, both forms of the LP tried (lp_x_space)."""
     seen = set()
     for seed in range(6):
         p = parametrize(random_problem(np.random.default_rng(seed), 5, bool(seed % 2)))
         rows = pattern_rows(p, 5, np.zeros(5, bool), np.zeros(5, bool))
         counts: dict = {}
-        status, x = lp_feasible(rows, 1.0, {"maxiter": 0, "presolve": False}, counts=counts)
+        status, x = lp_feasible(rows, 1.0, {"simplex_iteration_limit": 0, "presolve": "off"}, counts=counts)
         assert status == Status.UNDECIDED and x is None and counts == {"lp_x_space": 1}
         seen.add(lp_feasible(rows, 1.0)[0])
     assert seen == {Status.FEASIBLE, Status.INFEASIBLE}
