@@ -30,7 +30,7 @@ def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
 
 def test_highs_debug_prints_never_reach_stdout():
     """HiGHS's MIP solver printf()s debug lines past its output_flag on these bodies (6 lines
-    without milp._stdout_silenced); stdout carries `hpcwedge run --json`."""
+    without lp.stdout_silenced); stdout carries `hpcwedge run --json`."""
     code = f"""
 import sys
 sys.path.insert(0, {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))!r})
@@ -50,3 +50,29 @@ print("done")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout == "done\n"
+
+
+def test_a_stop_interrupts_a_long_milp_within_half_a_second():
+    """HiGHS's branch and bound polls the engine's stop (lp.highs_instance's interrupt
+    callbacks): plug2d rows 40 (m = 80) at mu = 100 runs past 30 s, and a stop asked 1 s in
+    raises TaskCancelled within 0.5 s of it (before: the MILP ran to its end, > 145 s at m =
+    640, whatever the signal)."""
+    import time
+
+    import pytest
+
+    from hpcwedge.parallel.cancel import TaskCancelled, run_cancellable
+    res = global_run({"kind": "plug2d", "rows": 40, "taper_deg": 10.0}, mu_c="none")
+    p, m = parametrize(res.problem), res.m
+    assert wedge_milp(p, m, 100.0, time_limit=3.0).status == Status.UNDECIDED     # longer than 3 s
+    start = time.monotonic()
+    asked = []
+
+    def check():
+        if time.monotonic() - start >= 1.0:
+            asked.append(asked[0] if asked else time.monotonic())
+            return True
+        return False
+    with pytest.raises(TaskCancelled):
+        run_cancellable(lambda ctx, payload: wedge_milp(p, m, 100.0), None, None, check)
+    assert asked and time.monotonic() - asked[0] < 0.5, time.monotonic() - start
