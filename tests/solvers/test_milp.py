@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from instances import global_run
 
 from hpcwedge.contact.problem import parametrize
@@ -59,8 +60,6 @@ def test_a_stop_interrupts_a_long_milp_within_half_a_second():
     640, whatever the signal)."""
     import time
 
-    import pytest
-
     from hpcwedge.parallel.cancel import TaskCancelled, run_cancellable
     res = global_run({"kind": "plug2d", "rows": 40, "taper_deg": 10.0}, mu_c="none")
     p, m = parametrize(res.problem), res.m
@@ -76,3 +75,58 @@ def test_a_stop_interrupts_a_long_milp_within_half_a_second():
     with pytest.raises(TaskCancelled):
         run_cancellable(lambda ctx, payload: wedge_milp(p, m, 100.0), None, None, check)
     assert asked and time.monotonic() - asked[0] < 0.5, time.monotonic() - start
+
+
+MILP_RUN = """
+import functools, sys
+import hpcwedge.mu_c.global_search as gs
+from hpcwedge import cli
+milp, bracket = gs.wedge_milp, gs.global_bracket_milp
+
+def announced(param, m, mu, *args, **kw):
+    print(f"MILP at mu = {mu}", file=sys.stderr, flush=True)
+    return milp(param, m, mu, *args, **kw)
+
+gs.wedge_milp = announced
+gs.global_bracket_milp = functools.partial(bracket, dive=0)      # every step a MILP
+sys.exit(cli.main())
+"""
+
+
+def test_sigterm_inside_a_long_milp_exits_75_within_2_s_with_a_checkpoint(tmp_path):
+    """`hpcwedge run` (global mu^c, plug2d rows 40, m = 80, the MILP route without its dive)
+    gets SIGTERM 1 s into its MILP at mu_max = 100 (a 46 s HiGHS call on its own): exit 75
+    within 2 s, the checkpoint written (before: the signal waited for the MILP's end)."""
+    import signal
+    import time
+
+    import h5py
+    from mpi_helpers import env
+
+    from hpcwedge.files import checkpoint_path
+    scene = tmp_path / "s.toml"
+    scene.write_text('name = "p"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 40\ntaper_deg = 10.0\n'
+                     '[friction]\nmu = [0.1]\n[compute]\nenumerate = false\nmu_c = "global"\n'
+                     '[run]\nsymmetry = false\n')
+    out = str(tmp_path / "r.h5")
+    p = subprocess.Popen([sys.executable, "-c", MILP_RUN, "run", str(scene), "-o", out, "-q"], env=env(),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in p.stderr:
+            if line.startswith("MILP at mu = 100"):
+                break
+        else:
+            pytest.fail(f"no MILP at mu_max: exit {p.wait()}")
+        time.sleep(1.0)
+        assert p.poll() is None
+        p.send_signal(signal.SIGTERM)
+        t = time.monotonic()
+        code = p.wait(timeout=60)
+        took = time.monotonic() - t
+    finally:
+        if p.poll() is None:
+            p.kill()
+    rest = p.stderr.read()
+    assert code == 75 and took < 2.0, (code, took, rest)
+    with h5py.File(checkpoint_path(out), "r") as f:
+        assert f.attrs["reason"] == "SIGTERM"
