@@ -24,6 +24,10 @@ LP_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance
 #: the HiGHS solver of each `lp_feasible` method: dual simplex (a vertex) or interior point
 #: (with crossover)
 LP_METHODS = {"simplex": {"solver": "simplex", "simplex_strategy": 1}, "ipm": {"solver": "ipm"}}
+#: the eliminated LP again after the dual simplex left it undecided: HiGHS's primal simplex
+#: (plug2d m = 160, a bisection LP of mu^c: dual "Unknown" after 499 iterations, primal
+#: infeasible in 250; the x-space LP that decided it instead took 3 s)
+PRIMAL = {"simplex_strategy": 4}
 #: seconds one HiGHS LP may run (`lp_feasible`); one that hits it is UNDECIDED. The MILP has
 #: its own (milp.wedge_milp): both are interruptible by a stop besides
 LP_TIME_LIMIT_S = 120.0
@@ -121,7 +125,8 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     to X_SPACE_TOL absolutely, as the x-space LP's tolerance guarantees; one that does
     not (a huge y along a near-recession direction on which sum r_n is a tiny share of
     |y|, within tolerance of the reduced rows only) is decided by the x-space LP instead, and so
-    is a problem HiGHS leaves undecided in the eliminated form (counted as "lp_x_space")."""
+    is a problem HiGHS leaves undecided in the eliminated form (counted as "lp_x_space"; the
+    dual simplex's undecided ones first by the primal simplex, PRIMAL, counted "lp_primal")."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
     live = scale > 0
@@ -139,6 +144,10 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     bn = np.linalg.norm(B, axis=1)
     keep = bn > ZERO_ROW_RTOL
     status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], options, method)
+    if status == Status.UNDECIDED and method == "simplex":
+        count(counts, "lp_primal")      # the dual simplex gave up ("Unknown"): the primal one
+        status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], {**(options or {}), **PRIMAL},
+                           method)
     if status == Status.INFEASIBLE:
         return status, None
     if status == Status.FEASIBLE:
@@ -173,7 +182,10 @@ class TreeLp:
     (2m), sum r_n (1), each unit-scaled. A pattern is row bounds only: u_n,i = 0 (contact)
     or >= 0; a gap node's two friction rows = 0 (r_n,i = r_t,i = 0, as mu > 0), else >= 0;
     sum r_n = 1. `solve` changes the bounds the pattern changes and re-solves by the dual
-    simplex from the previous basis (no presolve), LP_OPTIONS' tolerances and time limit.
+    simplex (no presolve, LP_OPTIONS' tolerances and time limit) from the root pattern's
+    final basis, always the same one: a node's answer and point depend on the node alone,
+    not on the nodes solved before it, so a tree split into tasks in any way (or resumed)
+    finds the same points, counts and patterns.
 
     An answer is taken only with its proof checked here: a point meeting every row to
     X_SPACE_TOL with a normalisation share (lp_feasible) of at least NORM_SHARE_MIN; an
@@ -193,10 +205,10 @@ class TreeLp:
         A = A / np.maximum(np.linalg.norm(A, axis=1, keepdims=True), 1e-300)
         self.A, self.norm, self.m = np.vstack([A, Rn.sum(axis=0)]), Rn.sum(axis=0), m
         self.upper = np.concatenate([np.full(3 * m, np.inf), [1.0]])
-        self._h = None
+        self._h = self._start = None
 
     def __getstate__(self):             # a tree sent to another rank takes no live HiGHS along
-        return {**self.__dict__, "_h": None, "upper": np.concatenate([np.full(3 * self.m, np.inf), [1.0]])}
+        return {**self.__dict__, "_h": None, "_start": None}
 
     def _highs(self):
         if self._h is None:
@@ -204,6 +216,9 @@ class TreeLp:
             d = self.A.shape[1]
             self._h = highs_instance({**LP_METHODS["simplex"], **LP_OPTIONS, "presolve": "off"}, LP_TIME_LIMIT_S)
             self._h.passModel(highs_lp(self.A, lower, self.upper, np.full(d, -np.inf), np.full(d, np.inf)))
+            self.upper = np.concatenate([np.full(3 * self.m, np.inf), [1.0]])
+            highs_run(self._h)              # the root pattern (every node free): its final basis starts every solve
+            self._start = self._h.getBasis()
         return self._h
 
     def solve(self, zero_u: np.ndarray, zero_r: np.ndarray,
@@ -218,6 +233,7 @@ class TreeLp:
             h.changeRowsBounds(changed.size, changed, np.zeros(changed.size),
                                np.clip(upper[changed], 0.0, highspy.kHighsInf))
             self.upper = upper
+        h.setBasis(self._start)
         status = highs_run(h)
         if status == Status.FEASIBLE:
             x = np.array(h.getSolution().col_value)

@@ -51,14 +51,15 @@ def test_lp_point_meets_its_rows_and_violation_measures_a_wrong_one():
 
 def test_a_highs_solve_stopped_short_decides_nothing():
     """HIGHS_STATUS: stopped at its iteration limit (kIterationLimit), HiGHS leaves feasible
-    and infeasible patterns alike UNDECIDED, both forms of the LP tried (lp_x_space)."""
+    and infeasible patterns alike UNDECIDED, both forms of the LP tried (lp_x_space), the
+    eliminated one by both simplex methods (lp_primal)."""
     seen = set()
     for seed in range(6):
         p = parametrize(random_problem(np.random.default_rng(seed), 5, bool(seed % 2)))
         rows = pattern_rows(p, 5, np.zeros(5, bool), np.zeros(5, bool))
         counts: dict = {}
         status, x = lp_feasible(rows, 1.0, {"simplex_iteration_limit": 0, "presolve": "off"}, counts=counts)
-        assert status == Status.UNDECIDED and x is None and counts == {"lp_x_space": 1}
+        assert status == Status.UNDECIDED and x is None and counts == {"lp_primal": 1, "lp_x_space": 1}
         seen.add(lp_feasible(rows, 1.0)[0])
     assert seen == {Status.FEASIBLE, Status.INFEASIBLE}
 
@@ -167,7 +168,7 @@ def test_a_highs_call_at_its_time_limit_decides_nothing(monkeypatch):
         monkeypatch.setattr(lp, "LP_TIME_LIMIT_S", 0.0)
         counts: dict = {}
         assert lp_feasible(pattern_rows(p, 5, zu, zr), 1.0, counts=counts) == (Status.UNDECIDED, None)
-        assert counts == {"lp_x_space": 1}
+        assert counts == {"lp_primal": 1, "lp_x_space": 1}
         assert TreeLp(p, 5, 1.0).solve(zu, zr, counts) == (Status.UNDECIDED, None)
         assert counts["warm_unsure"] == 1
         monkeypatch.undo()
