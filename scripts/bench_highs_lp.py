@@ -3,7 +3,7 @@
 counts, of this checkout or of another one (before / after a change), in one record.
 
     PYTHONPATH=. python scripts/bench_highs_lp.py [--quick] [--limit 300] [--checkout DIR]
-                                                  [--out results/bench_highs_lp]
+                                                  [--only MODEL:ROWS ...] [--out results/bench_highs_lp]
 
 Scenes: plug2d rows 80 / 160 / 320 (m = 160 / 320 / 640) and block2d rows 79 / 159 (refine 1,
 m = 160 / 320), taper 10 deg (global mu^c = tan 10 deg analytically), `enumerate = false`,
@@ -62,6 +62,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--limit", type=float, default=300.0)
     ap.add_argument("--checkout", default=None)
+    ap.add_argument("--only", nargs="+", default=None, metavar="MODEL:ROWS", help="these scenes only")
     ap.add_argument("--out", default=os.path.join(HERE, "..", "results", "bench_highs_lp"))
     ap.add_argument("--worker", nargs=2, default=None, help=argparse.SUPPRESS)
     a = ap.parse_args()
@@ -71,7 +72,8 @@ def main() -> None:
         print(bench_2d.MARK + json.dumps(worker(a.worker[0], int(a.worker[1])), default=str), flush=True)
         return
     records = []
-    for model, rows in (QUICK if a.quick else CASES):
+    cases = [(c.split(":")[0], int(c.split(":")[1])) for c in a.only] if a.only else QUICK if a.quick else CASES
+    for model, rows in cases:
         argv = ["--worker", model, str(rows)] + (["--checkout", a.checkout] if a.checkout else [])
         status, r, wall, err = bench_2d.run_script(os.path.abspath(__file__), argv, a.limit)
         rec = {"model": model, "rows": rows, "status": status, "wall": wall, **(r or {})}
