@@ -18,6 +18,9 @@ MILP_WEDGE_TOL = 1e-5
 #: HiGHS options of `wedge_milp` (presolve off: plug2d m = 40 at mu = 100, 1.8 s against
 #: 4.4 s with it)
 MILP_OPTIONS: dict = {"presolve": "off"}
+#: seconds one MILP may run by default (then UNDECIDED: global_bracket_milp hands the search
+#: to the tree); a stop interrupts it sooner
+MILP_TIME_LIMIT_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -35,7 +38,7 @@ class WedgeMilp:
 
 
 def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
-               time_limit: float | None = None) -> WedgeMilp:
+               time_limit: float | None = MILP_TIME_LIMIT_S) -> WedgeMilp:
     """Is there a 2D wedged configuration at mu (mu = inf: r_t free)? One MILP, solved by
     HiGHS, over x in R^d and binaries z (z_i = 1: node i may carry
     r_n, u_n,i = 0):
