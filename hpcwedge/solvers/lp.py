@@ -10,11 +10,12 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import time
 
 import numpy as np
 
 from hpcwedge.contact.problem import Parametrization, blocks
-from hpcwedge.parallel.cancel import task_stopping, task_tick
+from hpcwedge.parallel.cancel import TaskCancelled, task_stopping
 from hpcwedge.solvers.rows import ZERO_ROW_RTOL, Rows, Status, count, eq_null_space
 
 #: HiGHS options of the pattern LPs (2D) and the pyramid LPs (3D fallback); None given to
@@ -49,13 +50,18 @@ NORM_SHARE_MIN = 1e-2
 #: other one (time or iteration limit, interrupt, unbounded or infeasible, unknown, errors):
 #: nothing decided
 HIGHS_STATUS = {"kOptimal": Status.FEASIBLE, "kInfeasible": Status.INFEASIBLE}
+#: a stop interrupts a HiGHS call that has run this long (seconds); a shorter call ends, and
+#: the caller's own check stops the task between calls (a tree then hands back its open nodes)
+INTERRUPT_AFTER_S = 0.1
 _banner_shown = False
+_call_started = 0.0
 
 
 def highs_instance(options: dict, time_limit: float | None):
     """A silent HiGHS instance with `options` (HiGHS's names), `time_limit` seconds per run
     (None: none), and a stop (parallel.cancel.task_stopping) interrupting its simplex,
-    interior point and branch and bound (HiGHS polls them every few iterations / nodes)."""
+    interior point and branch and bound past INTERRUPT_AFTER_S (HiGHS polls them every few
+    iterations / nodes)."""
     global _banner_shown
     import highspy
     if not _banner_shown:               # the first instance prints HiGHS's banner on stdout
@@ -75,16 +81,20 @@ def highs_instance(options: dict, time_limit: float | None):
 
 
 def _interrupt_on_stop(event) -> None:
-    if task_stopping():
+    if time.monotonic() - _call_started >= INTERRUPT_AFTER_S and task_stopping():
         event.interrupt()
 
 
 def highs_run(h) -> Status:
-    """Run HiGHS on its model: its status in the package's vocabulary (HIGHS_STATUS). A run
-    a stop interrupted raises TaskCancelled here (parallel.cancel.task_tick)."""
+    """Run HiGHS on its model: its status in the package's vocabulary (HIGHS_STATUS). A stop
+    (parallel.cancel) interrupts a run past INTERRUPT_AFTER_S; an undecided run while the task
+    is stopping raises TaskCancelled here (interrupted, or no answer anyway)."""
+    global _call_started
+    _call_started = time.monotonic()
     h.run()
     status = HIGHS_STATUS.get(h.getModelStatus().name, Status.UNDECIDED)
-    task_tick()
+    if status == Status.UNDECIDED and task_stopping():
+        raise TaskCancelled()
     return status
 
 

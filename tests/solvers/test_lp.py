@@ -175,14 +175,22 @@ def test_a_highs_call_at_its_time_limit_decides_nothing(monkeypatch):
     assert seen == {Status.FEASIBLE, Status.INFEASIBLE}
 
 
-def test_a_stop_inside_an_lp_raises_task_cancelled():
-    """Inside a task the engine is stopping (parallel.cancel.run_cancellable), a HiGHS LP is
-    interrupted and raises TaskCancelled; outside a task the same LP answers."""
+def test_a_stop_interrupts_an_lp_past_its_grace_time(monkeypatch):
+    """Inside a task the engine is stopping (parallel.cancel.run_cancellable), an LP shorter
+    than INTERRUPT_AFTER_S ends with its answer (the caller's own check stops the task); with
+    no grace time HiGHS is interrupted and TaskCancelled raised."""
     import pytest
 
+    import hpcwedge.solvers.lp as lp
     from hpcwedge.parallel.cancel import TaskCancelled, run_cancellable
     p = parametrize(random_problem(np.random.default_rng(1), 5, True))
     rows = pattern_rows(p, 5, np.zeros(5, bool), np.zeros(5, bool))
-    assert lp_feasible(rows, 1.0)[0] != Status.UNDECIDED
+    alone = lp_feasible(rows, 1.0)[0]
+    assert alone != Status.UNDECIDED
+
+    def stopping(ctx, payload):
+        return lp_feasible(rows, 1.0)[0]
+    assert run_cancellable(stopping, None, None, lambda: True, tick_every_s=0.0) == alone
+    monkeypatch.setattr(lp, "INTERRUPT_AFTER_S", 0.0)
     with pytest.raises(TaskCancelled):
-        run_cancellable(lambda ctx, payload: lp_feasible(rows, 1.0), None, None, lambda: True, tick_every_s=0.0)
+        run_cancellable(stopping, None, None, lambda: True, tick_every_s=0.0)
