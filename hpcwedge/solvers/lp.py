@@ -218,15 +218,15 @@ class TreeLp:
         self._h = self._start = None
 
     def __getstate__(self):             # a tree sent to another rank takes no live HiGHS along
-        return {**self.__dict__, "_h": None, "_start": None}
+        return {**self.__dict__, "_h": None, "_start": None}   # rebuilt on the next solve
 
     def _highs(self):
         if self._h is None:
             lower = np.concatenate([np.zeros(3 * self.m), [1.0]])
             d = self.A.shape[1]
+            self.upper = np.concatenate([np.full(3 * self.m, np.inf), [1.0]])    # the root pattern's
             self._h = highs_instance({**LP_METHODS["simplex"], **LP_OPTIONS, "presolve": "off"}, LP_TIME_LIMIT_S)
             self._h.passModel(highs_lp(self.A, lower, self.upper, np.full(d, -np.inf), np.full(d, np.inf)))
-            self.upper = np.concatenate([np.full(3 * self.m, np.inf), [1.0]])
             highs_run(self._h)              # the root pattern (every node free): its final basis starts every solve
             self._start = self._h.getBasis()
         return self._h
@@ -243,6 +243,7 @@ class TreeLp:
             h.changeRowsBounds(changed.size, changed, np.zeros(changed.size),
                                np.clip(upper[changed], 0.0, highspy.kHighsInf))
             self.upper = upper
+        h.clearSolver()                 # no simplex state of earlier solves (edge weights, perturbations)
         h.setBasis(self._start)
         status = highs_run(h)
         if status == Status.FEASIBLE:

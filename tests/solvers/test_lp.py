@@ -126,12 +126,19 @@ def _walk(rng, m, steps):
         yield state == 1, state == 2
 
 
+def _same(a, b) -> bool:
+    return a[0] == b[0] and (a[1] is None) == (b[1] is None) and (a[1] is None or np.array_equal(a[1], b[1]))
+
+
 def test_tree_lp_agrees_with_the_cold_lp_and_its_points_meet_the_rows():
     """TreeLp (one warm HiGHS model, row bounds changed per pattern) against lp_feasible (a
     new model per pattern in the equalities' null space, with presolve): the same answer on
     every pattern it decides, a feasible point meets the pattern's rows (lp_violation) with
     sum r_n = 1; on random supported and free bodies, patterns in a tree's order, mu near
-    and far from where they change."""
+    and far from where they change; a copy made by pickle (after solves) answers bit for bit
+    as the original (every solve starts from the root pattern's basis)."""
+    import pickle
+
     from hpcwedge.solvers.lp import TreeLp
     decided = {Status.FEASIBLE: 0, Status.INFEASIBLE: 0}
     unsure = 0
@@ -151,6 +158,9 @@ def test_tree_lp_agrees_with_the_cold_lp_and_its_points_meet_the_rows():
                 decided[status] += 1
                 if status == Status.FEASIBLE:
                     assert abs(rows.norm @ x - 1) <= 1e-9 and lp_violation(rows, mu, x) <= 1e-8
+            again = pickle.loads(pickle.dumps(warm))     # as a tree sent to another rank: the same answers
+            for zu, zr in list(_walk(np.random.default_rng(seed), m, 10)):
+                assert _same(again.solve(zu, zr), warm.solve(zu, zr))
             assert sum(counts.values()) == 40 and set(counts) <= {"warm_feasible", "warm_infeasible", "warm_unsure"}
     assert min(decided.values()) >= 100 and unsure <= 0.1 * sum(decided.values()), (decided, unsure)
 
