@@ -22,7 +22,7 @@ from hpcwedge.parallel.cancel import task_stopping
 from hpcwedge.patterns.symmetry import Symmetry
 from hpcwedge.results.record import TreeStats
 from hpcwedge.solvers.feasibility import TREE_OPTIONS, Decision, SolverOptions, decide
-from hpcwedge.solvers.lp import lp_violation
+from hpcwedge.solvers.lp import TreeLp, lp_violation
 from hpcwedge.solvers.rows import ConeRows, Status, count, pattern_rows, problem_dim
 from hpcwedge.solvers.screens import PyramidScreens
 from hpcwedge.solvers.socp import verified
@@ -165,6 +165,8 @@ class PatternTree:
         self._steer = U / np.maximum(np.linalg.norm(U, axis=1, keepdims=True), 1e-300)
         #: 3D with friction and screens: LP screens before the SOCPs of deep nodes (screens.py)
         self._screens = PyramidScreens(param, m, mu) if screens and self.dim == 3 and friction else None
+        #: 2D with friction: the nodes' LPs in one warm HiGHS model (lp.TreeLp; decide on doubt)
+        self._lp = TreeLp(param, m, mu) if self.dim == 2 and friction and 0.0 < mu < np.inf else None
 
     def root(self) -> Subtree:
         return Subtree(0)
@@ -225,6 +227,11 @@ class PatternTree:
         """The decision of `node`'s relaxation: the LP screens when they apply and decide,
         else a solve (3D, static order: steered to the next node's u_n)."""
         zu, zr = node.masks(self.m)
+        if self._lp is not None:
+            status, x = self._lp.solve(zu, zr, stats.statuses)
+            if status != Status.UNDECIDED:
+                stats.solves += 1
+                return Decision(status, x)
         rows = pattern_rows(self.param, self.m, zu, zr, self.friction)
         if self._screens is not None and self._screens.applies(zu, zr):
             dec = self._screens.decide(rows, zu, zr, stats.statuses)

@@ -3,7 +3,8 @@
 - rows.py: the pattern problem as constraint rows, and the answers' vocabulary (`Status`).
 - conic.py: one Clarabel solve (`ConicProblem`, settings, the status map).
 - socp.py: the 3D pattern SOCP, its two forms and retry ladder.
-- lp.py: LP feasibility by HiGHS (its status map); milp.py: the 2D wedge MILP.
+- lp.py: LP feasibility by HiGHS (its status map; every HiGHS call, time-limited and
+  interruptible; the 2D tree's warm LPs, `TreeLp`); milp.py: the 2D wedge MILP.
 - screens.py: polyhedral LP screens (CLP, its status map) in front of the 3D tree's SOCPs.
 - feasibility.py: `decide` -- is a pattern problem feasible at mu?
 

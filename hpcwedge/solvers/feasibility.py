@@ -100,7 +100,7 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
         status, x = lp_feasible(rows, mu, LP_OPTIONS, counts=counts)
         count(counts, "lp_" + status)
         if status == Status.UNDECIDED:          # HiGHS's simplex gave up: its interior point method
-            status, x = lp_feasible(rows, mu, LP_OPTIONS, method="highs-ipm", counts=counts)
+            status, x = lp_feasible(rows, mu, LP_OPTIONS, method="ipm", counts=counts)
             count(counts, "lp_retry_ipm_" + status)
         return Decision(status, x)
     if rows.nodes.size == 0:

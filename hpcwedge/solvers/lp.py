@@ -1,19 +1,37 @@
-"""LP feasibility of a pattern problem (`rows.Rows`) by HiGHS (scipy.optimize.linprog),
-and the violation of a point of it.
+"""LP feasibility of a pattern problem (`rows.Rows`) by HiGHS (highspy), and the violation
+of a point of it; every HiGHS call of the package is made here (`highs_run`): bounded by a
+time limit and interruptible by a stop (parallel.cancel).
 
 2D patterns are LPs, and so are the 3D pyramid fallbacks (rows.pyramid_rows). HiGHS's
 dual simplex returns a vertex: the polish of mu^c (mu_bracket.py) needs its active set.
 """
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
+import time
+
 import numpy as np
 
+from hpcwedge.contact.problem import Parametrization, blocks
+from hpcwedge.parallel.cancel import TaskCancelled, task_stopping
 from hpcwedge.solvers.rows import ZERO_ROW_RTOL, Rows, Status, count, eq_null_space
 
 #: HiGHS options of the pattern LPs (2D) and the pyramid LPs (3D fallback); None given to
 #: `lp_feasible`: HiGHS's defaults (feasibility tolerance 1e-7). Presolve stays on: off,
 #: the dual simplex ended "Unknown" near mu^c on a random free body (m = 3)
 LP_OPTIONS = {"primal_feasibility_tolerance": 1e-10, "dual_feasibility_tolerance": 1e-10}
+#: the HiGHS solver of each `lp_feasible` method: dual simplex (a vertex) or interior point
+#: (with crossover)
+LP_METHODS = {"simplex": {"solver": "simplex", "simplex_strategy": 1}, "ipm": {"solver": "ipm"}}
+#: the eliminated LP again after the dual simplex left it undecided: HiGHS's primal simplex
+#: (plug2d m = 160, a bisection LP of mu^c: dual "Unknown" after 499 iterations, primal
+#: infeasible in 250; the x-space LP that decided it instead took 3 s)
+PRIMAL = {"simplex_strategy": 4}
+#: seconds one HiGHS LP may run (`lp_feasible`); one that hits it is UNDECIDED. The MILP has
+#: its own (milp.wedge_milp): both are interruptible by a stop besides
+LP_TIME_LIMIT_S = 120.0
 #: absolute violation of the unit x-space rows (sum r_n = 1) that a point of the eliminated
 #: LP may keep (lp_feasible): the x-space LP's own feasibility tolerance. At 1e-9 a point
 #: with ||x|| ~ 8e6 (equality rows 4.5e-10 off through rounding alone) passed 3e-8 below a
@@ -25,18 +43,90 @@ X_SPACE_TOL = LP_OPTIONS["primal_feasibility_tolerance"]
 #: under OpenBLAS's Haswell kernels: ||x|| 1.2e6 against 16 for the solution, share x
 #: sqrt(d) 3e-5; the least of plug2d's solutions, m = 20 and 160: 1.5e-3 and 4e-3)
 NORM_SHARE_MIN = 1e-2
-#: HiGHS's statuses, as scipy.optimize's linprog and milp report them (`status`), in the
-#: package's vocabulary: 0 optimal (a point), 2 infeasible; 1 iteration or time limit,
-#: 3 unbounded (no problem here is: a feasibility LP has no objective, the MILP's is
-#: bounded), 4 numerical difficulties or other: nothing decided
-HIGHS_STATUS = {0: Status.FEASIBLE, 1: Status.UNDECIDED, 2: Status.INFEASIBLE, 3: Status.UNDECIDED,
-                4: Status.UNDECIDED}
 
 
-def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str = "highs-ds",
+#: HiGHS's model statuses (HighsModelStatus names) in the package's vocabulary: kOptimal a
+#: point (a feasibility LP has no objective, the MILP's is bounded), kInfeasible none; every
+#: other one (time or iteration limit, interrupt, unbounded or infeasible, unknown, errors):
+#: nothing decided
+HIGHS_STATUS = {"kOptimal": Status.FEASIBLE, "kInfeasible": Status.INFEASIBLE}
+#: a stop interrupts a HiGHS call that has run this long (seconds); a shorter call ends, and
+#: the caller's own check stops the task between calls (a tree then hands back its open nodes)
+INTERRUPT_AFTER_S = 0.1
+_banner_shown = False
+_call_started = 0.0
+
+
+def highs_instance(options: dict, time_limit: float | None):
+    """A silent HiGHS instance with `options` (HiGHS's names), `time_limit` seconds per run
+    (None: none), and a stop (parallel.cancel.task_stopping) interrupting its simplex,
+    interior point and branch and bound past INTERRUPT_AFTER_S (HiGHS polls them every few
+    iterations / nodes)."""
+    global _banner_shown
+    import highspy
+    if not _banner_shown:               # the first instance prints HiGHS's banner on stdout
+        with stdout_silenced():
+            h = highspy.Highs()
+        _banner_shown = True
+    else:
+        h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    for k, v in options.items():
+        h.setOptionValue(k, v)
+    if time_limit is not None:
+        h.setOptionValue("time_limit", float(time_limit))
+    for cb in (h.cbSimplexInterrupt, h.cbIpmInterrupt, h.cbMipInterrupt):
+        cb += _interrupt_on_stop
+    return h
+
+
+def _interrupt_on_stop(event) -> None:
+    if time.monotonic() - _call_started >= INTERRUPT_AFTER_S and task_stopping():
+        event.interrupt()
+
+
+def highs_run(h) -> Status:
+    """Run HiGHS on its model: its status in the package's vocabulary (HIGHS_STATUS). A stop
+    (parallel.cancel) interrupts a run past INTERRUPT_AFTER_S; an undecided run while the task
+    is stopping raises TaskCancelled here (interrupted, or no answer anyway)."""
+    global _call_started
+    _call_started = time.monotonic()
+    h.run()
+    status = HIGHS_STATUS.get(h.getModelStatus().name, Status.UNDECIDED)
+    if status == Status.UNDECIDED and task_stopping():
+        raise TaskCancelled()
+    return status
+
+
+def highs_lp(A: np.ndarray, lower: np.ndarray, upper: np.ndarray, col_lower: np.ndarray,
+             col_upper: np.ndarray, cost: np.ndarray | None = None, integrality: np.ndarray | None = None):
+    """The HiGHS model {min cost.v : lower <= A v <= upper, col_lower <= v <= col_upper}
+    (A dense (k, d), row-wise; +-inf bounds allowed; integrality (d,): 1 integer)."""
+    import highspy
+    inf = highspy.kHighsInf
+    k, d = A.shape
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = d, k
+    lp.col_cost_ = np.zeros(d) if cost is None else np.asarray(cost, float)
+    lp.col_lower_, lp.col_upper_ = np.clip(col_lower, -inf, inf), np.clip(col_upper, -inf, inf)
+    lp.row_lower_, lp.row_upper_ = np.clip(lower, -inf, inf), np.clip(upper, -inf, inf)
+    nz = A != 0
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kRowwise
+    lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = d, k
+    lp.a_matrix_.start_ = np.concatenate([[0], np.cumsum(nz.sum(axis=1))]).astype(np.int32)
+    lp.a_matrix_.index_ = np.nonzero(nz)[1].astype(np.int32)
+    lp.a_matrix_.value_ = A[nz]
+    if integrality is not None:
+        lp.integrality_ = [highspy.HighsVarType.kInteger if i else highspy.HighsVarType.kContinuous
+                           for i in integrality]
+    return lp
+
+
+def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str = "simplex",
                 counts: dict | None = None) -> tuple[Status, np.ndarray | None]:
     """Feasibility of {rows(mu) x (>=,==) 0, sum r_n = 1}: (status, x or None), by
-    HiGHS (`method`: "highs-ds", dual simplex, which returns a vertex; "highs-ipm").
+    HiGHS (`method`, LP_METHODS: "simplex", dual simplex, which returns a vertex; "ipm";
+    options: HiGHS's names), each call at most LP_TIME_LIMIT_S (then UNDECIDED).
 
     The equalities are eliminated first (x = Z y, Z = rows.Z, mu-independent and
     computed once per rows): HiGHS solves an LP of half the size without equality rows
@@ -45,7 +135,8 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     to X_SPACE_TOL absolutely, as the x-space LP's tolerance guarantees; one that does
     not (a huge y along a near-recession direction on which sum r_n is a tiny share of
     |y|, within tolerance of the reduced rows only) is decided by the x-space LP instead, and so
-    is a problem HiGHS leaves undecided in the eliminated form (counted as "lp_x_space")."""
+    is a problem HiGHS leaves undecided in the eliminated form (counted as "lp_x_space"; the
+    dual simplex's undecided ones first by the primal simplex, PRIMAL, counted "lp_primal")."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
     live = scale > 0
@@ -63,6 +154,10 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     bn = np.linalg.norm(B, axis=1)
     keep = bn > ZERO_ROW_RTOL
     status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], options, method)
+    if status == Status.UNDECIDED and method == "simplex":
+        count(counts, "lp_primal")      # the dual simplex gave up ("Unknown"): the primal one
+        status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], {**(options or {}), **PRIMAL},
+                           method)
     if status == Status.INFEASIBLE:
         return status, None
     if status == Status.FEASIBLE:
@@ -80,14 +175,108 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
 def _highs(A_ge: np.ndarray, A_eq: np.ndarray, d: int, options: dict | None,
            method: str) -> tuple[Status, np.ndarray | None]:
     """{A_ge v >= 0, A_eq v = e_last (the last row is the normalisation)}, v free in R^d."""
-    from scipy.optimize import linprog  # here, not at the top: 0.16 s of every rank's start-up
     b_eq = np.zeros(A_eq.shape[0])
     b_eq[-1] = 1.0
-    ge = A_ge.shape[0] > 0
-    res = linprog(np.zeros(d), A_ub=-A_ge if ge else None, b_ub=np.zeros(A_ge.shape[0]) if ge else None,
-                  A_eq=A_eq, b_eq=b_eq, bounds=[(None, None)] * d, method=method, options=options)
-    status = HIGHS_STATUS.get(res.status, Status.UNDECIDED)
-    return status, res.x if status == Status.FEASIBLE else None
+    k = A_ge.shape[0]
+    lower = np.concatenate([np.zeros(k), b_eq])
+    upper = np.concatenate([np.full(k, np.inf), b_eq])
+    h = highs_instance({**LP_METHODS[method], **(options or {})}, LP_TIME_LIMIT_S)
+    h.passModel(highs_lp(np.vstack([A_ge, A_eq]), lower, upper, np.full(d, -np.inf), np.full(d, np.inf)))
+    status = highs_run(h)
+    return status, np.array(h.getSolution().col_value) if status == Status.FEASIBLE else None
+
+
+class TreeLp:
+    """The 2D pattern LPs of one tree (a parametrisation, m nodes, 0 < mu < inf) kept warm in
+    one HiGHS model over x in R^d: rows u_n,i (m), mu r_n,i + r_t,i and mu r_n,i - r_t,i
+    (2m), sum r_n (1), each unit-scaled. A pattern is row bounds only: u_n,i = 0 (contact)
+    or >= 0; a gap node's two friction rows = 0 (r_n,i = r_t,i = 0, as mu > 0), else >= 0;
+    sum r_n = 1. `solve` changes the bounds the pattern changes and re-solves by the dual
+    simplex (no presolve, LP_OPTIONS' tolerances and time limit) from the root pattern's
+    final basis, always the same one: a node's answer and point depend on the node alone,
+    not on the nodes solved before it, so a tree split into tasks in any way (or resumed)
+    finds the same points, counts and patterns.
+
+    An answer is taken only with its proof checked here: a point meeting every row to
+    X_SPACE_TOL with a normalisation share (lp_feasible) of at least NORM_SHARE_MIN; an
+    infeasibility by HiGHS's dual ray y (a Farkas certificate: y >= 0 on the inequality
+    rows, y_norm > 0 (y . bounds), |A^T y|_1 <= FARKAS_RTOL y_norm: no x with
+    |x|_inf < 1 / FARKAS_RTOL meets the rows). Anything else is UNDECIDED:
+    the caller decides the pattern by `lp_feasible` (counted "warm_unsure")."""
+
+    #: |A^T y|_1 of an accepted dual ray, relative to the bound it proves (y_norm)
+    FARKAS_RTOL = 1e-9
+
+    def __init__(self, param: Parametrization, m: int, mu: float):
+        if not 0.0 < mu < np.inf:
+            raise ValueError(f"TreeLp: 0 < mu < inf, got {mu}")
+        Un, (Rn, Rt) = blocks(param.U, m, 2)[0], blocks(param.R, m, 2)
+        A = np.vstack([Un, mu * Rn + Rt, mu * Rn - Rt])
+        A = A / np.maximum(np.linalg.norm(A, axis=1, keepdims=True), 1e-300)
+        self.A, self.norm, self.m = np.vstack([A, Rn.sum(axis=0)]), Rn.sum(axis=0), m
+        self.upper = np.concatenate([np.full(3 * m, np.inf), [1.0]])
+        self._h = self._start = None
+
+    def __getstate__(self):             # a tree sent to another rank takes no live HiGHS along
+        return {**self.__dict__, "_h": None, "_start": None}   # rebuilt on the next solve
+
+    def _highs(self):
+        if self._h is None:
+            lower = np.concatenate([np.zeros(3 * self.m), [1.0]])
+            d = self.A.shape[1]
+            self.upper = np.concatenate([np.full(3 * self.m, np.inf), [1.0]])    # the root pattern's
+            self._h = highs_instance({**LP_METHODS["simplex"], **LP_OPTIONS, "presolve": "off"}, LP_TIME_LIMIT_S)
+            self._h.passModel(highs_lp(self.A, lower, self.upper, np.full(d, -np.inf), np.full(d, np.inf)))
+            highs_run(self._h)              # the root pattern (every node free): its final basis starts every solve
+            self._start = self._h.getBasis()
+        return self._h
+
+    def solve(self, zero_u: np.ndarray, zero_r: np.ndarray,
+              counts: dict | None = None) -> tuple[Status, np.ndarray | None]:
+        """The pattern (zero_u, zero_r) (m,): (status, x normalised to sum r_n = 1 or None);
+        UNDECIDED: no proof checked (class doc)."""
+        h = self._highs()
+        upper = np.concatenate([np.where(zero_u, 0.0, np.inf), np.tile(np.where(zero_r, 0.0, np.inf), 2), [1.0]])
+        changed = np.flatnonzero(upper != self.upper).astype(np.int32)
+        if changed.size:
+            import highspy
+            h.changeRowsBounds(changed.size, changed, np.zeros(changed.size),
+                               np.clip(upper[changed], 0.0, highspy.kHighsInf))
+            self.upper = upper
+        h.clearSolver()                 # no simplex state of earlier solves (edge weights, perturbations)
+        h.setBasis(self._start)
+        status = highs_run(h)
+        if status == Status.FEASIBLE:
+            x = np.array(h.getSolution().col_value)
+            if self._point_holds(x):
+                count(counts, "warm_feasible")
+                return status, x
+        elif status == Status.INFEASIBLE and self._ray_holds(h):
+            count(counts, "warm_infeasible")
+            return status, None
+        count(counts, "warm_unsure")
+        return Status.UNDECIDED, None
+
+    def _point_holds(self, x: np.ndarray) -> bool:
+        v = self.A @ x
+        eq = self.upper == 0.0
+        share = 1.0 / max(np.linalg.norm(self.norm) * np.linalg.norm(x), 1e-300)
+        worst = max(np.abs(v[eq]).max(initial=0.0), (-v[:-1][~eq[:-1]]).max(initial=0.0), abs(v[-1] - 1.0))
+        return worst <= X_SPACE_TOL and share * np.sqrt(x.size) >= NORM_SHARE_MIN
+
+    def _ray_holds(self, h) -> bool:
+        """HiGHS's dual ray, either sign, proves {rows} empty (class doc)."""
+        _, has, y = h.getDualRay()
+        if not has:
+            return False
+        y = np.asarray(y, float)
+        ge = np.concatenate([self.upper[:-1] != 0.0, [False]])
+        for sign in (1.0, -1.0):
+            z = sign * y
+            z[ge] = np.maximum(z[ge], 0.0)   # rows >= 0 need z >= 0: zeroing keeps a valid combination
+            if z[-1] > 0 and np.abs(self.A.T @ z).sum() <= self.FARKAS_RTOL * z[-1]:
+                return True
+        return False
 
 
 def lp_violation(rows: Rows, mu: float, x: np.ndarray) -> float:
@@ -102,3 +291,25 @@ def lp_violation(rows: Rows, mu: float, x: np.ndarray) -> float:
     eq = rows.eq[live]
     return float(max(np.abs(v[eq]).max(initial=0.0), (-v[~eq]).max(initial=0.0)))
 
+
+
+@contextlib.contextmanager
+def stdout_silenced():
+    """File descriptor 1 to /dev/null for the block: HiGHS prints its banner and some debug
+    lines ("HighsMipSolverData::transformNewIntegerFeasibleSolution ...") with printf, past
+    its output_flag, and stdout carries `hpcwedge run --json`. C's stdio buffer is flushed
+    before fd 1 comes back, so nothing of it reaches the real stdout later."""
+    import ctypes
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+        yield
+    finally:
+        try:
+            ctypes.CDLL(None).fflush(None)
+        except (OSError, AttributeError):
+            pass
+        os.dup2(saved, 1)
+        os.close(saved)

@@ -1,25 +1,26 @@
-"""The 2D wedge MILP (HiGHS via scipy.optimize.milp): is there a wedged configuration at mu,
-one MILP over the whole pattern space (the global mu^c's MILP route, global_mu_c.py)."""
+"""The 2D wedge MILP (HiGHS through highspy, lp.highs_run): is there a wedged configuration at
+mu, one MILP over the whole pattern space (the global mu^c's MILP route, global_mu_c.py).
+A stop interrupts it within HiGHS's polling of its branch and bound and its LPs (a few ms)."""
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 
 from hpcwedge.contact.problem import Parametrization, blocks
-from hpcwedge.solvers.lp import HIGHS_STATUS
+from hpcwedge.solvers.lp import highs_instance, highs_lp, highs_run, stdout_silenced
 from hpcwedge.solvers.rows import Status
 
 #: a MILP optimum sum(r_n) below this (the normalisation makes it a share in [0, 1]) is
 #: no wedged configuration: HiGHS's MIP feasibility tolerance is 1e-6
 MILP_WEDGE_TOL = 1e-5
-#: scipy.optimize.milp options of `wedge_milp` (HiGHS's presolve off: plug2d m = 40 at
-#: mu = 100, 1.8 s against 4.4 s with it)
-MILP_OPTIONS: dict = {"presolve": False}
+#: HiGHS options of `wedge_milp` (presolve off: plug2d m = 40 at mu = 100, 1.8 s against
+#: 4.4 s with it)
+MILP_OPTIONS: dict = {"presolve": "off"}
+#: seconds one MILP may run by default (then UNDECIDED: global_bracket_milp hands the search
+#: to the tree); a stop interrupts it sooner
+MILP_TIME_LIMIT_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -37,9 +38,9 @@ class WedgeMilp:
 
 
 def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
-               time_limit: float | None = None) -> WedgeMilp:
+               time_limit: float | None = MILP_TIME_LIMIT_S) -> WedgeMilp:
     """Is there a 2D wedged configuration at mu (mu = inf: r_t free)? One MILP, solved by
-    HiGHS (scipy.optimize.milp), over x in R^d and binaries z (z_i = 1: node i may carry
+    HiGHS, over x in R^d and binaries z (z_i = 1: node i may carry
     r_n, u_n,i = 0):
 
         maximise sum r_n  s.t.  u_n >= 0, mu r_n +- r_t >= 0 (mu = inf: r_n >= 0),
@@ -49,8 +50,9 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
     u_n >= 0, u_n != 0: the lineality is factored out), so it bounds r_n,i <= 1 and
     s u_n,i <= 1 on the cone's section: both big-M constants (1) are valid, none cuts a
     solution off. A trivial lift-off has sum r_n = 0; a wedged configuration exists iff
-    the optimum is > 0. s > 0 weighs u_n against r (numerics.NumericsReport.scale)."""
-    from scipy.optimize import Bounds, LinearConstraint, milp
+    the optimum is > 0. s > 0 weighs u_n against r (numerics.NumericsReport.scale).
+    time_limit (seconds, None: none): HiGHS stopped there answers UNDECIDED; a stop
+    (parallel.cancel) interrupts it and raises TaskCancelled."""
     U, R = param.U, param.R
     Un, (Rn, Rt) = blocks(U, m, 2)[0], blocks(R, m, 2)
     d = param.d
@@ -70,45 +72,20 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
     hi = np.concatenate([np.full(k, np.inf), [1.0], np.zeros(m), np.ones(m)])
     c = np.concatenate([-Rn.sum(0), np.zeros(m)])
     integrality = np.concatenate([np.zeros(d), np.ones(m)])
-    bounds = Bounds(np.concatenate([np.full(d, -np.inf), np.zeros(m)]),
-                    np.concatenate([np.full(d, np.inf), np.ones(m)]))
-    options = dict(MILP_OPTIONS)
-    if time_limit is not None:
-        options["time_limit"] = time_limit
-    with _stdout_silenced():
-        res = milp(c, constraints=LinearConstraint(A, lo, hi), integrality=integrality, bounds=bounds,
-                   options=options)
-    nodes = int(getattr(res, "mip_node_count", 0) or 0)
-    status = HIGHS_STATUS.get(res.status, Status.UNDECIDED)
+    h = highs_instance(MILP_OPTIONS, time_limit)
+    h.passModel(highs_lp(A, lo, hi, np.concatenate([np.full(d, -np.inf), np.zeros(m)]),
+                         np.concatenate([np.full(d, np.inf), np.ones(m)]), c, integrality))
+    with stdout_silenced():
+        status = highs_run(h)
+    nodes = int(h.getInfo().mip_node_count)
     if status == Status.INFEASIBLE:     # P(mu) = {0} (a supported body below mu^c): no wedge
         return WedgeMilp(Status.INFEASIBLE, 0.0, nodes)
-    if status != Status.FEASIBLE or res.x is None:
+    if status != Status.FEASIBLE:
         return WedgeMilp(Status.UNDECIDED, math.nan, nodes)
-    value = float(-res.fun)
+    x = np.array(h.getSolution().col_value)
+    value = float(-h.getInfo().objective_function_value)
     if value < MILP_WEDGE_TOL:
         return WedgeMilp(Status.INFEASIBLE, value, nodes)
-    zu = res.x[d:] > 0.5
+    zu = x[d:] > 0.5
     return WedgeMilp(Status.FEASIBLE, value, nodes, zu, ~zu)
-
-
-@contextlib.contextmanager
-def _stdout_silenced():
-    """File descriptor 1 to /dev/null for the block: HiGHS's MIP solver prints some debug lines
-    ("HighsMipSolverData::transformNewIntegerFeasibleSolution ...") with printf, past its
-    output_flag, and stdout carries `hpcwedge run --json`. C's stdio buffer is flushed
-    before fd 1 comes back, so nothing of it reaches the real stdout later."""
-    import ctypes
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 1)
-        yield
-    finally:
-        try:
-            ctypes.CDLL(None).fflush(None)
-        except (OSError, AttributeError):
-            pass
-        os.dup2(saved, 1)
-        os.close(saved)
 

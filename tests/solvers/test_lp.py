@@ -50,15 +50,16 @@ def test_lp_point_meets_its_rows_and_violation_measures_a_wrong_one():
 
 
 def test_a_highs_solve_stopped_short_decides_nothing():
-    """HIGHS_STATUS: stopped at its iteration limit (scipy's status 1), HiGHS leaves feasible
-    and infeasible patterns alike UNDECIDED, both forms of the LP tried (lp_x_space)."""
+    """HIGHS_STATUS: stopped at its iteration limit (kIterationLimit), HiGHS leaves feasible
+    and infeasible patterns alike UNDECIDED, both forms of the LP tried (lp_x_space), the
+    eliminated one by both simplex methods (lp_primal)."""
     seen = set()
     for seed in range(6):
         p = parametrize(random_problem(np.random.default_rng(seed), 5, bool(seed % 2)))
         rows = pattern_rows(p, 5, np.zeros(5, bool), np.zeros(5, bool))
         counts: dict = {}
-        status, x = lp_feasible(rows, 1.0, {"maxiter": 0, "presolve": False}, counts=counts)
-        assert status == Status.UNDECIDED and x is None and counts == {"lp_x_space": 1}
+        status, x = lp_feasible(rows, 1.0, {"simplex_iteration_limit": 0, "presolve": "off"}, counts=counts)
+        assert status == Status.UNDECIDED and x is None and counts == {"lp_primal": 1, "lp_x_space": 1}
         seen.add(lp_feasible(rows, 1.0)[0])
     assert seen == {Status.FEASIBLE, Status.INFEASIBLE}
 
@@ -110,3 +111,96 @@ def test_eliminated_lp_agrees_with_the_x_space_lp():
             seen[status] += 1
     assert min(seen.values()) >= 30
     assert counts.get("lp_x_space", 0) <= 2            # the eliminated LP answered
+
+
+def _walk(rng, m, steps):
+    """Patterns of a depth-first walk as a tree visits them: one node fixed (contact or gap)
+    per step down, back to a random depth now and then: (zero_u, zero_r) pairs."""
+    state = np.zeros(m, int)                     # 0 free, 1 contact, 2 gap
+    for _ in range(steps):
+        free = np.flatnonzero(state == 0)
+        if free.size == 0 or rng.random() < 0.2:
+            state[rng.permutation(m)[:rng.integers(1, m + 1)]] = 0
+        else:
+            state[free[0]] = rng.integers(1, 3)
+        yield state == 1, state == 2
+
+
+def _same(a, b) -> bool:
+    return a[0] == b[0] and (a[1] is None) == (b[1] is None) and (a[1] is None or np.array_equal(a[1], b[1]))
+
+
+def test_tree_lp_agrees_with_the_cold_lp_and_its_points_meet_the_rows():
+    """TreeLp (one warm HiGHS model, row bounds changed per pattern) against lp_feasible (a
+    new model per pattern in the equalities' null space, with presolve): the same answer on
+    every pattern it decides, a feasible point meets the pattern's rows (lp_violation) with
+    sum r_n = 1; on random supported and free bodies, patterns in a tree's order, mu near
+    and far from where they change; a copy made by pickle (after solves) answers bit for bit
+    as the original (every solve starts from the root pattern's basis)."""
+    import pickle
+
+    from hpcwedge.solvers.lp import TreeLp
+    decided = {Status.FEASIBLE: 0, Status.INFEASIBLE: 0}
+    unsure = 0
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        m = 6
+        p = parametrize(random_problem(rng, m, bool(seed % 2)))
+        for mu in (0.2, 0.9, 4.0):
+            warm, counts = TreeLp(p, m, mu), {}
+            for zu, zr in _walk(rng, m, 40):
+                status, x = warm.solve(zu, zr, counts)
+                rows = pattern_rows(p, m, zu, zr)
+                if status == Status.UNDECIDED:
+                    unsure += 1
+                    continue
+                assert status == lp_feasible(rows, mu)[0], (seed, mu, zu, zr)
+                decided[status] += 1
+                if status == Status.FEASIBLE:
+                    assert abs(rows.norm @ x - 1) <= 1e-9 and lp_violation(rows, mu, x) <= 1e-8
+            again = pickle.loads(pickle.dumps(warm))     # as a tree sent to another rank: the same answers
+            for zu, zr in list(_walk(np.random.default_rng(seed), m, 10)):
+                assert _same(again.solve(zu, zr), warm.solve(zu, zr))
+            assert sum(counts.values()) == 40 and set(counts) <= {"warm_feasible", "warm_infeasible", "warm_unsure"}
+    assert min(decided.values()) >= 100 and unsure <= 0.1 * sum(decided.values()), (decided, unsure)
+
+
+def test_a_highs_call_at_its_time_limit_decides_nothing(monkeypatch):
+    """LP_TIME_LIMIT_S bounds every LP: at 0 s HiGHS stops at once (kTimeLimit), and
+    lp_feasible (both forms) and TreeLp leave feasible and infeasible patterns UNDECIDED."""
+    import hpcwedge.solvers.lp as lp
+    from hpcwedge.solvers.lp import TreeLp
+    seen = set()
+    for seed in range(6):
+        p = parametrize(random_problem(np.random.default_rng(seed), 5, bool(seed % 2)))
+        zu, zr = np.zeros(5, bool), np.zeros(5, bool)
+        seen.add(lp_feasible(pattern_rows(p, 5, zu, zr), 1.0)[0])
+        monkeypatch.setattr(lp, "LP_TIME_LIMIT_S", 0.0)
+        counts: dict = {}
+        assert lp_feasible(pattern_rows(p, 5, zu, zr), 1.0, counts=counts) == (Status.UNDECIDED, None)
+        assert counts == {"lp_primal": 1, "lp_x_space": 1}
+        assert TreeLp(p, 5, 1.0).solve(zu, zr, counts) == (Status.UNDECIDED, None)
+        assert counts["warm_unsure"] == 1
+        monkeypatch.undo()
+    assert seen == {Status.FEASIBLE, Status.INFEASIBLE}
+
+
+def test_a_stop_interrupts_an_lp_past_its_grace_time(monkeypatch):
+    """Inside a task the engine is stopping (parallel.cancel.run_cancellable), an LP shorter
+    than INTERRUPT_AFTER_S ends with its answer (the caller's own check stops the task); with
+    no grace time HiGHS is interrupted and TaskCancelled raised."""
+    import pytest
+
+    import hpcwedge.solvers.lp as lp
+    from hpcwedge.parallel.cancel import TaskCancelled, run_cancellable
+    p = parametrize(random_problem(np.random.default_rng(1), 5, True))
+    rows = pattern_rows(p, 5, np.zeros(5, bool), np.zeros(5, bool))
+    alone = lp_feasible(rows, 1.0)[0]
+    assert alone != Status.UNDECIDED
+
+    def stopping(ctx, payload):
+        return lp_feasible(rows, 1.0)[0]
+    assert run_cancellable(stopping, None, None, lambda: True, tick_every_s=0.0) == alone
+    monkeypatch.setattr(lp, "INTERRUPT_AFTER_S", 0.0)
+    with pytest.raises(TaskCancelled):
+        run_cancellable(stopping, None, None, lambda: True, tick_every_s=0.0)

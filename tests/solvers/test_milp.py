@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from instances import global_run
 
 from hpcwedge.contact.problem import parametrize
@@ -30,7 +31,7 @@ def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
 
 def test_highs_debug_prints_never_reach_stdout():
     """HiGHS's MIP solver printf()s debug lines past its output_flag on these bodies (6 lines
-    without milp._stdout_silenced); stdout carries `hpcwedge run --json`."""
+    without lp.stdout_silenced); stdout carries `hpcwedge run --json`."""
     code = f"""
 import sys
 sys.path.insert(0, {os.path.dirname(os.path.dirname(os.path.abspath(__file__)))!r})
@@ -50,3 +51,88 @@ print("done")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout == "done\n"
+
+
+def test_a_stop_interrupts_a_long_milp_within_half_a_second():
+    """HiGHS's branch and bound polls the engine's stop (lp.highs_instance's interrupt
+    callbacks): plug2d rows 40 (m = 80) at mu = 100 runs past 30 s, and a stop asked 1 s in
+    raises TaskCancelled within 0.5 s of it (before: the MILP ran to its end, > 145 s at m =
+    640, whatever the signal)."""
+    import time
+
+    from hpcwedge.parallel.cancel import TaskCancelled, run_cancellable
+    res = global_run({"kind": "plug2d", "rows": 40, "taper_deg": 10.0}, mu_c="none")
+    p, m = parametrize(res.problem), res.m
+    assert wedge_milp(p, m, 100.0, time_limit=3.0).status == Status.UNDECIDED     # longer than 3 s
+    start = time.monotonic()
+    asked = []
+
+    def check():
+        if time.monotonic() - start >= 1.0:
+            asked.append(asked[0] if asked else time.monotonic())
+            return True
+        return False
+    with pytest.raises(TaskCancelled):
+        run_cancellable(lambda ctx, payload: wedge_milp(p, m, 100.0), None, None, check)
+    assert asked and time.monotonic() - asked[0] < 0.5, time.monotonic() - start
+
+
+MILP_RUN = """
+import functools, sys
+import hpcwedge.mu_c.global_search as gs
+from hpcwedge import cli
+milp, bracket = gs.wedge_milp, gs.global_bracket_milp
+
+def announced(param, m, mu, *args, **kw):
+    print(f"MILP at mu = {mu}", file=sys.stderr, flush=True)
+    return milp(param, m, mu, *args, **kw)
+
+gs.wedge_milp = announced
+gs.global_bracket_milp = functools.partial(bracket, dive=0)      # every step a MILP
+sys.exit(cli.main())
+"""
+
+
+def test_sigterm_inside_a_long_milp_exits_75_within_2_s_with_a_checkpoint(tmp_path):
+    """`hpcwedge run` (global mu^c, plug2d rows 40, m = 80, the MILP route without its dive)
+    gets SIGTERM 1 s into its MILP at mu_max = 100 (a 46 s HiGHS call on its own): exit 75
+    with the checkpoint written, within 1 s of the process's CPU time after the signal and
+    2 s of wall time (times the machine's load per core, when it is shared beyond its cores).
+    Before: the signal waited for the MILP's end (13 s even with only the simplex polled)."""
+    import signal
+    import time
+
+    import h5py
+    from mpi_helpers import cpu_seconds, env
+
+    from hpcwedge.files import checkpoint_path
+    scene = tmp_path / "s.toml"
+    scene.write_text('name = "p"\ndim = 2\n[model]\nkind = "plug2d"\nrows = 40\ntaper_deg = 10.0\n'
+                     '[friction]\nmu = [0.1]\n[compute]\nenumerate = false\nmu_c = "global"\n'
+                     '[run]\nsymmetry = false\n')
+    out = str(tmp_path / "r.h5")
+    p = subprocess.Popen([sys.executable, "-c", MILP_RUN, "run", str(scene), "-o", out, "-q"], env=env(),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in p.stderr:
+            if line.startswith("MILP at mu = 100"):
+                break
+        else:
+            pytest.fail(f"no MILP at mu_max: exit {p.wait()}")
+        time.sleep(1.0)
+        assert p.poll() is None
+        cpu = cpu_seconds(p.pid)
+        p.send_signal(signal.SIGTERM)
+        t = time.monotonic()
+        _, status, usage = os.wait4(p.pid, 0)
+        took = time.monotonic() - t
+        p.returncode = os.waitstatus_to_exitcode(status)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    cpu = usage.ru_utime + usage.ru_stime - cpu
+    load = max(1.0, os.getloadavg()[0] / os.cpu_count())
+    rest = p.stderr.read()
+    assert p.returncode == 75 and cpu < 1.0 and took < 2.0 * load, (p.returncode, cpu, took, load, rest)
+    with h5py.File(checkpoint_path(out), "r") as f:
+        assert f.attrs["reason"] == "SIGTERM"
