@@ -10,9 +10,11 @@
 #
 # Runs `mpirun -n RANKS python -m hpcwedge run SCENE -o RESULT --resume`: a
 # rerun continues from the checkpoint beside RESULT (or starts fresh when there
-# is none). Ctrl-C / SIGTERM / SIGHUP: mpirun gets SIGTERM, which it forwards;
-# the master writes a checkpoint and exits 75 within the second Open MPI gives
-# it (the workers ignore SIGTERM); SIGKILL if mpirun is still there 30 s later.
+# is none). Ctrl-C / SIGTERM / SIGHUP: SIGTERM goes to the ranks (mpirun's
+# children), not to mpirun: the master writes a checkpoint, tells the workers to
+# stop (they ignore SIGTERM) and exits 75, and so does mpirun, then this script.
+# (Open MPI 4's mpirun exits 1 on a SIGTERM of its own, whatever the ranks do.)
+# SIGTERM to mpirun if no rank is found, SIGKILL if it is still there 30 s later.
 # mpirun runs in its own session so that the terminal's Ctrl-C reaches only this
 # script (Open MPI's mpirun would answer it by killing the ranks at once).
 # Send the run SIGUSR1 yourself for a checkpoint without stopping.
@@ -27,12 +29,24 @@ on_signal() {
   if [ -z "$stop_sig" ]; then
     stop_sig=$1 stop_t=$SECONDS
     if [ -n "$child" ]; then
-      log "signal $1 received: SIGTERM to ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints and stops"
+      log "signal $1 received: SIGTERM to the ranks of ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints and stops"
       term_t=$SECONDS
-      kill -TERM "$child" 2>/dev/null
+      stop_ranks
     else
       log "signal $1 received before the launch"
     fi
+  fi
+}
+# SIGTERM to the launcher's children (the ranks on this host; rank 0 among them), or to
+# the launcher when it has none yet
+stop_ranks() {
+  local ranks
+  ranks=$(ps -o pid= --ppid "$child" 2>/dev/null)
+  if [ -n "$ranks" ]; then
+    # shellcheck disable=SC2086  # one pid per word
+    kill -TERM $ranks 2>/dev/null
+  else
+    kill -TERM "$child" 2>/dev/null
   fi
 }
 trap 'on_signal INT' INT
@@ -97,7 +111,7 @@ if [ -n "$stop_sig" ]; then log "stopped by SIG$stop_sig before the launch"; exi
 "${SETSID[@]}" "${CMD[@]}" < /dev/null &
 child=$!
 log "launch: ${CMD[*]} (mpirun pid $child)"
-[ -n "$stop_sig" ] && { term_t=$SECONDS; kill -TERM "$child" 2>/dev/null; }
+[ -n "$stop_sig" ] && { term_t=$SECONDS; kill -TERM "$child" 2>/dev/null; }   # before its ranks exist
 
 while kill -0 "$child" 2>/dev/null; do
   if [ -z "$stop_sig" ]; then
@@ -124,6 +138,9 @@ if [ $rc = 0 ] && [ "$complete" = 1 ]; then
   log "done: $RESULT${stop_sig:+ (completed before stopping)}"; exit 0
 fi
 if [ -n "$stop_sig" ]; then
+  if [ $rc = 75 ]; then
+    log "stopped by SIG$stop_sig, checkpoint written (exit 75); rerun the same command to resume"; exit 75
+  fi
   log "stopped by SIG$stop_sig (run exit $rc); rerun the same command to resume"
   case "$stop_sig" in INT) exit 130 ;; HUP) exit 129 ;; *) exit 143 ;; esac
 fi
