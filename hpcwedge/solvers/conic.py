@@ -200,7 +200,7 @@ class _KeptSolvers(threading.local):
 
     Not bit for bit in every case: a kept solver decided a problem on which a new one stops
     at its first step (plug3d 3 x 6, mu = 1.0: a tight attempt 0 with an objective, FEASIBLE
-    in 11 iterations against UNDECIDED in 1), which moved a mu^c by 1 ulp with the solvers
+    in 11 iterations against UNDECIDED in 1), which moved a mu^c by 1-2 ulp with the solvers
     kept before it. So every engine task has solvers of its own (`task_solvers`, entered by
     parallel.run_cancellable): its answer depends on its payload only, whatever the rank
     ran before, and the master's solvers are the same serially and under mpirun."""
