@@ -14,13 +14,15 @@
 # children), not to mpirun: the master writes a checkpoint, tells the workers to
 # stop (they ignore SIGTERM) and exits 75, and so does mpirun, then this script.
 # (Open MPI 4's mpirun exits 1 on a SIGTERM of its own, whatever the ranks do.)
-# SIGTERM to mpirun if no rank is found, SIGKILL if it is still there 30 s later.
+# SIGTERM to mpirun if no rank is found, SIGKILL if it is still there
+# HPCWEDGE_KILL_AFTER seconds later (default 120: 64 workers oversubscribed on 2 busy
+# cores took over 30 s to hand back their tasks and exit).
 # mpirun runs in its own session so that the terminal's Ctrl-C reaches only this
 # script (Open MPI's mpirun would answer it by killing the ranks at once).
 # Send the run SIGUSR1 yourself for a checkpoint without stopping.
 #
 # Environment: HPCWEDGE_ROOT, HPCWEDGE_PYTHON, HPCWEDGE_MPIRUN,
-# HPCWEDGE_MPIRUN_ARGS (as for jobs/wedge.sbatch).
+# HPCWEDGE_MPIRUN_ARGS (as for jobs/wedge.sbatch), HPCWEDGE_KILL_AFTER.
 
 log() { printf '%s [wedge-mpirun] %s\n' "$(date '+%F %T')" "$*" >&2; }
 stop_sig="" stop_t=0 term_t=0 child=""
@@ -63,7 +65,7 @@ while [ $# -gt 0 ]; do
     -n|--np) [ $# -ge 2 ] || die "$usage"; RANKS=$2; shift 2 ;;
     -n*) RANKS=${1#-n}; shift ;;
     --no-resume) RESUME=(); shift ;;
-    -h|--help) sed -n '2,20s/^# \{0,1\}//p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,25s/^# \{0,1\}//p' "$0"; exit 0 ;;
     --) shift; ARGS+=("$@"); break ;;
     -*) die "unknown option $1; $usage" ;;
     *) ARGS+=("$1"); shift ;;
@@ -79,6 +81,8 @@ CPUS=$(nproc 2>/dev/null || echo 1)
 CORES=$(lscpu -p=CORE,SOCKET 2>/dev/null | grep -v '^#' | sort -u | wc -l)
 [ "${CORES:-0}" -ge 1 ] && [ "$CORES" -lt "$CPUS" ] && CPUS=$CORES   # Open MPI counts cores, not threads
 RANKS=${RANKS:-$CPUS}
+KILL_AFTER=${HPCWEDGE_KILL_AFTER:-120}
+[[ "$KILL_AFTER" =~ ^[0-9]+$ ]] || die "HPCWEDGE_KILL_AFTER=$KILL_AFTER: not a number of seconds"
 [[ "$RANKS" =~ ^[1-9][0-9]*$ ]] || die "-n $RANKS: not a positive integer"
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -117,8 +121,8 @@ while kill -0 "$child" 2>/dev/null; do
   if [ -z "$stop_sig" ]; then
     wait "$child"
   else
-    if [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge 30 ]; then
-      log "${LAUNCH[0]} ignored SIGTERM for 30 s: SIGKILL"
+    if [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge "$KILL_AFTER" ]; then
+      log "${LAUNCH[0]} still running ${KILL_AFTER} s after SIGTERM: SIGKILL"
       kill -KILL "$child" 2>/dev/null
     fi
     sleep 1 & wait $!
