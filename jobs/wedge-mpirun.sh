@@ -10,15 +10,19 @@
 #
 # Runs `mpirun -n RANKS python -m hpcwedge run SCENE -o RESULT --resume`: a
 # rerun continues from the checkpoint beside RESULT (or starts fresh when there
-# is none). Ctrl-C / SIGTERM / SIGHUP: mpirun gets SIGTERM, which it forwards;
-# the master writes a checkpoint and exits 75 within the second Open MPI gives
-# it (the workers ignore SIGTERM); SIGKILL if mpirun is still there 30 s later.
+# is none). Ctrl-C / SIGTERM / SIGHUP: SIGTERM goes to the ranks (mpirun's
+# children), not to mpirun: the master writes a checkpoint, tells the workers to
+# stop (they ignore SIGTERM) and exits 75, and so does mpirun, then this script.
+# (Open MPI 4's mpirun exits 1 on a SIGTERM of its own, whatever the ranks do.)
+# SIGTERM to mpirun if no rank is found, SIGKILL if it is still there
+# HPCWEDGE_KILL_AFTER seconds later (default 120: 64 workers oversubscribed on 2 busy
+# cores took over 30 s to hand back their tasks and exit).
 # mpirun runs in its own session so that the terminal's Ctrl-C reaches only this
 # script (Open MPI's mpirun would answer it by killing the ranks at once).
 # Send the run SIGUSR1 yourself for a checkpoint without stopping.
 #
 # Environment: HPCWEDGE_ROOT, HPCWEDGE_PYTHON, HPCWEDGE_MPIRUN,
-# HPCWEDGE_MPIRUN_ARGS (as for jobs/wedge.sbatch).
+# HPCWEDGE_MPIRUN_ARGS (as for jobs/wedge.sbatch), HPCWEDGE_KILL_AFTER.
 
 log() { printf '%s [wedge-mpirun] %s\n' "$(date '+%F %T')" "$*" >&2; }
 stop_sig="" stop_t=0 term_t=0 child=""
@@ -27,12 +31,24 @@ on_signal() {
   if [ -z "$stop_sig" ]; then
     stop_sig=$1 stop_t=$SECONDS
     if [ -n "$child" ]; then
-      log "signal $1 received: SIGTERM to ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints and stops"
+      log "signal $1 received: SIGTERM to the ranks of ${LAUNCH[0]:-mpirun} (pid $child); the master checkpoints and stops"
       term_t=$SECONDS
-      kill -TERM "$child" 2>/dev/null
+      stop_ranks
     else
       log "signal $1 received before the launch"
     fi
+  fi
+}
+# SIGTERM to the launcher's children (the ranks on this host; rank 0 among them), or to
+# the launcher when it has none yet
+stop_ranks() {
+  local ranks
+  ranks=$(ps -o pid= --ppid "$child" 2>/dev/null)
+  if [ -n "$ranks" ]; then
+    # shellcheck disable=SC2086  # one pid per word
+    kill -TERM $ranks 2>/dev/null
+  else
+    kill -TERM "$child" 2>/dev/null
   fi
 }
 trap 'on_signal INT' INT
@@ -49,7 +65,7 @@ while [ $# -gt 0 ]; do
     -n|--np) [ $# -ge 2 ] || die "$usage"; RANKS=$2; shift 2 ;;
     -n*) RANKS=${1#-n}; shift ;;
     --no-resume) RESUME=(); shift ;;
-    -h|--help) sed -n '2,20s/^# \{0,1\}//p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,25s/^# \{0,1\}//p' "$0"; exit 0 ;;
     --) shift; ARGS+=("$@"); break ;;
     -*) die "unknown option $1; $usage" ;;
     *) ARGS+=("$1"); shift ;;
@@ -65,6 +81,8 @@ CPUS=$(nproc 2>/dev/null || echo 1)
 CORES=$(lscpu -p=CORE,SOCKET 2>/dev/null | grep -v '^#' | sort -u | wc -l)
 [ "${CORES:-0}" -ge 1 ] && [ "$CORES" -lt "$CPUS" ] && CPUS=$CORES   # Open MPI counts cores, not threads
 RANKS=${RANKS:-$CPUS}
+KILL_AFTER=${HPCWEDGE_KILL_AFTER:-120}
+[[ "$KILL_AFTER" =~ ^[0-9]+$ ]] || die "HPCWEDGE_KILL_AFTER=$KILL_AFTER: not a number of seconds"
 [[ "$RANKS" =~ ^[1-9][0-9]*$ ]] || die "-n $RANKS: not a positive integer"
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -97,14 +115,14 @@ if [ -n "$stop_sig" ]; then log "stopped by SIG$stop_sig before the launch"; exi
 "${SETSID[@]}" "${CMD[@]}" < /dev/null &
 child=$!
 log "launch: ${CMD[*]} (mpirun pid $child)"
-[ -n "$stop_sig" ] && { term_t=$SECONDS; kill -TERM "$child" 2>/dev/null; }
+[ -n "$stop_sig" ] && { term_t=$SECONDS; kill -TERM "$child" 2>/dev/null; }   # before its ranks exist
 
 while kill -0 "$child" 2>/dev/null; do
   if [ -z "$stop_sig" ]; then
     wait "$child"
   else
-    if [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge 30 ]; then
-      log "${LAUNCH[0]} ignored SIGTERM for 30 s: SIGKILL"
+    if [ "$term_t" != 0 ] && [ $((SECONDS - term_t)) -ge "$KILL_AFTER" ]; then
+      log "${LAUNCH[0]} still running ${KILL_AFTER} s after SIGTERM: SIGKILL"
       kill -KILL "$child" 2>/dev/null
     fi
     sleep 1 & wait $!
@@ -124,6 +142,9 @@ if [ $rc = 0 ] && [ "$complete" = 1 ]; then
   log "done: $RESULT${stop_sig:+ (completed before stopping)}"; exit 0
 fi
 if [ -n "$stop_sig" ]; then
+  if [ $rc = 75 ]; then
+    log "stopped by SIG$stop_sig, checkpoint written (exit 75); rerun the same command to resume"; exit 75
+  fi
   log "stopped by SIG$stop_sig (run exit $rc); rerun the same command to resume"
   case "$stop_sig" in INT) exit 130 ;; HUP) exit 129 ;; *) exit 143 ;; esac
 fi

@@ -38,6 +38,25 @@ PLUG_MODEL = 'kind = "plug2d"\nrows = 4'
 RAW_MODEL = 'kind = "stiffness"\nfile = "plug8.npz"'
 _RAW: dict = {}
 
+#: plug3d 2 x 6 (m = 12) at two mu without its symmetry (stops at many rank counts:
+#: tests/parallel/test_resume_ranks.py, scripts/bench_sigterm.py): a tree of subtree tasks, then
+#: 223 mu^c tasks (~10 s serially), checkpoints every 0.2 s so that a stop lands mid-run
+STOP_SCENE = """name = "plug3d-2x6"
+dim = 3
+[model]
+kind = "plug3d"
+levels = 2
+ring = 6
+[friction]
+mu = [0.65, 1.0]
+[compute]
+mu_c = "cones"
+[run]
+symmetry = false
+checkpoint_every_s = 0.2
+task_budget = 8
+"""
+
 #: a 2D rays scene: plug2d (cols 3, taper 10 deg) as a raw condensed K, m = 2 rows
 RAYS_SCENE = """name = "plug{m}-rays"
 dim = 2

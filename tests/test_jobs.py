@@ -21,6 +21,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.mpi]
 REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 SBATCH = os.path.join(REPO, "jobs", "wedge.sbatch")
 MPIRUN_SH = os.path.join(REPO, "jobs", "wedge-mpirun.sh")
+MULTINODE = os.path.join(REPO, "jobs", "wedge-multinode.sbatch")
 
 # Two ranks, a few seconds at most.
 SMALL = """name = "plug2d-r3"
@@ -178,7 +179,7 @@ def wait_running(slurm, jid, logpath, timeout=120):
 
 def test_warning_signal_requeues_and_resumes(slurm, scenes, tmp_path):
     scene, want = scenes["long"]
-    jid = submit(slurm, tmp_path, scene, "long.h5")
+    jid = submit(slurm, tmp_path, scene, "long.h5", HPCWEDGE_STOP_GRACE="60")   # the master's own stop, exit 75
     logpath = tmp_path / f"job-{jid}.out"
     wait_running(slurm, jid, logpath)
     t_sig = time.monotonic()
@@ -190,7 +191,8 @@ def test_warning_signal_requeues_and_resumes(slurm, scenes, tmp_path):
     t_done = time.monotonic()
     log = read(logpath)
     assert info.get("JobState") == "COMPLETED" and info.get("Restarts") == "1", log
-    assert "signal USR1 received: forwarding USR1 to mpirun" in log, log
+    assert "signal USR1 received: stopping the run with a checkpoint" in log, log
+    assert "SIGTERM to rank 0 (pid " in log and "run stopped (exit 75) after the time-limit warning" in log, log
     assert f"requeue: job {jid} goes back to the queue" in log, log
     assert log.count("start: job") == 2 and f"start: job {jid} SLURM_RESTART_COUNT=1" in log, log
     assert "done:" in log and log.index("SLURM_RESTART_COUNT=1") < log.index("done:"), log
@@ -232,6 +234,38 @@ def test_dependency_chain_without_requeue(slurm, scenes, tmp_path):
     assert_same_result(show(str(tmp_path / "chain.h5")), want)
 
 
+def test_multinode_script_requeues_and_resumes(slurm, scenes, tmp_path):
+    """jobs/wedge-multinode.sbatch on the one local node with 4 tasks (the node's CPUs, more
+    than the machine's 2 cores): at the warning SIGTERM to rank 0, the
+    master checkpoints and exits 75, the job is requeued and the rerun resumes; the result
+    is the direct run's."""
+    scene, want = scenes["long"]
+    jid = slurm.sbatch(MULTINODE, [scene, "multi.h5"], cwd=str(tmp_path), env=job_env(HPCWEDGE_STOP_GRACE="60"),
+                       options=["-N", "1", "--ntasks-per-node", "4", "-t", "10",
+                                "-o", str(tmp_path / "job-%j.out")])
+    logpath = tmp_path / f"job-{jid}.out"
+    wait_running(slurm, jid, logpath)
+    slurm.run("scancel", "-b", "-s", "USR1", jid)
+    slurm.wait_for(lambda: slurm.job(jid).get("Restarts", "0") != "0", 90, f"job {jid} to be requeued")
+    slurm.start_now(jid)
+    info = slurm.wait_gone(jid, timeout=300)
+    log = read(logpath)
+    assert info.get("JobState") == "COMPLETED" and info.get("Restarts") == "1", log
+    assert "[wedge-multinode] nodes " in log and "4 task(s) per node, 4 in all" in log, log
+    assert "SIGTERM to rank 0 (pid " in log and "run stopped (exit 75) after the time-limit warning" in log, log
+    assert "mpirun -n 4 " in log and f"start: job {jid} SLURM_RESTART_COUNT=1 ntasks=4" in log, log
+    assert_same_result(show(str(tmp_path / "multi.h5")), want)
+
+
+def test_multinode_script_checks_the_task_count(scenes, tmp_path):
+    """Tasks per node x nodes must be SLURM_NTASKS (exit 2, one line), checked before any launch."""
+    scene, _ = scenes["small"]
+    bad = {"SLURM_JOB_ID": "1", "SLURM_NTASKS": "5", "SLURM_JOB_NUM_NODES": "2", "SLURM_NTASKS_PER_NODE": "3"}
+    r = subprocess.run(["bash", MULTINODE, scene], capture_output=True, text=True, cwd=str(tmp_path),
+                       env={**os.environ, **job_env(), **bad}, timeout=60)
+    assert r.returncode == 2 and "SLURM_NTASKS=5 is not 2 node(s) x 3 task(s) per node" in r.stdout, r.stdout
+
+
 def test_sbatch_bad_arguments(tmp_path):
     """Outside SLURM the script still checks its arguments (exit 2, one clear line)."""
     for args, msg in (([], "usage:"), ([str(tmp_path / "none.toml")], "not readable")):
@@ -268,12 +302,13 @@ def test_mpirun_script_forwards_sigint_then_resumes(scenes, tmp_path):
         assert "done:" not in read(errpath), "the scene finished before the signal"
         mpirun_pid = int(read(errpath).split("mpirun pid ")[1].split(")")[0])
         p.send_signal(signal.SIGINT)
-        assert p.wait(timeout=60) == 130, read(errpath)
+        assert p.wait(timeout=60) == 75, read(errpath)         # the master's status, not mpirun's 1
     finally:
         if p.poll() is None:
             p.kill()
     log = read(errpath)
-    assert "signal INT received: SIGTERM to mpirun" in log and "stopped by SIGINT" in log, log
+    assert "signal INT received: SIGTERM to the ranks of mpirun" in log, log
+    assert "stopped by SIGINT, checkpoint written (exit 75)" in log, log
     with pytest.raises(ProcessLookupError):
         os.kill(mpirun_pid, 0)
     # The same command again finishes the job (from the checkpoint once there is one).

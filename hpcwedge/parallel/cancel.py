@@ -5,6 +5,7 @@ A leaf: no MPI, no HDF5, nothing of the domain, so every engine may import it.
 """
 from __future__ import annotations
 
+import contextlib
 import time
 
 from hpcwedge.errors import Interrupted
@@ -54,15 +55,36 @@ def task_tick() -> None:
         raise TaskCancelled()
 
 
+# ---------------------------------------------------------------- task scopes
+
+#: context-manager factories entered around every task (task_scope)
+_scopes: list = []
+
+
+def task_scope(factory) -> None:
+    """Register factory(), a context manager that run_cancellable enters around every task,
+    in whatever process runs it (in-process, or a worker). For state a module keeps between
+    calls (solvers/conic.py's kept Clarabel solvers): the task starts with its own, empty,
+    and the caller's is back afterwards, so that a task's answer is a function of its
+    payload alone — not of which tasks the rank ran before — and the master's state is
+    the same serially and under mpirun (SPEC §5: the same bits for any rank count)."""
+    if factory not in _scopes:
+        _scopes.append(factory)
+
+
 def run_cancellable(handler, ctx, payload, check, tick_every_s: float = TICK_EVERY_S):
-    """handler(ctx, payload), during which task_stopping() asks check() (at most every
-    tick_every_s seconds) whether the task should stop."""
+    """handler(ctx, payload) inside every task_scope, during which task_stopping() asks
+    check() (at most every tick_every_s seconds) whether the task should stop."""
     global _cancel_check, _tick_every_s, _last_tick, _stopping
     _cancel_check, _tick_every_s, _last_tick, _stopping = check, tick_every_s, time.monotonic(), False
     try:
-        return handler(ctx, payload)
+        with contextlib.ExitStack() as scopes:
+            for factory in list(_scopes):
+                scopes.enter_context(factory())
+            return handler(ctx, payload)
     finally:
         _cancel_check, _stopping = None, False
 
 
-__all__ = ["Interrupted", "TaskCancelled", "TICK_EVERY_S", "task_stopping", "task_tick", "run_cancellable"]
+__all__ = ["Interrupted", "TaskCancelled", "TICK_EVERY_S", "task_stopping", "task_tick", "run_cancellable",
+           "task_scope"]

@@ -35,6 +35,7 @@ keep Clarabel's steps.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import threading
 from dataclasses import dataclass
@@ -42,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from hpcwedge.parallel.cancel import task_scope
 from hpcwedge.solvers.rows import Status
 
 #: the attempts of the ladder (module doc), and the one that seeks the least-norm point
@@ -194,7 +196,14 @@ class _KeptSolvers(threading.local):
     tree the same). Only problems whose pattern is a function of their shape are kept
     (DenseDiag, dense arrays), and only under settings without equilibration (a data update
     keeps the first problem's scaling) or presolve (which forbids updates). Process and
-    thread state: each MPI rank and each thread has its own solvers."""
+    thread state: each MPI rank and each thread has its own solvers.
+
+    Not bit for bit in every case: a kept solver decided a problem on which a new one stops
+    at its first step (plug3d 3 x 6, mu = 1.0: a tight attempt 0 with an objective, FEASIBLE
+    in 11 iterations against UNDECIDED in 1), which moved a mu^c by 1-2 ulp with the solvers
+    kept before it. So every engine task has solvers of its own (`task_solvers`, entered by
+    parallel.run_cancellable): its answer depends on its payload only, whatever the rank
+    ran before, and the master's solvers are the same serially and under mpirun."""
 
     def __init__(self, size: int, entries: int):
         self.size, self.entries = size, entries
@@ -236,6 +245,21 @@ class _KeptSolvers(threading.local):
 #: the solvers kept for reuse (_KeptSolvers): the structures a tree meets (plug3d 3 x 6 at
 #: mu = 0.65: 163 among its 7,219 SOCPs), within ~2^22 entries of A (a few tens of MB)
 _KEPT = _KeptSolvers(256, 1 << 22)
+
+
+@contextlib.contextmanager
+def task_solvers():
+    """The span of one engine task (registered with parallel.task_scope): no kept solver at
+    its start, and the caller's kept solvers back at its end (this thread's)."""
+    outer = _KEPT._solvers, _KEPT._stored
+    _KEPT._solvers, _KEPT._stored = {}, 0
+    try:
+        yield
+    finally:
+        _KEPT._solvers, _KEPT._stored = outer
+
+
+task_scope(task_solvers)
 
 
 @dataclass(frozen=True)

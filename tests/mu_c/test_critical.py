@@ -174,3 +174,37 @@ def test_3d_small_taper_every_pattern_mu_c_polished():
     want = math.tan(math.radians(0.1))
     assert r.runs[0].n_patterns == 41 and r.stats["mu_c_polished"] == 41 and r.stats["mu_c_unpolished"] == 0
     assert r.stats["lp_undecided"] == 0 and abs(r.mu_c - want) <= 1e-9 * want
+
+
+def test_a_mu_c_task_is_a_function_of_its_payload():
+    """The 1 ulp of issue 42 (a run stopped under mpirun -n 9 and resumed under -n 3): on
+    plug3d 3 x 6 at mu = 1.0, the mu^c task of one pattern computed after that of another,
+    with the Clarabel solvers both kept (conic._KeptSolvers), moved by 2 ulp. As
+    engine tasks (run_cancellable: each with solvers of its own) it is the same bits
+    alone, after the other, and again; the direct calls show that the case is a real one."""
+    from functools import partial
+
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.mu_c.critical import mu_c_task
+    from hpcwedge.parallel.cancel import run_cancellable
+    from hpcwedge.rays.numerics import NumericsReport
+    from hpcwedge.scene.parse import parse_scene
+    prob = contact_problem(parse_scene({"name": "p", "dim": 3, "friction": {"mu": [1.0]},
+                                        "model": {"kind": "plug3d", "levels": 3, "ring": 6}}))
+    solve = partial(mu_critical, parametrize(prob), prob.m, mu_max=100.0, method="accurate", tol=1e-6,
+                    scale=NumericsReport.of(prob, 0).scale)
+
+    def payload(zero_u, zero_r):
+        return (np.isin(np.arange(18), zero_u), np.isin(np.arange(18), zero_r), 1.0)
+
+    before = payload([0, 1, 2, 6, 7, 9, 10, 12, 15, 16, 17], [3, 4, 5, 8, 11, 13, 14])
+    task = payload([0, 1, 2, 3, 6, 7, 9, 10, 12, 15, 16, 17], [4, 5, 8, 11, 13, 14])
+
+    def as_task(p):
+        return run_cancellable(mu_c_task, solve, p, lambda: False)["mu_c"]
+
+    alone = as_task(task)
+    assert as_task(before) != alone
+    assert as_task(task) == alone and as_task(task) == alone
+    # outside a task the solvers stay kept: the same calls, directly, move the value
+    assert [mu_c_task(solve, p)["mu_c"] for p in (task, before, task)][::2] != [alone, alone]

@@ -29,3 +29,27 @@ def test_engines_import_no_mpi_and_no_hdf5():
     p = subprocess.run([sys.executable, "-c", code], env=env(), capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip() == "False False"
+
+
+def test_task_scopes_wrap_every_task(monkeypatch):
+    """A registered scope is entered before the handler and left after it, also when the
+    task is cancelled; registering it twice enters it once."""
+    import contextlib
+    monkeypatch.setattr(cancel, "_scopes", [])
+    seen = []
+
+    @contextlib.contextmanager
+    def scope():
+        seen.append("in")
+        try:
+            yield
+        finally:
+            seen.append("out")
+
+    cancel.task_scope(scope)
+    cancel.task_scope(scope)
+    assert cancel.run_cancellable(lambda ctx, p: seen.append(p) or p, None, 3, lambda: False) == 3
+    assert seen == ["in", 3, "out"]
+    with pytest.raises(cancel.TaskCancelled):
+        cancel.run_cancellable(lambda ctx, p: cancel.task_tick(), None, None, lambda: True, tick_every_s=0.0)
+    assert seen[3:] == ["in", "out"]

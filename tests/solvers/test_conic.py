@@ -141,3 +141,25 @@ def test_kept_solvers_answer_as_new_ones_bit_for_bit(monkeypatch):
     assert 0 < len(small._solvers) <= 4 and small._stored <= 300
     # settled answers and others (solved again on a new solver) both among them
     assert {name for _, name, _, _ in new} > {"Solved", "PrimalInfeasible"}
+
+
+def test_a_task_starts_without_kept_solvers_and_gives_them_back():
+    """conic.task_solvers (entered around every engine task): no kept solver inside, the
+    task's own dropped, the caller's back after it."""
+    from hpcwedge.parallel.cancel import run_cancellable
+    from hpcwedge.solvers import conic
+    p, m = plug3d_param(2, 4)
+    rows = next(iter(partial_rows(p, m, np.random.default_rng(3), (0.9,), 1)))[1]
+    problem = pattern_socp(rows, 0.9)
+    conic.solve(problem, 1, False)
+    outer = dict(conic._KEPT._solvers)
+    assert outer
+
+    def task(ctx, payload):
+        assert not conic._KEPT._solvers
+        conic.solve(problem, 2, False)
+        return set(conic._KEPT._solvers)
+
+    inside = run_cancellable(task, None, None, lambda: False)
+    assert inside and not inside & set(outer)
+    assert conic._KEPT._solvers == outer
