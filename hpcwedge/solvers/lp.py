@@ -7,6 +7,7 @@ dual simplex returns a vertex: the polish of mu^c (mu_bracket.py) needs its acti
 """
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import sys
@@ -57,7 +58,7 @@ _banner_shown = False
 _call_started = 0.0
 
 
-def highs_instance(options: dict, time_limit: float | None):
+def highs_instance(options: dict, time_limit: float | None, polled: bool = True):
     """A silent HiGHS instance with `options` (HiGHS's names), `time_limit` seconds per run
     (None: none), and a stop (parallel.cancel.task_stopping) interrupting its simplex,
     interior point and branch and bound past INTERRUPT_AFTER_S (HiGHS polls them every few
@@ -75,8 +76,9 @@ def highs_instance(options: dict, time_limit: float | None):
         h.setOptionValue(k, v)
     if time_limit is not None:
         h.setOptionValue("time_limit", float(time_limit))
-    for cb in (h.cbSimplexInterrupt, h.cbIpmInterrupt, h.cbMipInterrupt):
-        cb += _interrupt_on_stop
+    if polled:
+        for cb in (h.cbSimplexInterrupt, h.cbIpmInterrupt, h.cbMipInterrupt):
+            cb += _interrupt_on_stop
     return h
 
 
@@ -92,6 +94,37 @@ def highs_run(h) -> Status:
     global _call_started
     _call_started = time.monotonic()
     h.run()
+    status = HIGHS_STATUS.get(h.getModelStatus().name, Status.UNDECIDED)
+    if status == Status.UNDECIDED and task_stopping():
+        raise TaskCancelled()
+    return status
+
+
+#: HiGHS runs a stop left behind (highs_run_watched): the process's exit waits for them
+_left_running: list = []
+
+
+@atexit.register
+def _join_left_running() -> None:
+    while _left_running:
+        _left_running.pop().wait()
+
+
+def highs_run_watched(h, grace_s: float = 0.3) -> Status:
+    """highs_run for a long call (the MILP, made by highs_instance(..., polled=False)): HiGHS
+    runs in a thread of its own while this one polls task_stopping() every 0.1 s. HiGHS's own
+    interrupt points can lie seconds apart (presolve, root heuristics), so a stop asks HiGHS to
+    stop and, when it has not within grace_s, leaves its thread behind (the task is being
+    dropped, the instance is never used again; the process's exit waits for HiGHS's next
+    interrupt point) and raises TaskCancelled."""
+    h.HandleUserInterrupt = True
+    h.startSolve()
+    while not h.wait(0.1)[0]:
+        if task_stopping():
+            h.cancelSolve()
+            if not h.wait(grace_s)[0]:
+                _left_running.append(h)     # joined at exit: a C++ thread must end before it
+            raise TaskCancelled()
     status = HIGHS_STATUS.get(h.getModelStatus().name, Status.UNDECIDED)
     if status == Status.UNDECIDED and task_stopping():
         raise TaskCancelled()

@@ -1,6 +1,6 @@
-"""The 2D wedge MILP (HiGHS through highspy, lp.highs_run): is there a wedged configuration at
+"""The 2D wedge MILP (HiGHS through highspy, lp.highs_run_watched): is there a wedged configuration at
 mu, one MILP over the whole pattern space (the global mu^c's MILP route, global_mu_c.py).
-A stop interrupts it within HiGHS's polling of its branch and bound and its LPs (a few ms)."""
+A stop is served within ~0.5 s: HiGHS runs in a thread of its own, watched (lp.highs_run_watched)."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hpcwedge.contact.problem import Parametrization, blocks
-from hpcwedge.solvers.lp import highs_instance, highs_lp, highs_run, stdout_silenced
+from hpcwedge.solvers.lp import highs_instance, highs_lp, highs_run_watched, stdout_silenced
 from hpcwedge.solvers.rows import Status
 
 #: a MILP optimum sum(r_n) below this (the normalisation makes it a share in [0, 1]) is
@@ -72,11 +72,11 @@ def wedge_milp(param: Parametrization, m: int, mu: float, scale: float = 1.0,
     hi = np.concatenate([np.full(k, np.inf), [1.0], np.zeros(m), np.ones(m)])
     c = np.concatenate([-Rn.sum(0), np.zeros(m)])
     integrality = np.concatenate([np.zeros(d), np.ones(m)])
-    h = highs_instance(MILP_OPTIONS, time_limit)
+    h = highs_instance(MILP_OPTIONS, time_limit, polled=False)
     h.passModel(highs_lp(A, lo, hi, np.concatenate([np.full(d, -np.inf), np.zeros(m)]),
                          np.concatenate([np.full(d, np.inf), np.ones(m)]), c, integrality))
     with stdout_silenced():
-        status = highs_run(h)
+        status = highs_run_watched(h)
     nodes = int(h.getInfo().mip_node_count)
     if status == Status.INFEASIBLE:     # P(mu) = {0} (a supported body below mu^c): no wedge
         return WedgeMilp(Status.INFEASIBLE, 0.0, nodes)
