@@ -63,12 +63,13 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     Where the certified lower bound meets best (`bound_meets`: no wedge at best (1 - 1e-9), by
     an exactly checked certificate; free bodies whose rigid part sets mu^c, e.g. plugs) best
     is the answer, and neither route searches further (bound=False: the bound is not asked;
-    the answer is the same). Otherwise the tree route settles:
-    every pattern (one per orbit) feasible at best (1 + 1e-9) gets its certified mu^c; the
-    least is the answer. The MILP route skips that enumeration
+    the answer is the same). Otherwise the tree route settles (`settled`): every pattern (one
+    per orbit) feasible at best (1 + 1e-9) gets its certified mu^c; the least is the answer.
+    The MILP route skips that enumeration
     (exponential in m: 635 tree nodes on plug2d m = 16): its answer is the certified mu^c of
     the last pattern it found, the least to the MILP's tolerance (a pattern whose mu^c lies
-    within ~1e-6 relative below it can go unseen). stats.extra["route"] says which route
+    within ~1e-6 relative below it can go unseen, unless the bound met it: then it is the
+    least by a certificate). stats.extra["route"] says which route
     ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"]; the bound's
     stats.extra["bound_solves"] (conic programs), ["bound_certified"] (1 when it ended the
     search) and ["bound"] (the certified value);
