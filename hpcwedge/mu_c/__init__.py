@@ -5,6 +5,7 @@
 - dinkelbach.py, kkt.py: a 3D pattern's mu^c, and its KKT Newton certificate.
 - exact_2d.py: a 2D pattern's mu^c certified in rational arithmetic.
 - global_search.py: the least mu at which any pattern is feasible.
+- lower_bound.py: a certified lower bound on it (free bodies), which ends that search.
 """
 
-__all__ = ["critical", "bracket", "dinkelbach", "kkt", "exact_2d", "global_search"]
+__all__ = ["critical", "bracket", "dinkelbach", "kkt", "exact_2d", "global_search", "lower_bound"]

@@ -13,6 +13,7 @@ import numpy as np
 
 from hpcwedge.contact.problem import Parametrization
 from hpcwedge.mu_c.critical import MuC, add_counts, mu_critical, run_mu_c
+from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at
 from hpcwedge.parallel.cancel import TaskCancelled, task_tick
 from hpcwedge.parallel.engine import Engine, run_tasks
 from hpcwedge.patterns.job import DEFAULT_BUDGET, run_patterns
@@ -46,7 +47,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
                        symmetry: Symmetry | None = None,
                        scale: float | None = None, route: str = "auto",
                        certify=None, engine: Engine | None = None,
-                       budget: int = DEFAULT_BUDGET) -> tuple[float | None, str]:
+                       budget: int = DEFAULT_BUDGET, bound: bool = True) -> tuple[float | None, str]:
     """Least mu with any solution (2D and 3D alike; with a symmetry, over orbit
     representatives). scale: passed to mu_critical (2D balanced coordinates).
 
@@ -59,12 +60,19 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         (an undecided MILP, a pattern our LP rejects at every mu, no wedge at all) falls back
         to the tree;
       route "auto": "milp" in 2D from MILP_FROM_M contact nodes on, else "tree".
-    The tree route then settles: every pattern (one per orbit) feasible at best (1 + 1e-9)
-    gets its certified mu^c; the least is the answer. The MILP route skips that enumeration
+    Where the certified lower bound meets best (`bound_meets`: no wedge at best (1 - 1e-9), by
+    an exactly checked certificate; free bodies whose rigid part sets mu^c, e.g. plugs) best
+    is the answer, and neither route searches further (bound=False: the bound is not asked;
+    the answer is the same). Otherwise the tree route settles (`settled`): every pattern (one
+    per orbit) feasible at best (1 + 1e-9) gets its certified mu^c; the least is the answer.
+    The MILP route skips that enumeration
     (exponential in m: 635 tree nodes on plug2d m = 16): its answer is the certified mu^c of
     the last pattern it found, the least to the MILP's tolerance (a pattern whose mu^c lies
-    within ~1e-6 relative below it can go unseen). stats.extra["route"] says which route
-    ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"];
+    within ~1e-6 relative below it can go unseen, unless the bound met it: then it is the
+    least by a certificate). stats.extra["route"] says which route
+    ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"]; the bound's
+    stats.extra["bound_solves"] (conic programs), ["bound_certified"] (1 when it ended the
+    search) and ["bound"] (the certified value);
     stats.extra["mu_c_unsettled"] the settled patterns whose mu^c no solve decided (the
     answer is certified when it is 0 and every value is polished).
 
@@ -85,7 +93,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
     stats = stats if stats is not None else BnBStats()
     engine = engine or Engine()
-    search = GlobalSearch(param, m, mu_max, method, tol, symmetry, scale, route)
+    search = GlobalSearch(param, m, mu_max, method, tol, symmetry, scale, route, bound)
     got = run_tasks(bracket_task, search, [0], engine=engine, kind="global_bracket")[0]
     best = None if math.isnan(got["best"]) else float(got["best"])
     status = BRACKET_STATUS[int(got["status"])]
@@ -93,33 +101,44 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     pattern_of: dict = {}           # each value computed -> its pattern (for certify)
     if best is not None:
         pattern_of[best] = (np.asarray(got["zero_u"], dtype=bool), np.asarray(got["zero_r"], dtype=bool))
+    if status == "settle" and bound and bound_meets(param, m, best, stats):
+        status = "found"
     if status == "settle":
-        # patterns whose mu^c lies within the last step below `best`: settle them all
-        # (one per orbit: mu^c is invariant under the symmetry)
-        top = best * (1 + 1e-9)
-        make_tree = partial(PatternTree, param, m, symmetry=symmetry, options=DEFAULT_OPTIONS)
-        pats = run_patterns(make_tree, [top], engine=engine, budget=budget, name="global_patterns")
-        c = pats.counters
-        for k in STAT_KEYS:
-            setattr(stats, k, getattr(stats, k) + c.get(k, 0))
-        for k, v in solver_statuses(c).items():
-            stats.statuses[k] = stats.statuses.get(k, 0) + v
-        items = [(*s.masks(m), top) for s in pats.found[0]]
-        for (zu, zr, _), r in zip(items, run_mu_c(search.solve, items, engine=engine, name="global_mu_c")):
-            _absorb(stats, r)
-            if r.mu_c is None and r.undecided:
-                # feasible at top (or left undecided by the tree) and no value: its mu^c may
-                # lie below best
-                stats.extra["mu_c_unsettled"] = stats.extra.get("mu_c_unsettled", 0) + 1
-            if r.mu_c is not None:
-                pattern_of.setdefault(r.mu_c, (zu, zr))
-                best = min(best, r.mu_c)
+        best = settled(search, best, stats, pattern_of, engine, budget)
         status = "found"
     if certify is not None and best in pattern_of:
         exact = certify(*pattern_of[best], best)
         if exact is not None:
             best = exact
     return best, status
+
+
+def settled(search: GlobalSearch, best: float, stats: BnBStats, pattern_of: dict, engine: Engine,
+            budget: int) -> float:
+    """The tree route's settling (global_mu_critical's doc): every pattern (one per orbit:
+    mu^c is invariant under the symmetry) feasible at best (1 + 1e-9) gets its certified mu^c
+    (jobs "global_patterns", "global_mu_c"); the least of them and best. Counted into stats;
+    pattern_of[value] = the pattern of every value computed."""
+    param, m = search.param, search.m
+    top = best * (1 + 1e-9)
+    make_tree = partial(PatternTree, param, m, symmetry=search.symmetry, options=DEFAULT_OPTIONS)
+    pats = run_patterns(make_tree, [top], engine=engine, budget=budget, name="global_patterns")
+    c = pats.counters
+    for k in STAT_KEYS:
+        setattr(stats, k, getattr(stats, k) + c.get(k, 0))
+    for k, v in solver_statuses(c).items():
+        stats.statuses[k] = stats.statuses.get(k, 0) + v
+    items = [(*s.masks(m), top) for s in pats.found[0]]
+    for (zu, zr, _), r in zip(items, run_mu_c(search.solve, items, engine=engine, name="global_mu_c")):
+        _absorb(stats, r)
+        if r.mu_c is None and r.undecided:
+            # feasible at top (or left undecided by the tree) and no value: its mu^c may
+            # lie below best
+            stats.extra["mu_c_unsettled"] = stats.extra.get("mu_c_unsettled", 0) + 1
+        if r.mu_c is not None:
+            pattern_of.setdefault(r.mu_c, (zu, zr))
+            best = min(best, r.mu_c)
+    return best
 
 
 #: the bracket task's outcome: "settle" (tree route: best is an upper value, the settling
@@ -140,6 +159,7 @@ class GlobalSearch:
     symmetry: Symmetry | None
     scale: float | None
     route: str
+    bound: bool = True
 
     @property
     def solve(self):
@@ -153,7 +173,7 @@ class GlobalSearch:
         param, m, mu_max = self.param, self.m, self.mu_max
         solve = partial(_recorded, self.solve, pattern_of)
         if (self.route == "milp" or (self.route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
-            best = global_bracket_milp(param, m, mu_max, solve, stats, self.scale)
+            best = global_bracket_milp(param, m, mu_max, solve, stats, self.scale, bound=self.bound)
             if best is not None:
                 return best, "found"
         stats.extra["route"] = "tree"
@@ -218,7 +238,7 @@ def _absorb_json(stats: BnBStats, text) -> None:
 
 
 def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, stats: BnBStats,
-                        scale: float | None = None, dive: int = DIVE_NODES) -> float | None:
+                        scale: float | None = None, dive: int = DIVE_NODES, bound: bool = True) -> float | None:
     """2D global mu^c by MILPs (milp.wedge_milp, valid big-M): the least certified
     pattern mu^c `best` found; None when in doubt (the caller runs the tree instead).
     solve(zero_u, zero_r, mu_hi): the certified mu^c of one pattern (mu_critical).
@@ -229,7 +249,9 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     of lower certified mu^c replaces best (same delta again); none, or one no better
     (blurred), moves to the next delta. The first pattern is the MILP's at mu = inf (r_t
     free), whose mu^c, when finite, saves the MILP at mu_max (the slowest). Before each
-    MILP the tree dives for dive * m + 1 nodes (0: no dive), see `_wedge_at`."""
+    MILP the tree dives for dive * m + 1 nodes (0: no dive), see `_wedge_at`. The steps
+    end where the certified lower bound meets best (`bound_meets`; bound=False: not asked):
+    then no pattern lies below best, by a certificate, at 1e-9."""
     s = 1.0 if scale is None else float(scale)
     stats.extra["route"] = "milp"
     wedge = partial(_wedge_at, param, m, stats, s, dive)
@@ -244,14 +266,16 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
             break
     if best is None:
         return None                       # the MILP's pattern at mu_max is no wedge: doubt
-    return _lowered(best, wedge, certified)
+    return _lowered(best, wedge, certified, partial(bound_meets, param, m, stats=stats) if bound else None)
 
 
-def _lowered(best: float, wedge, certified: _PatternValues) -> float | None:
+def _lowered(best: float, wedge, certified: _PatternValues, met=None) -> float | None:
     """global_bracket_milp's steps down from `best`: at best (1 - delta), delta = MILP_STEPS
     in turn, wedge(mu) (`_wedge_at`) asked again while it returns a pattern of lower
-    certified mu^c. The last best, or None on doubt (an undecided answer, a pattern with
-    no value)."""
+    certified mu^c; none once met(best) (the certified lower bound meets it: `bound_meets`).
+    The last best, or None on doubt (an undecided answer, a pattern with no value)."""
+    if met is not None and met(best):
+        return best
     for delta in MILP_STEPS:
         while True:
             task_tick()
@@ -267,7 +291,23 @@ def _lowered(best: float, wedge, certified: _PatternValues) -> float | None:
             if mu >= best:
                 break
             best = mu
+            if met is not None and met(best):
+                return best
     return best
+
+
+def bound_meets(param: Parametrization, m: int, best: float, stats: BnBStats) -> bool:
+    """Is no wedge below best (1 - BOUND_RTOL), by the certified lower bound
+    (lower_bound.bound_at; False for a supported body)? Counted into stats.extra:
+    "bound_solves", and on success "bound_certified" = 1 and "bound" (the certified value)."""
+    b = bound_at(param, m, best * (1 - BOUND_RTOL))
+    if b is None:
+        return False
+    stats.extra["bound_solves"] = stats.extra.get("bound_solves", 0) + b.solves
+    if b.certified:
+        stats.extra["bound_certified"] = 1
+        stats.extra["bound"] = b.mu
+    return b.certified
 
 
 def _wedge_at(param: Parametrization, m: int, stats: BnBStats, scale: float, dive: int, mu: float) -> WedgeMilp:

@@ -222,7 +222,9 @@ class GlobalRouteStats:
     included; those leave the answer certified (nothing is pruned on doubt, and a polished
     value is certified). unsettled: the settling tree's patterns whose mu^c computation came
     back without a value and with undecided solves; only these (and unpolished values)
-    leave the global mu^c uncertified."""
+    leave the global mu^c uncertified. bound_solves: the certified lower bound's
+    conic programs (mu_c.lower_bound); bound_certified: 1 when it met the incumbent and ended
+    the search (no settling tree, no further MILP step)."""
 
     solves: int = 0
     skipped: int = 0
@@ -234,6 +236,8 @@ class GlobalRouteStats:
     pruned: int = 0
     lps: int = 0
     unsettled: int = 0
+    bound_solves: int = 0
+    bound_certified: int = 0
 
 
 @dataclass

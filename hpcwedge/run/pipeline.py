@@ -395,6 +395,7 @@ def global_mu_c(ctx: Context, values: MuCValues) -> GlobalMuC:
                                       budget=scene.task_budget)
     search = GlobalRouteStats(bnb.solves, bnb.skipped, bnb.undecided, bnb.nodes, bnb.extra.get("route", "tree"),
                               bnb.extra.get("milp_solves", 0), bnb.extra.get("milp_nodes", 0), bnb.pruned, bnb.lps,
-                              bnb.extra.get("mu_c_unsettled", 0))
+                              bnb.extra.get("mu_c_unsettled", 0), bnb.extra.get("bound_solves", 0),
+                              bnb.extra.get("bound_certified", 0))
     return GlobalMuC(mu_c, status, search, polished=bnb.extra.get("mu_c_polished", 0),
                      unpolished=bnb.extra.get("mu_c_unpolished", 0))

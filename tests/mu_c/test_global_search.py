@@ -38,29 +38,38 @@ def by_milp(res) -> float | None:
 def test_plug2d_global_mu_c_is_tan_taper_by_either_route(rows):
     """plug2d: global mu^c = tan(taper) for any rows, to 1e-9, by the route "auto" takes
     (the MILP route from MILP_FROM_M nodes) and by the MILP route asked for (m = 20: a single
-    MILP step at 1e-7 below the incumbent returned a blurred pattern and stopped at 0.2975)."""
+    MILP step at 1e-7 below the incumbent returned a blurred pattern and stopped at 0.2975).
+    The certified lower bound (lower_bound.py) meets the incumbent on the free plug: neither
+    route settles."""
     res = global_run({"kind": "plug2d", "rows": rows, "taper_deg": 10.0})
     want = math.tan(math.radians(10.0))
     assert res.mu_c_status == "found"
     assert abs(res.mu_c - want) <= 1e-9 * want
-    assert res.stats["bnb"]["route"] == route_for(2 * rows)
-    # the engine's jobs: the MILP route's answer needs no settling tree
-    settled = ["global_patterns", "global_mu_c"] if route_for(2 * rows) == "tree" else []
-    assert [j for j in res.stats["parallel"]["jobs"] if j.startswith("global")] == ["global_bracket", *settled]
+    bnb = res.stats["bnb"]
+    assert bnb["route"] == route_for(2 * rows)
+    assert bnb["bound_certified"] == 1 and bnb["bound_solves"] >= 1
+    # the engine's jobs: the bound ends the search, no settling tree
+    assert [j for j in res.stats["parallel"]["jobs"] if j.startswith("global")] == ["global_bracket"]
     if rows < 20:
         assert abs(by_milp(res) - want) <= 1e-9 * want
 
 
 @pytest.mark.parametrize("rows", [2, 10])
 def test_plug2d_global_mu_c_by_milps_alone(rows):
-    """No dive: every step is a MILP (HiGHS), each pattern's mu^c certified by ours."""
+    """No dive: every step is a MILP (HiGHS), each pattern's mu^c certified by ours. Without
+    the certified bound the steps go down to 1e-6 below the answer (>= 4 MILPs); with it they
+    end as soon as it meets the incumbent (one bound solve per value found), same answer."""
     res = global_run({"kind": "plug2d", "rows": rows, "taper_deg": 10.0}, mu_c="none")
     p, m = parametrize(res.problem), res.m
-    st = BnBStats()
-    best = global_bracket_milp(p, m, 100.0, partial(mu_critical, p, m, mu_max=100.0), st, dive=0)
     want = math.tan(math.radians(10.0))
+    solve = partial(mu_critical, p, m, mu_max=100.0)
+    st, st_bound = BnBStats(), BnBStats()
+    best = global_bracket_milp(p, m, 100.0, solve, st, dive=0, bound=False)
     assert abs(best - want) <= 1e-9 * want
-    assert st.extra["milp_solves"] >= 4 and st.nodes == 0
+    assert st.extra["milp_solves"] >= 4 and st.nodes == 0 and "bound_solves" not in st.extra
+    assert abs(global_bracket_milp(p, m, 100.0, solve, st_bound, dive=0) - best) <= 1e-12 * want
+    assert st_bound.extra["bound_certified"] == 1 and st_bound.extra["bound_solves"] >= 1
+    assert st_bound.extra["milp_solves"] < st.extra["milp_solves"]
 
 
 @pytest.mark.parametrize("theta,k,eps", [(20.0, 1.0, 0.0), (20.0, 1.0, 0.1), (35.0, 2.0, 0.3)])
@@ -146,7 +155,9 @@ def test_global_search_is_the_same_for_every_split_into_tasks(body):
     """The global search's settling runs as subtree tasks of `budget` tree nodes, then one
     mu^c task per pattern found (engine jobs global_patterns, global_mu_c): its value and every
     count (tree nodes, solves, statuses, mu^c polished) are the same in tasks of 1 node, 5
-    nodes and one task for the whole tree, and the tasks really split the tree (handed back)."""
+    nodes and one task for the whole tree, and the tasks really split the tree (handed back).
+    The certified bound, which ends the search on these plugs before any settling, is not
+    asked (bound=False)."""
     from hpcwedge.parallel.engine import Engine
     if body == "plug2d":
         data = {"name": "p", "dim": 2, "friction": {"mu": [0.65]},
@@ -157,7 +168,7 @@ def test_global_search_is_the_same_for_every_split_into_tasks(body):
     seen = []
     for budget in (1, 5, 10**9):
         st, engine = BnBStats(), Engine()
-        mu, status = global_mu_critical(param, m, 100.0, stats=st, engine=engine, budget=budget)
+        mu, status = global_mu_critical(param, m, 100.0, stats=st, engine=engine, budget=budget, bound=False)
         jobs = engine.summary()["jobs"]
         assert list(jobs) == ["global_bracket", "global_patterns", "global_mu_c"]
         assert (jobs["global_patterns"]["handed_back"] > 0) == (budget < 10**9)

@@ -42,7 +42,8 @@ def test_solve_stats_as_dict_is_the_file_object():
                         "partitions": 8}
     s.bnb = GlobalRouteStats(solves=1, nodes=2, route="milp")
     assert list(s.as_dict()["bnb"]) == ["solves", "skipped", "undecided", "nodes", "route", "milp_solves",
-                                        "milp_nodes", "pruned", "lps", "unsettled"]
+                                        "milp_nodes", "pruned", "lps", "unsettled", "bound_solves",
+                                        "bound_certified"]
 
 
 def test_run_counts_are_none_until_asked():

@@ -1,0 +1,118 @@
+#!/usr/bin/env python3
+"""The global mu^c at meshed-body scale (issue 41's targets), through `hpcwedge run`.
+
+Each case is a scene file written to a temporary directory and run by the product's entry
+point (`python -m hpcwedge run scene.toml -o out.h5 -q`, serial, `run.symmetry = false`,
+every other key at its default; compute.mu_c = "global", no enumeration, friction.mu [0.1]),
+under a time limit (harness.run_command: an overrun is recorded as "timeout"). The answer and
+counts are read back with `hpcwedge show --json`:
+
+    case                  m     target
+    plug3d 8 x 8          64    <= 10 s
+    plug3d 8 x 16         128   <= 60 s
+    plug2d rows 320       640   <= 30 s
+    block2d rows 159      320   <= 30 s
+
+(plug2d: m = 2 rows; block2d: m = 2 (rows + 1); plug3d: m = levels x ring.) Every one is a
+free plug at a 10 deg taper, whose global mu^c is tan 10 deg (SPEC §6); the error is
+against it. Written: results/bench_global_scale.{json,csv} (--quick: smaller bodies,
+results/bench_global_scale_quick.*): seconds (wall, the command), program_seconds (the
+result's timings.total, and its condense and mu_c stages), the global mu^c and its relative error, route, tree nodes, solves
+(SOCPs in 3D, LPs in 2D), pyramid LPs, MILPs, bound solves and whether the certified bound
+ended the search, undecided solves, unsettled patterns, the target and whether it was met.
+
+    .venv/bin/python scripts/bench_global_scale.py [--quick] [--limit 300] [--only plug3d-8x8 ...]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import tempfile
+
+from harness import ERROR, OK, OVERRUN, python_command, run_command, write_records
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+OUT = os.path.join(ROOT, "results")
+TAPER_DEG = 10.0
+
+#: (name, dim, model table, m, target seconds)
+CASES = [
+    ("plug3d-8x8", 3, {"kind": "plug3d", "levels": 8, "ring": 8}, 64, 10.0),
+    ("plug3d-8x16", 3, {"kind": "plug3d", "levels": 8, "ring": 16}, 128, 60.0),
+    ("plug2d-r320", 2, {"kind": "plug2d", "rows": 320}, 640, 30.0),
+    ("block2d-r159", 2, {"kind": "block2d", "rows": 159}, 320, 30.0),
+]
+QUICK = [
+    ("plug3d-4x8", 3, {"kind": "plug3d", "levels": 4, "ring": 8}, 32, None),
+    ("plug2d-r40", 2, {"kind": "plug2d", "rows": 40}, 80, None),
+    ("block2d-r39", 2, {"kind": "block2d", "rows": 39}, 80, None),
+]
+
+
+def scene_text(name: str, dim: int, model: dict) -> str:
+    """The scene file of a case: the global mu^c alone, no symmetry, defaults otherwise."""
+    keys = "".join(f"{k} = {json.dumps(v)}\n" for k, v in {**model, "taper_deg": TAPER_DEG}.items())
+    return (f'name = "{name}"\ndim = {dim}\n[model]\n{keys}[friction]\nmu = [0.1]\n'
+            f'[compute]\nenumerate = false\nmu_c = "global"\n[run]\nsymmetry = false\n')
+
+
+def run_case(tmp: str, name: str, dim: int, model: dict, m: int, target: float | None, limit: float) -> dict:
+    """One case through `hpcwedge run` and `hpcwedge show --json`: its record."""
+    scene, out = os.path.join(tmp, f"{name}.toml"), os.path.join(tmp, f"{name}.h5")
+    with open(scene, "w") as f:
+        f.write(scene_text(name, dim, model))
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    load = os.getloadavg()[0]               # the shared machine's 1-minute load before the run
+    rec = run_command(python_command("-m", "hpcwedge", "run", scene, "-o", out, "-q"), limit=limit, env=env)
+    row = {"case": name, "dim": dim, "m": m, "model": json.dumps(model), "status": rec["status"],
+           "seconds": rec["seconds"], "target_seconds": target, "load_before": load}
+    if rec["status"] == ERROR:
+        row["error"] = rec["stderr"].strip().splitlines()[-1:] if rec["stderr"] else ""
+    if rec["status"] != OK:
+        return row
+    js = json.loads(run_command(python_command("-m", "hpcwedge", "show", out, "--json"))["stdout"])
+    bnb, want = js["stats"].get("bnb") or {}, math.tan(math.radians(TAPER_DEG))
+    mu_c = js["mu_c"]
+    row.update(m_result=js["m"], program_seconds=js["timings"]["total"],
+               condense_seconds=js["timings"]["condense"], mu_c_seconds=js["timings"]["mu_c"], mu_c=mu_c, mu_c_status=js.get("mu_c_status"),
+               rel_error=None if mu_c is None else abs(mu_c - want) / want, route=bnb.get("route"),
+               nodes=bnb.get("nodes"), solves=bnb.get("solves"), lps=bnb.get("lps"),
+               milp_solves=bnb.get("milp_solves"), bound_solves=bnb.get("bound_solves"),
+               bound_certified=bnb.get("bound_certified"), undecided=bnb.get("undecided"),
+               unsettled=bnb.get("unsettled"),
+               target_met=None if target is None else rec["seconds"] <= target)
+    return row
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller bodies (m = 32 / 80 / 80), no targets")
+    ap.add_argument("--limit", type=float, default=300.0, help="seconds per case (default 300)")
+    ap.add_argument("--only", nargs="*", help="case names to run (default: all)")
+    ap.add_argument("--out", default=None, help="output base (default results/bench_global_scale[_quick])")
+    args = ap.parse_args()
+    cases = [c for c in (QUICK if args.quick else CASES) if not args.only or c[0] in args.only]
+    base = args.out or os.path.join(OUT, "bench_global_scale" + ("_quick" if args.quick else ""))
+    tmp = tempfile.mkdtemp(prefix="bench_global_scale_")
+    rows = []
+    for name, dim, model, m, target in cases:
+        row = run_case(tmp, name, dim, model, m, target, args.limit)
+        rows.append(row)
+        if row["status"] == OK:
+            print(f"{name:<14} m={m:<4} {row['seconds']:7.2f} s  mu_c={row['mu_c']!r} err={row['rel_error']:.1e} "
+                  f"route={row['route']} nodes={row['nodes']} solves={row['solves']} lps={row['lps']} "
+                  f"milps={row['milp_solves']} bound={row['bound_solves']}/{row['bound_certified']} "
+                  f"undecided={row['undecided']} target={target} met={row['target_met']}", flush=True)
+        else:
+            print(f"{name:<14} m={m:<4} {row['status']} after {row['seconds']:.1f} s {row.get('error', '')}",
+                  flush=True)
+    write_records(base, rows, extra={"limit_seconds": args.limit, "taper_deg": TAPER_DEG,
+                                     "command": "python -m hpcwedge run scene.toml -o out.h5 -q (serial)"})
+    print(f"wrote {base}.json / .csv")
+    return 0 if all(r["status"] in (OK, OVERRUN) for r in rows) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
