@@ -15,7 +15,7 @@ Every row is one `hpcwedge run` route (pipeline.run_scene) in its own process
              its foot): 4 x 8, 6 x 8, 8 x 8 (m = 32, 48, 64): seconds, nodes, SOCPs, mu^c, certified (no undecided solve, every pattern's
              mu^c polished, none unsettled)
 An enumeration cut by --limit is run once more as `probe` (the same tree, PatternTree with
-`hpcwedge run`'s options, explored in budgets of PROBE_BUDGET nodes until 0.9 * --limit CPU
+`hpcwedge run`'s options, explored in budgets of PROBE_BUDGET nodes until 0.8 * --limit wall
 seconds have passed): how far it got (nodes, SOCPs, patterns so far). --quick: 4 x 8 only.
 Counts are the same on every machine; seconds are CPU seconds of the worker
 (2 shared cores: read them as +-2x). --label tags the rows (e.g. "before" / "after" a change);
@@ -85,16 +85,17 @@ def worker(task: str, levels: int, ring: int, mu: float) -> dict:
 
 def probe(levels: int, ring: int, mu: float, seconds: float) -> dict:
     """An enumeration's tree (symmetry off, the tree options of `hpcwedge run`) explored
-    depth first in budgets of PROBE_BUDGET nodes until `seconds` of CPU have passed: its
-    counts so far and whether it finished (the counts do not depend on the budget)."""
+    depth first in budgets of PROBE_BUDGET nodes until `seconds` have passed (wall clock: the
+    run is killed by wall clock): its counts so far, its CPU seconds and whether it finished
+    (the counts do not depend on the budget)."""
     from hpcwedge.contact.build import contact_problem
     from hpcwedge.contact.problem import parametrize
     from hpcwedge.patterns.tree import BnBStats, PatternTree
     prob = contact_problem(plug_scene(levels, ring, mu))
     tree, stats, found = PatternTree(parametrize(prob), prob.m, mu), BnBStats(), 0
-    c = time.process_time()
+    t, c = time.perf_counter(), time.process_time()
     stack = [(tree.root(), None)]
-    while stack and time.process_time() - c < seconds:
+    while stack and time.perf_counter() - t < seconds:
         node, x = stack.pop()
         out = tree.explore(node, PROBE_BUDGET, x=x)
         stats.add(out.stats)
@@ -102,7 +103,7 @@ def probe(levels: int, ring: int, mu: float, seconds: float) -> dict:
         stack += list(zip(out.open, out.open_x))[::-1]
     return {"m": prob.m, "nodes": stats.nodes, "socps": stats.solves, "skipped": stats.skipped,
             "undecided": stats.undecided, "patterns": found, "finished": not stack,
-            "seconds": time.process_time() - c}
+            "seconds": time.process_time() - c, "wall_in_process": time.perf_counter() - t}
 
 
 def main() -> None:
@@ -116,7 +117,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.worker:
         task, levels, ring, mu = args.worker[0], int(args.worker[1]), int(args.worker[2]), float(args.worker[3])
-        out = probe(levels, ring, mu, 0.9 * args.limit) if task == "probe" else worker(task, levels, ring, mu)
+        out = probe(levels, ring, mu, 0.8 * args.limit) if task == "probe" else worker(task, levels, ring, mu)
         print(bench_2d.MARK + json.dumps(out))
         return
     plan = [("enumerate", lv, rg, mu) for lv, rg, mu in ENUMERATE[:1 if args.quick else None]]
