@@ -268,3 +268,44 @@ def pyramid_agreement(param, m: int, mu: float, inner, outer) -> None:
             proved_infeasible += 1
     assert 0 < feasible < 2 ** m - 1
     assert (proved_feasible, proved_infeasible) == (feasible, 2 ** m - 1 - feasible)
+
+
+def curved_neck(levels: int = 2, ring: int = 5, seed: int = 0, taper_deg: float = 3.0, bend: float = 0.3,
+                stiffness_spread: float = 1.0, jitter: float = 0.25, drop: int = 0, mu: float = 1.0) -> dict:
+    """Scene data (parse_scene's dict, `[model] kind = "truss"`) of a plug in a curved neck: plug3d's
+    bars (LEVELS rings of RING nodes and a centre per level, z = 0..1) on a wall whose radius
+    0.5 + z tan(taper) + bend z^2 flares with height (the wall's angle to the axis grows from
+    `taper_deg` at z = 0 to atan(tan taper + 2 bend) at z = 1), each ring node's angle moved by
+    up to `jitter` of a ring step and each bar's EA = exp(stiffness_spread * N(0, 1)) (seeded):
+    a free body with no symmetry. Contact: every ring node but `drop` of them drawn at random
+    (m = levels * ring - drop), normal -cos(tau) e_r + sin(tau) e_z at the node's wall angle
+    tau(z) (into the body), t1 = e_phi. The rigid bound (self-equilibrated reactions in the
+    cones) is about tan(taper_deg); elastic compatibility sets the global mu^c above it."""
+    from hpcwedge.models.library import plug3d
+    rng = np.random.default_rng(seed)
+    bars = plug3d(levels, ring).cells["line"]
+    z = np.repeat(np.arange(levels) / (levels - 1), ring)
+    t0 = math.tan(math.radians(taper_deg))
+    radius, slope = 0.5 + z * t0 + bend * z ** 2, t0 + 2 * bend * z
+    phi = 2 * np.pi * (np.tile(np.arange(ring), levels) + jitter * rng.uniform(-1, 1, levels * ring)) / ring
+    er = np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=1)
+    nodes = np.concatenate([radius[:, None] * er + np.outer(z, [0.0, 0.0, 1.0]),
+                            np.outer(np.arange(levels) / (levels - 1), [0.0, 0.0, 1.0])])
+    tau = np.arctan(slope)[:, None]
+    normals = -np.cos(tau) * er + np.sin(tau) * np.array([0.0, 0.0, 1.0])
+    tangents = np.stack([-np.sin(phi), np.cos(phi), np.zeros_like(phi)], axis=1)
+    EA = np.exp(stiffness_spread * rng.standard_normal(len(bars)))
+    keep = np.sort(rng.permutation(levels * ring)[drop:])
+    return {"name": f"neck-{levels}x{ring}-s{seed}", "dim": 3,
+            "model": {"kind": "truss", "nodes": nodes.tolist(), "bars": bars.tolist(), "EA": EA.tolist()},
+            "contact": {"nodes": keep.tolist(), "normals": normals[keep].tolist(),
+                        "tangents": tangents[keep].tolist()},
+            "friction": {"mu": [mu]}, "run": {"symmetry": False}}
+
+
+def scene_param(data: dict):
+    """(parametrisation, m) of scene data (parse_scene's dict)."""
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.scene.parse import parse_scene
+    prob = contact_problem(parse_scene(data))
+    return parametrize(prob), prob.m

@@ -221,3 +221,50 @@ def test_2d_patterns_agree_with_rays(rows, taper, mus):
         assert [p.contact for p in rp.patterns] == want
         for p in rp.patterns:               # a pattern's mu^c: at most the run's mu, at least the global one
             assert ray.mu_c * (1 - 1e-9) <= p.mu_c <= rp.mu * (1 + 1e-9)
+
+
+# ------------------------------------------------- bodies where elasticity sets mu^c
+
+
+NECKS = [dict(levels=2, ring=5, seed=0), dict(levels=3, ring=3, seed=1), dict(levels=2, ring=5, seed=2, drop=1)]
+
+
+@pytest.mark.parametrize("body", NECKS, ids=lambda b: "-".join(f"{k}{v}" for k, v in b.items()))
+def test_curved_neck_patterns_and_global_mu_c_agree_with_brute_force(body):
+    """instances.curved_neck (m = 9, 10): the global mu^c equals the least certified mu^c over
+    the brute force's feasible patterns at mu = 2 (all 2^m partitions, one SOCP each), to
+    1e-9; it lies well above the relaxation bound (the root relaxation, no complementarity,
+    is feasible at 1.5 tan(taper)): elasticity, not the rigid bound, sets it; the tree finds
+    exactly the brute force's patterns at 1.02, 1.1 and 1.5 mu^c."""
+    import math
+
+    from instances import curved_neck, scene_param
+
+    from hpcwedge.mu_c.critical import mu_critical
+    from hpcwedge.solvers.feasibility import decide
+    from hpcwedge.solvers.rows import Status, pattern_rows
+    data = curved_neck(**body)
+    p, m = scene_param(data)
+    assert m == body["levels"] * body["ring"] - body.get("drop", 0)
+    values = []
+    for bits in brute_3d(p, m, 2.0):
+        zu = np.array([bool(bits >> i & 1) for i in range(m)])
+        values.append(mu_critical(p, m, zu, ~zu, mu_hi=2.0).mu_c)
+    want = min(values)
+    got = _global_of(data)
+    assert abs(got - want) <= 1e-9 * want, (got, want)
+    tan = math.tan(math.radians(3.0))
+    assert decide(pattern_rows(p, m, np.zeros(m, bool), np.zeros(m, bool)), 1.5 * tan).status == Status.FEASIBLE
+    assert want > 3 * tan
+    for f in (1.02, 1.1, 1.5):
+        tree = PatternTree(p, m, f * want)
+        found = {s.contact for s in tree.explore(tree.root()).found}
+        assert found == brute_3d(p, m, f * want) and found
+
+
+def _global_of(data: dict) -> float:
+    """The global mu^c of scene data by `hpcwedge run`'s route (enumerate = false)."""
+    scene = dict(data, friction={"mu": [0.01]}, compute={"enumerate": False, "mu_c": "global"})
+    res = run_scene(parse_scene(scene))
+    assert res.stats["bnb"]["unsettled"] == 0
+    return res.mu_c
