@@ -146,5 +146,5 @@ def task_seconds(result) -> float:
 def make_job(workload: str, durations: dict, worker_seconds: float, seed: int, sleep: bool, budget: int = 64):
     """The synthetic job of a workload ("subtree", "mu_c" or "face")."""
     if workload == "subtree":
-        return tree_job(durations["subtree"], worker_seconds, seed, sleep, budget)
-    return task_job(durations[workload], worker_seconds, seed, sleep)
+        return tree_job(durations["subtree"], worker_seconds, seed, sleep, budget, name=workload)
+    return task_job(durations[workload], worker_seconds, seed, sleep, name=workload)

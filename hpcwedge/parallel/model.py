@@ -3,8 +3,9 @@ its efficiency at rank counts a machine cannot run.
 
 The job is real (its take() and merge() run, and so does its handler, which must
 not sleep: `seconds(result)` says how long the task would have run); only time is
-simulated. The master is one server: each task costs it `send_s` (take and send) and
-each result `merge_s` (receive and merge); between results it waits as mpi.wait_any
+simulated. A TaskJob's tasks travel in batches (engine.batch_size), one message each, as
+the engine sends them. The master is one server: each message costs it `send_s` (take and
+send) and each answer `merge_s` (receive and merge); between answers it waits as mpi.wait_any
 does (probes, then sleeps that grow by POLL_FRACTION of the wait up to `poll_max_s`),
 so it notices a result at its next wake-up. A task starts `latency_s` after its send
 and its result reaches the master when it ends. Results are taken in the order they
@@ -15,12 +16,14 @@ from __future__ import annotations
 import heapq
 from dataclasses import dataclass
 
+from hpcwedge.parallel.engine import batch_size
+from hpcwedge.parallel.jobs import TaskJob
 from hpcwedge.parallel.mpi import POLL_FRACTION, POLL_MAX_MASTER
 
 
 @dataclass(frozen=True)
 class MasterCosts:
-    """The master's costs per task (seconds): take + send, receive + merge; the wire and
+    """The master's costs per message (seconds): take + send, receive + merge; the wire and
     worker wake-up before a task starts; the master's longest sleep while it waits."""
 
     send_s: float
@@ -32,14 +35,15 @@ class MasterCosts:
 @dataclass(frozen=True)
 class Simulated:
     """One simulated run: workers, wall seconds (first send to the last merge), the sum of
-    the tasks' seconds, the tasks, the master's busy seconds; efficiency = task seconds
-    / (workers x wall), master_busy = busy / wall."""
+    the tasks' seconds, the tasks, the master's busy seconds, the messages (tasks or
+    batches) sent; efficiency = task seconds / (workers x wall), master_busy = busy / wall."""
 
     workers: int
     wall_s: float
     task_s: float
     tasks: int
     busy_s: float
+    messages: int
 
     @property
     def efficiency(self) -> float:
@@ -76,27 +80,31 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     idle = list(range(workers))[::-1]
-    events: list = []                  # (result arrives, seq, worker, token, result)
+    events: list = []                  # (answer arrives, seq, worker, [(token, result)], seconds)
     t = busy = task_s = 0.0
     seq = tasks = 0
+    batched = isinstance(job, TaskJob)
+    merged_s = 0.0                     # the merged tasks' seconds (the engine's batch sizes)
     while True:
         while idle:
-            taken = job.take(workers)
-            if taken is None:
+            k = batch_size(workers, merged_s / tasks if tasks else None) if batched else 1
+            taken = [x for x in (job.take(workers) for _ in range(k)) if x is not None]
+            if not taken:
                 break
-            token, payload = taken
             t += costs.send_s
             busy += costs.send_s
-            result = job.handler(job.context, payload)
-            d = float(seconds(result))
+            done = [(token, job.handler(job.context, payload)) for token, payload in taken]
+            d = sum(float(seconds(r)) for _, r in done)
             task_s += d
-            heapq.heappush(events, (t + costs.latency_s + d, seq, idle.pop(), token, result))
+            heapq.heappush(events, (t + costs.latency_s + d, seq, idle.pop(), done, d))
             seq += 1
         if not events:
-            return Simulated(workers, t, task_s, tasks, busy)
-        arrival, _, w, token, result = heapq.heappop(events)
+            return Simulated(workers, t, task_s, tasks, busy, seq)
+        arrival, _, w, done, d = heapq.heappop(events)
+        merged_s += d
         t = noticed_at(t, arrival, costs.poll_max_s) + costs.merge_s
         busy += costs.merge_s
-        job.merge(token, result)
-        tasks += 1
+        for token, result in done:
+            job.merge(token, result)
+        tasks += len(done)
         idle.append(w)

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from hpcwedge.parallel import mpi
+from hpcwedge.parallel import engine, mpi
 from hpcwedge.parallel.jobs import TaskJob, TreeJob
 from hpcwedge.parallel.model import MasterCosts, noticed_at, simulate
 
@@ -86,3 +86,15 @@ def test_the_master_notices_a_result_at_its_next_wake_up():
         expect = next(w for w in wakes if w >= arrival)
         assert noticed_at(0.0, arrival, cap) == pytest.approx(expect, abs=1e-12)
     assert noticed_at(1.0, 0.5, cap) == 1.0
+
+
+def test_a_task_job_travels_in_batches_of_the_masters_target_length():
+    """400 tasks of 0.3 ms on 8 workers: a first round of single tasks, then batches that
+    last 8 x MESSAGE_S / MAX_BUSY (10 ms: 34 tasks); every task merged once, in its slot."""
+    durations = [0.0003 + 1e-9 * k for k in range(400)]
+    job = TaskJob("t", _seconds_task, None, durations)
+    sim = simulate(job, 8, ZERO, _result_seconds)
+    assert [r["seconds"] for r in job.results] == durations and sim.tasks == 400
+    k = math.ceil(8 * engine.MESSAGE_S / engine.MAX_BUSY / 0.0003)
+    assert k == 34 and sim.messages == 8 + math.ceil(392 / k)
+    assert sim.task_s == pytest.approx(sum(durations))
