@@ -22,6 +22,7 @@ deterministic, so it asks for the same jobs in the same order.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import socket
@@ -37,6 +38,33 @@ from hpcwedge.parallel.jobs import TaskJob
 EXIT_INTERRUPTED = 75
 #: the master checks the memory guard (Engine.guard) at most this often (seconds)
 GUARD_EVERY_S = 1.0
+#: a TaskJob's tasks go to a worker in batches that last about workers x MESSAGE_S / MAX_BUSY
+#: seconds (by the mean task seconds so far): the master, whose every message costs it up
+#: to ~MESSAGE_S (0.1-1 ms measured, scripts/bench_scale.py), stays at most ~MAX_BUSY busy
+MESSAGE_S, MAX_BUSY = 1e-3, 0.8
+
+
+def batch_size(workers: int, mean_task_s: float | None) -> int:
+    """Tasks of a TaskJob in the next message to a worker (>= 1): enough for the batch to
+    last workers x MESSAGE_S / MAX_BUSY seconds at `mean_task_s` (None, no task done yet:
+    1). Smaller batches at the end would flood the master; the last batches' tail is about
+    that long. Answers do not depend on it."""
+    if not mean_task_s:
+        return 1
+    return max(1, math.ceil(workers * MESSAGE_S / MAX_BUSY / mean_task_s))
+
+
+def run_batch(ctx, payloads: list) -> tuple[list, float]:
+    """The handler of a batch of tasks: ctx = (handler, context); their results in order
+    and the seconds they took."""
+    handler, context = ctx
+    t0 = time.perf_counter()
+    results = [handler(context, p) for p in payloads]
+    return results, time.perf_counter() - t0
+
+
+class Batch(list):
+    """The tokens of the tasks in one batch (a worker's task in flight)."""
 
 
 class SignalState:
@@ -114,10 +142,12 @@ class Master:
         for w in self.workers:           # small: an eager send, returns at once
             comm.send(me, dest=w, tag=mpi.HELLO)
 
-    def send_task(self, w: int, job_id: int, job, payload) -> None:
+    def send_task(self, w: int, job_id: int, job, payload, batched: bool = False) -> None:
+        """batched: payload is a list of the job's payloads (run_batch runs them)."""
         fresh = self._ctx_sent.get(w) != job_id
         self._ctx_sent[w] = job_id
-        self.comm.send((job_id, payload, (job.kind, job.handler, job.context) if fresh else None), dest=w, tag=mpi.TASK)
+        handler, ctx = (run_batch, (job.handler, job.context)) if batched else (job.handler, job.context)
+        self.comm.send((job_id, payload, (job.kind, handler, ctx) if fresh else None), dest=w, tag=mpi.TASK)
 
     def stop(self, waiting, timeout: float, on_answer) -> None:
         """Once: stop every worker, hand the answers of `waiting` to on_answer (mpi.stop_workers)."""
@@ -159,6 +189,7 @@ class Engine:
         self._inflight: dict = {}        # rank -> token of its task in flight
         self._job_id = 0
         self._job_start = (time.monotonic(), 0)    # (when, tasks done) as the current job started
+        self._batched = [0.0, 0]         # the current job's batches: seconds, tasks (batch_size)
         self._guarded = 0.0
 
     @property
@@ -210,8 +241,8 @@ class Engine:
             return False
         jobs = [(name, _state(job, [], finished=True)) for name, job in self._jobs.items()]
         if self._current is not None and self._current.name not in self._jobs:
-            jobs.append((self._current.name,
-                         _state(self._current, list(self._inflight.values()), finished=False)))
+            in_flight = [t for v in self._inflight.values() for t in (v if isinstance(v, Batch) else [v])]
+            jobs.append((self._current.name, _state(self._current, in_flight, finished=False)))
         return self.checkpoints.write(jobs, self.size, reason)
 
     def remove_checkpoint(self) -> None:
@@ -274,7 +305,7 @@ class Engine:
                 job.load(state)
                 job.counters.update(json.loads(state["attrs"]["counters"]))
             self._job_id += 1
-            self._current, self._inflight = job, {}
+            self._current, self._inflight, self._batched = job, {}, [0.0, 0]
             self._job_start = (time.monotonic(), job.counters.get("tasks", 0))
             self.checkpoints.restored.pop(job.name, None)
             if self.signals.stop_reason():
@@ -312,17 +343,9 @@ class Engine:
 
     def _run_master(self, job) -> None:
         idle = [w for w in self.master.workers if w not in self._inflight][::-1]
-        n_workers = len(self.master.workers)
         last_note = time.monotonic()
         while True:
-            while idle:
-                taken = job.take(n_workers)
-                if taken is None:
-                    break
-                token, payload = taken
-                w = idle.pop()
-                self._inflight[w] = token
-                self.master.send_task(w, self._job_id, job, payload)
+            self._hand_out(job, idle)
             if not self._inflight:
                 return                         # pool empty, nothing in flight: done
             got = mpi.wait_any(self.comm, self.checkpoints.next_at, lambda: bool(self.signals.flags))
@@ -341,6 +364,24 @@ class Engine:
                 raise
             last_note = self._note(job, last_note)
 
+    def _hand_out(self, job, idle: list) -> None:
+        """A task (a TaskJob: a batch of them, batch_size) to each idle worker while the pool lasts."""
+        n_workers = len(self.master.workers)
+        batched = isinstance(job, TaskJob)
+        while idle:
+            secs, done = self._batched
+            k = batch_size(n_workers, secs / done if done else None) if batched else 1
+            taken = [t for t in (job.take(n_workers) for _ in range(k)) if t is not None]
+            if not taken:
+                return
+            w = idle.pop()
+            if batched:
+                self._inflight[w] = Batch(t for t, _ in taken)
+                self.master.send_task(w, self._job_id, job, [p for _, p in taken], batched=True)
+            else:
+                self._inflight[w], payload = taken[0]
+                self.master.send_task(w, self._job_id, job, payload)
+
     def _take_result(self, job, w: int, tag: int, msg) -> None:
         """Merge worker w's answer to its task in flight (done: in the master's state);
         a cancelled task stays open (not in flight any more: the caller keeps it)."""
@@ -348,7 +389,6 @@ class Engine:
         if tag == mpi.CANCELLED:
             self._inflight[w] = token
             return
-        self.tasks_per_rank[w] += 1
         if tag == mpi.ERROR and isinstance(msg, mpi.UserFailure):
             raise UserError(msg.line)
         if tag == mpi.ERROR:
@@ -356,7 +396,13 @@ class Engine:
             # all the command line prints; the whole traceback after it (HPCWEDGE_DEBUG=1)
             cause = (str(msg).strip().splitlines() or ["?"])[-1]
             raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task: {cause}\n{msg}")
-        job.merge(token, msg)
+        if isinstance(token, Batch):
+            msg, seconds = msg
+            self._batched[0] += seconds
+            self._batched[1] += len(token)
+        for t, result in zip(token, msg, strict=True) if isinstance(token, Batch) else [(token, msg)]:
+            job.merge(t, result)
+            self.tasks_per_rank[w] += 1
 
     def _stop_workers(self, job, timeout: float = 60.0) -> None:
         """SIGTERM/SIGINT on the master, inside a job, once the checkpoint of the state at

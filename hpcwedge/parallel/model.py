@@ -1,0 +1,110 @@
+"""A discrete-event model of the engine's master loop (Engine._run_master), to predict
+its efficiency at rank counts a machine cannot run.
+
+The job is real (its take() and merge() run, and so does its handler, which must
+not sleep: `seconds(result)` says how long the task would have run); only time is
+simulated. A TaskJob's tasks travel in batches (engine.batch_size), one message each, as
+the engine sends them. The master is one server: each message costs it `send_s` (take and
+send) and each answer `merge_s` (receive and merge); between answers it waits as mpi.wait_any
+does (probes, then sleeps that grow by POLL_FRACTION of the wait up to `poll_max_s`),
+so it notices a result at its next wake-up. A task starts `latency_s` after its send
+and its result reaches the master when it ends. Results are taken in the order they
+arrive; after each the master refills every idle worker, as the engine does.
+"""
+from __future__ import annotations
+
+import heapq
+from dataclasses import dataclass
+
+from hpcwedge.parallel.engine import batch_size
+from hpcwedge.parallel.jobs import TaskJob
+from hpcwedge.parallel.mpi import POLL_FRACTION, POLL_MAX_MASTER
+
+
+@dataclass(frozen=True)
+class MasterCosts:
+    """The master's costs per message (seconds): take + send, receive + merge; the wire and
+    worker wake-up before a task starts; the master's longest sleep while it waits."""
+
+    send_s: float
+    merge_s: float
+    latency_s: float = 0.0
+    poll_max_s: float = POLL_MAX_MASTER
+
+
+@dataclass(frozen=True)
+class Simulated:
+    """One simulated run: workers, wall seconds (first send to the last merge), the sum of
+    the tasks' seconds, the tasks, the master's busy seconds, the messages (tasks or
+    batches) sent; efficiency = task seconds / (workers x wall), master_busy = busy / wall."""
+
+    workers: int
+    wall_s: float
+    task_s: float
+    tasks: int
+    busy_s: float
+    messages: int
+
+    @property
+    def efficiency(self) -> float:
+        return self.task_s / (self.workers * self.wall_s) if self.wall_s > 0 else 1.0
+
+    @property
+    def master_busy(self) -> float:
+        return self.busy_s / self.wall_s if self.wall_s > 0 else 0.0
+
+
+def noticed_at(since: float, arrival: float, poll_max_s: float) -> float:
+    """When a master that started waiting at `since` sees a message that arrives at
+    `arrival`: its first wake-up at or after it (wake-ups at since, then every
+    min(poll_max_s, max(1e-4, POLL_FRACTION x time waited))); poll_max_s 0: a master
+    that never sleeps sees it at once."""
+    if arrival <= since or poll_max_s <= 0:
+        return max(since, arrival)
+    t = since
+    # the sleeps grow geometrically up to the cap, then stay at it
+    while True:
+        step = min(poll_max_s, max(1e-4, POLL_FRACTION * (t - since)))
+        if step >= poll_max_s:
+            k = -(-(arrival - t) // poll_max_s)          # ceil: whole capped sleeps to reach it
+            return t + k * poll_max_s
+        t += step
+        if t >= arrival:
+            return t
+
+
+def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
+    """Run `job` to its end on `workers` simulated workers (>= 1); seconds(result) -> the
+    task's duration. With zero costs the wall time is the schedule's makespan (1 worker:
+    the sum of the task durations)."""
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    idle = list(range(workers))[::-1]
+    events: list = []                  # (answer arrives, seq, worker, [(token, result)], seconds)
+    t = busy = task_s = 0.0
+    seq = tasks = 0
+    batched = isinstance(job, TaskJob)
+    merged_s = 0.0                     # the merged tasks' seconds (the engine's batch sizes)
+    while True:
+        while idle:
+            k = batch_size(workers, merged_s / tasks if tasks else None) if batched else 1
+            taken = [x for x in (job.take(workers) for _ in range(k)) if x is not None]
+            if not taken:
+                break
+            t += costs.send_s
+            busy += costs.send_s
+            done = [(token, job.handler(job.context, payload)) for token, payload in taken]
+            d = sum(float(seconds(r)) for _, r in done)
+            task_s += d
+            heapq.heappush(events, (t + costs.latency_s + d, seq, idle.pop(), done, d))
+            seq += 1
+        if not events:
+            return Simulated(workers, t, task_s, tasks, busy, seq)
+        arrival, _, w, done, d = heapq.heappop(events)
+        merged_s += d
+        t = noticed_at(t, arrival, costs.poll_max_s) + costs.merge_s
+        busy += costs.merge_s
+        for token, result in done:
+            job.merge(token, result)
+        tasks += len(done)
+        idle.append(w)

@@ -1,0 +1,225 @@
+#!/usr/bin/env python3
+"""The engine itself at many ranks, measured and modelled (issue 42).
+
+Measured: synthetic jobs (scripts/scale_workload.py: TaskJob / TreeJob tasks that sleep for
+durations recorded from real runs, results/task_durations.json by
+scripts/record_durations.py) run by the real engine under `mpirun --oversubscribe` at 3, 9,
+17, 33, 65 (and 129) ranks on this machine: sleeping workers leave the cores to the master,
+so what is measured is the master's throughput and the workers' idle time. One launch per
+rank count runs the three workloads in turn, each sized to about SECONDS_PER_WORKER[workload]
+x workers worker-seconds (more for the workloads whose longest tasks take seconds). Per run: tasks, tasks per second, the master's busy fraction (its
+wall time outside mpi.wait_any's waits), efficiency = the sum of the task seconds / (workers
+x wall), wall from the first task sent to the last result merged (start-up excluded); the
+master is busy when it is not asleep (its waits sleep between bursts of probes).
+
+Modelled: parallel.model.simulate on the same jobs with costs measured here: the master's
+busy seconds per message (a task, or a batch of a TaskJob's tasks; each workload's median
+over the measured runs, half to send and half to merge) and a message's latency (the
+workers' idle time per message at the fewest ranks, less the master's costs: calibrated there, validated at the other rank counts);
+"model_error" = modelled minus measured efficiency of each measured run;
+then 256, 1,024 and 4,096 ranks with max(MIN_WORKER_SECONDS, MODEL_SECONDS_PER_WORKER[ranks] x
+workers) worker-seconds (fewer per worker at 4,096 ranks: the model runs the tree's nodes).
+
+Writes results/bench_scale.json ("measured", "modelled", the costs, the load) and
+results/bench_scale.png (efficiency against ranks).
+
+    PYTHONPATH=. .venv/bin/python scripts/bench_scale.py [--quick] [--ranks 3 9 ...] [--seconds S]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import traceback
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+from harness import RESULTS, mpirun_command, python_command, write_json  # noqa: E402
+from scale_workload import load_durations, make_job, task_seconds  # noqa: E402
+
+WORKLOADS = ("subtree", "mu_c", "face")
+RANKS, QUICK_RANKS, MODEL_RANKS = (3, 9, 17, 33, 65, 129), (3, 9, 17, 33, 65), (256, 1024, 4096)
+#: measured runs: worker-seconds per worker; modelled runs: the same, at least MIN_WORKER_SECONDS
+SECONDS_PER_WORKER = {"subtree": 24.0, "mu_c": 8.0, "face": 24.0}
+MODEL_SECONDS_PER_WORKER = {256: 20.0, 1024: 10.0, 4096: 3.0}
+MIN_WORKER_SECONDS = 2000.0
+
+
+def rank_run(durations_path: str, out: str, specs) -> None:
+    """Under mpirun: rank 0 runs each workload's job as the engine's master, the others serve."""
+    from hpcwedge.parallel import mpi
+    from hpcwedge.parallel.engine import Engine
+    from hpcwedge.parallel.worker import serve
+    comm = mpi.world()
+    if comm.rank != 0:
+        comm.Barrier()
+        serve(comm)
+        return
+    durations = load_durations(durations_path)
+    engine = Engine(comm)
+    waited = [0.0]
+    real_sleep = time.sleep
+
+    def timed_sleep(seconds):           # the master's idle time: its sleeps while it waits
+        t0 = time.perf_counter()
+        real_sleep(seconds)
+        waited[0] += time.perf_counter() - t0
+    time.sleep = timed_sleep            # rank 0 runs no task: every sleep of it is a wait
+    sent = [0]
+    real_send = engine.master.send_task
+
+    def counted_send(*args, **kwargs):  # messages (tasks or batches of tasks) sent
+        sent[0] += 1
+        real_send(*args, **kwargs)
+    engine.master.send_task = counted_send
+    comm.Barrier()                      # every rank is up: start-up ends here
+    try:
+        rows = _run_workloads(engine, comm.size - 1, durations, specs, waited, sent)
+    except BaseException:
+        traceback.print_exc()
+        comm.Abort(1)                   # the workers would wait for a task forever
+    engine.close()
+    with open(out, "w") as f:
+        json.dump(rows, f)
+
+
+def _run_workloads(engine, workers: int, durations: dict, specs, waited: list, sent: list) -> list[dict]:
+    """The master's side of rank_run: each workload's job in turn ("workload=seconds per
+    worker"), timed."""
+    rows = []
+    for seed, spec in enumerate(specs):
+        workload, seconds = spec.split("=")
+        seconds = float(seconds)
+        job = make_job(workload, durations, seconds * workers, seed, sleep=True)
+        waited[0] = sent[0] = 0
+        t0, c0 = time.perf_counter(), time.process_time()
+        engine.run(job)
+        wall = time.perf_counter() - t0
+        task_s = (sum(r["seconds"] for r in job.output()) if workload != "subtree"
+                  else job.counters["seconds"])
+        rows.append({"ranks": workers + 1, "workers": workers, "workload": workload, "seed": seed, "tasks": job.counters["tasks"], "messages": sent[0],
+                     "wall_s": wall, "task_s": task_s, "busy_s": wall - waited[0],
+                     "cpu_s": time.process_time() - c0, "worker_seconds_asked": seconds * workers})
+    return rows
+
+
+def measure(ranks: int, durations_path: str, seconds: dict, workloads) -> list[dict]:
+    """One mpirun launch at `ranks`: its rows, with tasks_per_s, master_busy, efficiency."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = os.path.join(tmp, "rows.json")
+        cmd = mpirun_command(ranks, os.path.abspath(__file__), "--rank-run", durations_path, out,
+                             *[f"{w}={seconds[w]}" for w in workloads], env=env)
+        load = os.getloadavg()[0]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise SystemExit(f"{' '.join(cmd)}: exit {proc.returncode}\n{proc.stderr[-3000:]}")
+        with open(out) as f:
+            rows = json.load(f)
+    launch = time.perf_counter() - t0
+    for r in rows:
+        r.update(tasks_per_s=r["tasks"] / r["wall_s"], master_busy=r["busy_s"] / r["wall_s"],
+                 efficiency=r["task_s"] / ((ranks - 1) * r["wall_s"]), launch_s=launch, load_before=load)
+        print(f"{ranks:4d} ranks {r['workload']:8s} {r['tasks']:6d} tasks {r['tasks_per_s']:8.1f}/s "
+              f"busy {r['master_busy']:.3f} efficiency {r['efficiency']:.3f}", flush=True)
+    return rows
+
+
+def model_run(workload: str, durations: dict, ranks: int, worker_seconds: float, seed: int, costs):
+    from hpcwedge.parallel.model import simulate
+    job = make_job(workload, durations, worker_seconds, seed, sleep=False)
+    return simulate(job, ranks - 1, costs, task_seconds)
+
+
+def master_costs(measured: list[dict]) -> dict:
+    """{workload: MasterCosts} from the measured runs (see the module's docstring)."""
+    from hpcwedge.parallel.model import MasterCosts
+    fewest = min(r["ranks"] for r in measured)
+    out = {}
+    for w in {r["workload"] for r in measured}:
+        rows = [r for r in measured if r["workload"] == w]
+        per_message = statistics.median(r["busy_s"] / r["messages"] for r in rows)
+        idle = statistics.median((r["workers"] * r["wall_s"] - r["task_s"]) / r["messages"]
+                                 for r in rows if r["ranks"] == fewest)
+        out[w] = MasterCosts(send_s=per_message / 2, merge_s=per_message / 2,
+                             latency_s=max(0.0, idle - per_message))
+    return out
+
+
+def plot(measured: list[dict], modelled: list[dict], path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for i, w in enumerate(WORKLOADS):
+        meas = [r for r in measured if r["workload"] == w]
+        mod = sorted([(r["ranks"], r["efficiency"] + r["model_error"]) for r in meas]
+                     + [(r["ranks"], r["efficiency"]) for r in modelled if r["workload"] == w])
+        if not meas:
+            continue
+        ax.plot([r["ranks"] for r in meas], [r["efficiency"] for r in meas], "o", color=f"C{i}",
+                label=f"{w} measured")
+        ax.plot(*zip(*mod), "--", color=f"C{i}", label=f"{w} model")
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("MPI ranks (1 master + workers)")
+    ax.set_ylabel("efficiency (task time / workers x wall)")
+    ax.set_ylim(0, 1.05)
+    ax.axhline(0.9, color="grey", lw=0.5)
+    ax.legend(fontsize=8)
+    ax.set_title("hpcwedge engine: measured (2 cores, oversubscribed) and modelled")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="stop at 65 ranks")
+    ap.add_argument("--ranks", type=int, nargs="+")
+    ap.add_argument("--seconds", type=float, help="worker-seconds per worker, every workload "
+                    f"(default {SECONDS_PER_WORKER})")
+    ap.add_argument("--durations", default=os.path.join(RESULTS, "task_durations.json"))
+    ap.add_argument("--workloads", nargs="+", default=list(WORKLOADS), choices=WORKLOADS)
+    ap.add_argument("--out", default=os.path.join(RESULTS, "bench_scale"))
+    ap.add_argument("--rank-run", nargs="+", help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.rank_run:
+        path, out, *specs = a.rank_run
+        return rank_run(path, out, specs)
+    ranks = a.ranks or (QUICK_RANKS if a.quick else RANKS)
+    durations = load_durations(a.durations)
+    t0 = time.perf_counter()
+    seconds = {w: a.seconds or SECONDS_PER_WORKER[w] for w in WORKLOADS}
+    measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)]
+    costs = master_costs(measured)
+    for r in measured:
+        sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
+                        costs[r["workload"]])
+        r["model_error"] = sim.efficiency - r["efficiency"]
+    modelled = []
+    for n in MODEL_RANKS:
+        for seed, w in enumerate(a.workloads):
+            ws = max(MIN_WORKER_SECONDS, MODEL_SECONDS_PER_WORKER[n] * (n - 1))
+            sim = model_run(w, durations, n, ws, seed, costs[w])
+            modelled.append({"workload": w, "ranks": n, "worker_seconds": sim.task_s, "efficiency": sim.efficiency,
+                             "tasks": sim.tasks, "messages": sim.messages, "master_busy": sim.master_busy, "wall_s": sim.wall_s})
+            print(f"model {n:5d} ranks {w:8s} {sim.task_s:9.0f} worker-s efficiency {sim.efficiency:.3f} "
+                  f"busy {sim.master_busy:.3f}", flush=True)
+    keys = ("ranks", "workload", "tasks", "tasks_per_s", "master_busy", "efficiency", "model_error")
+    write_json(a.out + ".json", {
+        "measured": [{k: r[k] for k in keys} for r in measured], "modelled": modelled,
+        "measured_detail": measured, "costs": {w: vars(c) for w, c in costs.items()}, "seconds_per_worker": seconds,
+        "machine": f"{os.cpu_count()} cores, shared", "bench_seconds": time.perf_counter() - t0,
+        "command": " ".join(python_command(*sys.argv))})
+    plot(measured, modelled, a.out + ".png")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,100 @@
+"""The discrete-event model of the engine's master (hpcwedge/parallel/model.py) against
+schedules worked out by hand: one worker is the serial sum, equal tasks on w workers take
+ceil(n / w) rounds, zero-length tasks are the master's costs alone, the master's wake-ups
+are mpi.wait_any's."""
+import math
+
+import pytest
+
+from hpcwedge.parallel import engine, mpi
+from hpcwedge.parallel.jobs import TaskJob, TreeJob
+from hpcwedge.parallel.model import MasterCosts, noticed_at, simulate
+
+
+def _seconds_task(ctx, payload):
+    return {"seconds": payload}
+
+
+class _Node(tuple):
+    @property
+    def depth(self) -> int:
+        return len(self)
+
+
+def _explore(ctx, payload):
+    """The full binary tree of depth 6, `budget` nodes per task, each costing 1 + depth s."""
+    _, node, budget, _ = payload
+    stack, found, seconds, visited = [node], [], 0.0, 0
+    while stack and visited < budget:
+        n = stack.pop()
+        visited += 1
+        seconds += 1 + n.depth
+        if n.depth == 6:
+            found.append(n)
+        else:
+            stack += [_Node(n + (1,)), _Node(n + (0,))]
+    return found, stack, {"seconds": seconds}, [], [None] * len(stack)
+
+
+def _result_seconds(r):
+    return r["seconds"] if isinstance(r, dict) else r[2]["seconds"]
+
+
+ZERO = MasterCosts(send_s=0.0, merge_s=0.0, poll_max_s=0.0)
+
+
+def test_one_worker_is_the_serial_sum_and_equal_tasks_take_rounds():
+    durations = [0.3, 1.7, 0.25, 2.0, 0.5, 0.125]
+    sim = simulate(TaskJob("t", _seconds_task, None, durations), 1, ZERO, _result_seconds)
+    assert sim.wall_s == pytest.approx(sum(durations)) and sim.tasks == len(durations)
+    assert sim.efficiency == pytest.approx(1.0)
+    for n, w in [(10, 3), (12, 4), (7, 8)]:
+        sim = simulate(TaskJob("t", _seconds_task, None, [2.0] * n), w, ZERO, _result_seconds)
+        assert sim.wall_s == pytest.approx(2.0 * math.ceil(n / w))
+        assert sim.efficiency == pytest.approx(n / (w * math.ceil(n / w)))
+
+
+def test_zero_length_tasks_cost_the_master_alone():
+    costs = MasterCosts(send_s=0.001, merge_s=0.003, poll_max_s=0.0)
+    sim = simulate(TaskJob("t", _seconds_task, None, [0.0] * 50), 16, costs, _result_seconds)
+    assert sim.wall_s == pytest.approx(50 * 0.004)
+    assert sim.master_busy == pytest.approx(1.0)
+
+
+def test_a_tree_job_costs_its_tree_for_any_worker_count():
+    """The tree is the same for any split: its task seconds are the sum over its 127 nodes;
+    one worker's wall time is that sum, more workers' is less, down to the longest path."""
+    total = sum((1 + d) * 2 ** d for d in range(7))
+    walls = []
+    for w in (1, 2, 8):
+        job = TreeJob("t", _explore, None, [_Node(())], 3, {"seconds": 0.0})
+        sim = simulate(job, w, ZERO, _result_seconds)
+        assert sim.task_s == pytest.approx(total) and len(job.found[0]) == 64
+        walls.append(sim.wall_s)
+    assert walls[0] == pytest.approx(total)
+    assert walls[0] > walls[1] > walls[2] >= sum(1 + d for d in range(7))
+
+
+def test_the_master_notices_a_result_at_its_next_wake_up():
+    """noticed_at against the wake-ups listed one by one, as mpi.wait_any sleeps."""
+    cap = mpi.POLL_MAX_MASTER
+    wakes, t = [0.0], 0.0
+    while t < 0.5:
+        t += mpi.backoff(t, cap)
+        wakes.append(t)
+    for arrival in (0.0, 5e-5, 0.0031, 0.0457, 0.1, 0.2345, 0.49):
+        expect = next(w for w in wakes if w >= arrival)
+        assert noticed_at(0.0, arrival, cap) == pytest.approx(expect, abs=1e-12)
+    assert noticed_at(1.0, 0.5, cap) == 1.0
+
+
+def test_a_task_job_travels_in_batches_of_the_masters_target_length():
+    """400 tasks of 0.3 ms on 8 workers: a first round of single tasks, then batches that
+    last 8 x MESSAGE_S / MAX_BUSY (10 ms: 34 tasks); every task merged once, in its slot."""
+    durations = [0.0003 + 1e-9 * k for k in range(400)]
+    job = TaskJob("t", _seconds_task, None, durations)
+    sim = simulate(job, 8, ZERO, _result_seconds)
+    assert [r["seconds"] for r in job.results] == durations and sim.tasks == 400
+    k = math.ceil(8 * engine.MESSAGE_S / engine.MAX_BUSY / 0.0003)
+    assert k == 34 and sim.messages == 8 + math.ceil(392 / k)
+    assert sim.task_s == pytest.approx(sum(durations))
