@@ -15,6 +15,10 @@ acts on it between two merges (a task is done only once its result is merged
 into the master's state; tasks in flight are saved as open). Outside the loop,
 SIGTERM raises ``Interrupted`` at once: the state is then the finished jobs.
 
+A TaskJob task that runs long may pause (cancel.task_pausing, after checkpoint_every_s or
+at a stop) and hand back a Continuation: the job keeps its payload as the task's open one
+(in the checkpoint too) and hands it out again.
+
 Resume: a job whose name is in the checkpoint starts from the saved state
 (a finished job returns its saved results at once). The pipeline is
 deterministic, so it asks for the same jobs in the same order.
@@ -22,6 +26,7 @@ deterministic, so it asks for the same jobs in the same order.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import socket
@@ -109,6 +114,8 @@ class Master:
         self.comm = comm
         self.workers = list(range(1, comm.size))
         self.stopped = False
+        #: a task that can hand back a Continuation does so after this long (the checkpoint period)
+        self.pause_every_s = math.inf
         self._ctx_sent: dict = {}        # worker -> job id whose context it holds
         me = (socket.gethostname(), os.getpid())
         for w in self.workers:           # small: an eager send, returns at once
@@ -117,7 +124,8 @@ class Master:
     def send_task(self, w: int, job_id: int, job, payload) -> None:
         fresh = self._ctx_sent.get(w) != job_id
         self._ctx_sent[w] = job_id
-        self.comm.send((job_id, payload, (job.kind, job.handler, job.context) if fresh else None), dest=w, tag=mpi.TASK)
+        self.comm.send((job_id, payload, (job.kind, job.handler, job.context) if fresh else None, self.pause_every_s),
+                       dest=w, tag=mpi.TASK)
 
     def stop(self, waiting, timeout: float, on_answer) -> None:
         """Once: stop every worker, hand the answers of `waiting` to on_answer (mpi.stop_workers)."""
@@ -188,6 +196,8 @@ class Engine:
         held, self.signals.defer = self.signals.defer, True
         try:
             loaded = self.checkpoints.use(path, scene_hash, scene_text, every_s, resume, inputs, changed_settings)
+            if self.master is not None:
+                self.master.pause_every_s = float(every_s)
         finally:
             self.signals.defer = held
         if self.signals.stop_reason():
@@ -302,7 +312,8 @@ class Engine:
             token, payload = taken
             self._inflight[0] = token
             try:
-                result = run_cancellable(handler, job.context, payload, self._in_task, self.tick_every_s)
+                result = run_cancellable(handler, job.context, payload, self._in_task, self.tick_every_s,
+                                         self.checkpoints.every_s)
             except TaskCancelled:
                 raise Interrupted(self.signals.stop_reason()) from None
             job.merge(token, result)           # done (or stopped, the rest handed back as open)
