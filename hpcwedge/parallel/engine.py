@@ -34,7 +34,7 @@ import time
 
 from hpcwedge.errors import Interrupted, UserError
 from hpcwedge.parallel import mpi
-from hpcwedge.parallel.cancel import TICK_EVERY_S, TaskCancelled, run_cancellable
+from hpcwedge.parallel.cancel import TICK_EVERY_S, Continuation, TaskCancelled, run_cancellable
 from hpcwedge.parallel.checkpoint import Checkpointer, CheckpointError
 from hpcwedge.parallel.jobs import TaskJob
 
@@ -316,7 +316,7 @@ class Engine:
                                          self.checkpoints.every_s)
             except TaskCancelled:
                 raise Interrupted(self.signals.stop_reason()) from None
-            job.merge(token, result)           # done (or stopped, the rest handed back as open)
+            self._merge(job, token, result)    # done (or stopped, the rest handed back as open)
             del self._inflight[0]
             self.tasks_per_rank[0] += 1
             last_note = self._note(job, last_note)
@@ -367,7 +367,14 @@ class Engine:
             # all the command line prints; the whole traceback after it (HPCWEDGE_DEBUG=1)
             cause = (str(msg).strip().splitlines() or ["?"])[-1]
             raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task: {cause}\n{msg}")
-        job.merge(token, msg)
+        self._merge(job, token, msg)
+
+    def _merge(self, job, token, result) -> None:
+        """job.merge; a Continuation (a long task paused) makes the checkpoint due, so that
+        the next safe point saves its progress."""
+        job.merge(token, result)
+        if isinstance(result, Continuation) and self.checkpoints.active:
+            self.checkpoints.next_at = 0.0
 
     def _stop_workers(self, job, timeout: float = 60.0) -> None:
         """SIGTERM/SIGINT on the master, inside a job, once the checkpoint of the state at
