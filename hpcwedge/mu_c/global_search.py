@@ -14,7 +14,7 @@ import numpy as np
 from hpcwedge.contact.problem import Parametrization
 from hpcwedge.mu_c.critical import MuC, add_counts, mu_critical, run_mu_c
 from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at
-from hpcwedge.parallel.cancel import TaskCancelled, task_tick
+from hpcwedge.parallel.cancel import Continuation, TaskCancelled, task_pausing, task_tick
 from hpcwedge.parallel.engine import Engine, run_tasks
 from hpcwedge.patterns.job import DEFAULT_BUDGET, run_patterns
 from hpcwedge.patterns.symmetry import Symmetry
@@ -167,34 +167,56 @@ class GlobalSearch:
         return partial(mu_critical, self.param, self.m, mu_max=self.mu_max, method=self.method, tol=self.tol,
                        scale=self.scale)
 
-    def bracket(self, stats: BnBStats, pattern_of: dict) -> tuple[float | None, str]:
+    def bracket(self, stats: BnBStats, pattern_of: dict, resume: dict | None = None):
         """(best, BRACKET_STATUS entry): the bracket stage (global_mu_critical's doc);
-        pattern_of[value] = the pattern of every value computed."""
+        pattern_of[value] = the pattern of every value computed. The tree route's steps may
+        pause (cancel.task_pausing: the checkpoint is due, or the engine is stopping): it then
+        returns a Continuation whose payload (`_step_state`) is `resume` of the call that
+        goes on, with the counts as of that step (a step cut short by a stop is dropped and
+        run again), so the answer and every count are the same wherever it paused."""
+        if resume is not None:
+            _absorb_json(stats, resume["stats"])
+            best = resume["best"]
+            if best is not None:
+                pattern_of[best] = (np.array(resume["zero_u"], dtype=bool), np.array(resume["zero_r"], dtype=bool))
+            return self._tree_steps(stats, pattern_of, best, resume["bound"])
         param, m, mu_max = self.param, self.m, self.mu_max
-        solve = partial(_recorded, self.solve, pattern_of)
         if (self.route == "milp" or (self.route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
-            best = global_bracket_milp(param, m, mu_max, solve, stats, self.scale, bound=self.bound)
+            best = global_bracket_milp(param, m, mu_max, partial(_recorded, self.solve, pattern_of), stats,
+                                       self.scale, bound=self.bound)
             if best is not None:
                 return best, "found"
         stats.extra["route"] = "tree"
-
-        def first_leaf(mu: float, friction: bool = True):
-            # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
-            tree = PatternTree(param, m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS)
-            out = tree.explore(Subtree(0), first_only=True)
-            stats.add(out.stats)
-            if out.stopped:               # the engine is stopping: no answer from this dive
-                raise TaskCancelled()
-            return out.found[0].masks(m) if out.found else None
-
-        if first_leaf(np.inf, friction=False) is None:
+        if self._first_leaf(stats, np.inf, friction=False) is None:
             return None, "none_at_any_mu"
-        best, bound = None, mu_max
+        return self._tree_steps(stats, pattern_of, None, mu_max)
+
+    def _first_leaf(self, stats: BnBStats, mu: float, friction: bool = True):
+        """The masks of the first feasible leaf of the tree at mu (None: none); TaskCancelled
+        when the engine stops the dive."""
+        # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
+        tree = PatternTree(self.param, self.m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS)
+        out = tree.explore(Subtree(0), first_only=True)
+        stats.add(out.stats)
+        if out.stopped:                   # the engine is stopping: no answer from this dive
+            raise TaskCancelled()
+        return out.found[0].masks(m=self.m) if out.found else None
+
+    def _tree_steps(self, stats: BnBStats, pattern_of: dict, best: float | None, bound: float):
+        """The tree route's steps from (best, bound): a dive at bound, the certified mu^c of
+        its leaf, the next bound best (1 - TREE_STEP); a Continuation when pausing (bracket)."""
+        solve = partial(_recorded, self.solve, pattern_of)
         while True:
-            leaf = first_leaf(bound)
-            if leaf is None:
+            state = _step_state(stats, pattern_of, best, bound, self.m)
+            if task_pausing():
+                return Continuation(state)
+            try:
+                leaf = self._first_leaf(stats, bound)
+                r = None if leaf is None else solve(*leaf, mu_hi=bound)
+            except TaskCancelled:
+                return Continuation(state)
+            if r is None:
                 break
-            r = solve(*leaf, mu_hi=bound)
             _absorb(stats, r)
             if r.mu_c is None or (best is not None and r.mu_c >= best):
                 break
@@ -203,19 +225,38 @@ class GlobalSearch:
         return (None, "none_up_to_mu_max") if best is None else (best, "settle")
 
 
-def bracket_task(search: GlobalSearch, payload) -> dict:
-    """Task "global_bracket": the bracket of `search` (GlobalSearch.bracket) -> best (NaN:
-    none), status (index into BRACKET_STATUS), the pattern of best (zero_u, zero_r masks;
-    all False without one) and the search's counts (stats: JSON of a BnBStats)."""
-    stats, pattern_of = BnBStats(), {}
-    best, status = search.bracket(stats, pattern_of)
-    none = np.zeros(search.m, dtype=bool)
+def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: float, m: int) -> dict:
+    """The bracket's state before a step (JSON data, a Continuation's payload): best, its
+    pattern (zero_u, zero_r lists; all False without one), bound and the counts so far."""
+    none = [False] * m
     zu, zr = pattern_of.get(best, (none, none))
+    return {"best": best, "bound": bound, "zero_u": [bool(v) for v in zu], "zero_r": [bool(v) for v in zr],
+            "stats": _counts_json(stats)}
+
+
+def _counts_json(stats: BnBStats) -> str:
+    """The counts of stats as JSON (read back by _absorb_json)."""
     counts = {**{k: getattr(stats, k) for k in ("solves", "skipped", "pruned", "undecided", "nodes", "lps")},
               "extra": stats.extra, "statuses": stats.statuses}
+    return json.dumps(counts, sort_keys=True)
+
+
+def bracket_task(search: GlobalSearch, payload):
+    """Task "global_bracket": the bracket of `search` (GlobalSearch.bracket) -> best (NaN:
+    none), status (index into BRACKET_STATUS), the pattern of best (zero_u, zero_r masks;
+    all False without one) and the search's counts (stats: JSON of a BnBStats); or a
+    Continuation when it pauses. payload: anything but a dict to start, a Continuation's
+    payload to go on."""
+    stats, pattern_of = BnBStats(), {}
+    out = search.bracket(stats, pattern_of, payload if isinstance(payload, dict) else None)
+    if isinstance(out, Continuation):
+        return out
+    best, status = out
+    none = np.zeros(search.m, dtype=bool)
+    zu, zr = pattern_of.get(best, (none, none))
     return {"best": math.nan if best is None else float(best), "status": BRACKET_STATUS.index(status),
             "zero_u": np.asarray(zu, dtype=bool), "zero_r": np.asarray(zr, dtype=bool),
-            "stats": json.dumps(counts, sort_keys=True).encode()}
+            "stats": _counts_json(stats).encode()}
 
 
 def _recorded(solve, pattern_of: dict, zero_u, zero_r, **kw):

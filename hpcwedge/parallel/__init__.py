@@ -3,7 +3,8 @@ with checkpoints and signals. It knows nothing of wedging: a job hands it tasks 
 handler (a module-level callable, sent to the workers by reference), and merges the
 results. Importing this package loads nothing; each module is imported by name:
 
-- cancel.py: what a running task polls (task_stopping, task_tick); no MPI, no HDF5.
+- cancel.py: what a running task polls (task_stopping, task_tick, task_pausing) and how a long
+  task hands back its progress (Continuation); no MPI, no HDF5.
 - jobs.py: the job protocol; TaskJob (a fixed list of independent tasks) and TreeJob (a
   budgeted tree search whose open nodes go back to the pool).
 - engine.py: Engine.run(job), in-process or as the master under mpirun; run_tasks.

@@ -1,11 +1,13 @@
-"""Cancellation of a running task: what a long loop polls (`task_stopping`, `task_tick`)
-and how the engine runs a task under it (`run_cancellable`).
+"""Cancellation of a running task: what a long loop polls (`task_stopping`, `task_tick`,
+`task_pausing`), how a long task hands back its progress (`Continuation`) and how the
+engine runs a task under it (`run_cancellable`).
 
 A leaf: no MPI, no HDF5, nothing of the domain, so every engine may import it.
 """
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 
 from hpcwedge.errors import Interrupted
@@ -18,6 +20,19 @@ class TaskCancelled(Exception):
     """Raised by task_tick() inside a task the engine is stopping."""
 
 
+class Continuation:
+    """What a long task returns instead of its result when task_pausing() says so: the
+    payload that runs the rest of it (JSON data: the job keeps it as the task's open payload,
+    in its checkpoint too, and runs the task again with it). The task's answer must not
+    depend on where it paused."""
+
+    def __init__(self, payload):
+        self.payload = payload
+
+    def __repr__(self) -> str:
+        return f"Continuation({self.payload!r})"
+
+
 # ---------------------------------------------------------------- cancellation
 
 #: set while a task runs (run_cancellable): returns True when the task should stop
@@ -25,6 +40,7 @@ _cancel_check = None
 _tick_every_s = TICK_EVERY_S
 _last_tick = 0.0
 _stopping = False
+_pause_at = math.inf
 
 
 def task_stopping() -> bool:
@@ -72,19 +88,35 @@ def task_scope(factory) -> None:
         _scopes.append(factory)
 
 
-def run_cancellable(handler, ctx, payload, check, tick_every_s: float = TICK_EVERY_S):
-    """handler(ctx, payload) inside every task_scope, during which task_stopping() asks
-    check() (at most every tick_every_s seconds) whether the task should stop."""
-    global _cancel_check, _tick_every_s, _last_tick, _stopping
-    _cancel_check, _tick_every_s, _last_tick, _stopping = check, tick_every_s, time.monotonic(), False
+def in_task_scopes(handler, ctx, payload):
+    """handler(ctx, payload) inside a fresh entry of every task_scope."""
+    with contextlib.ExitStack() as scopes:
+        for factory in list(_scopes):
+            scopes.enter_context(factory())
+        return handler(ctx, payload)
+
+
+def task_pausing() -> bool:
+    """A task that can hand back a Continuation polls this between its steps: True when it
+    should (the engine is stopping, or the task has run pause_every_s seconds since it was
+    handed out: the master's next checkpoint then holds its progress). False outside a task."""
+    return task_stopping() or (_cancel_check is not None and time.monotonic() >= _pause_at)
+
+
+def run_cancellable(handler, ctx, payload, check, tick_every_s: float = TICK_EVERY_S,
+                    pause_every_s: float = math.inf):
+    """handler(ctx, payload) inside every task_scope, during which task_stopping() asks check() (at most every
+    tick_every_s seconds) whether the task should stop, and task_pausing() turns True
+    pause_every_s seconds from now."""
+    global _cancel_check, _tick_every_s, _last_tick, _stopping, _pause_at
+    now = time.monotonic()
+    _cancel_check, _tick_every_s, _last_tick, _stopping = check, tick_every_s, now, False
+    _pause_at = now + pause_every_s
     try:
-        with contextlib.ExitStack() as scopes:
-            for factory in list(_scopes):
-                scopes.enter_context(factory())
-            return handler(ctx, payload)
+        return in_task_scopes(handler, ctx, payload)
     finally:
-        _cancel_check, _stopping = None, False
+        _cancel_check, _stopping, _pause_at = None, False, math.inf
 
 
-__all__ = ["Interrupted", "TaskCancelled", "TICK_EVERY_S", "task_stopping", "task_tick", "run_cancellable",
-           "task_scope"]
+__all__ = ["Interrupted", "TaskCancelled", "Continuation", "TICK_EVERY_S", "task_stopping", "task_tick",
+           "task_pausing", "run_cancellable", "task_scope", "in_task_scopes"]

@@ -15,6 +15,10 @@ acts on it between two merges (a task is done only once its result is merged
 into the master's state; tasks in flight are saved as open). Outside the loop,
 SIGTERM raises ``Interrupted`` at once: the state is then the finished jobs.
 
+A TaskJob task that runs long may pause (cancel.task_pausing, after checkpoint_every_s or
+at a stop) and hand back a Continuation: the job keeps its payload as the task's open one
+(in the checkpoint too) and hands it out again.
+
 Resume: a job whose name is in the checkpoint starts from the saved state
 (a finished job returns its saved results at once). The pipeline is
 deterministic, so it asks for the same jobs in the same order.
@@ -30,7 +34,7 @@ import time
 
 from hpcwedge.errors import Interrupted, UserError
 from hpcwedge.parallel import mpi
-from hpcwedge.parallel.cancel import TICK_EVERY_S, TaskCancelled, run_cancellable
+from hpcwedge.parallel.cancel import TICK_EVERY_S, Continuation, TaskCancelled, in_task_scopes, run_cancellable
 from hpcwedge.parallel.checkpoint import Checkpointer, CheckpointError
 from hpcwedge.parallel.jobs import TaskJob
 
@@ -56,10 +60,11 @@ def batch_size(workers: int, mean_task_s: float | None) -> int:
 
 def run_batch(ctx, payloads: list) -> tuple[list, float]:
     """The handler of a batch of tasks: ctx = (handler, context); their results in order
-    and the seconds they took."""
+    and the seconds they took. Each task runs in task scopes of its own (cancel.task_scope),
+    as an unbatched one does."""
     handler, context = ctx
     t0 = time.perf_counter()
-    results = [handler(context, p) for p in payloads]
+    results = [in_task_scopes(handler, context, p) for p in payloads]
     return results, time.perf_counter() - t0
 
 
@@ -137,6 +142,8 @@ class Master:
         self.comm = comm
         self.workers = list(range(1, comm.size))
         self.stopped = False
+        #: a task that can hand back a Continuation does so after this long (the checkpoint period)
+        self.pause_every_s = math.inf
         self._ctx_sent: dict = {}        # worker -> job id whose context it holds
         me = (socket.gethostname(), os.getpid())
         for w in self.workers:           # small: an eager send, returns at once
@@ -147,7 +154,8 @@ class Master:
         fresh = self._ctx_sent.get(w) != job_id
         self._ctx_sent[w] = job_id
         handler, ctx = (run_batch, (job.handler, job.context)) if batched else (job.handler, job.context)
-        self.comm.send((job_id, payload, (job.kind, handler, ctx) if fresh else None), dest=w, tag=mpi.TASK)
+        self.comm.send((job_id, payload, (job.kind, handler, ctx) if fresh else None, self.pause_every_s),
+                       dest=w, tag=mpi.TASK)
 
     def stop(self, waiting, timeout: float, on_answer) -> None:
         """Once: stop every worker, hand the answers of `waiting` to on_answer (mpi.stop_workers)."""
@@ -219,6 +227,8 @@ class Engine:
         held, self.signals.defer = self.signals.defer, True
         try:
             loaded = self.checkpoints.use(path, scene_hash, scene_text, every_s, resume, inputs, changed_settings)
+            if self.master is not None:
+                self.master.pause_every_s = float(every_s)
         finally:
             self.signals.defer = held
         if self.signals.stop_reason():
@@ -333,10 +343,11 @@ class Engine:
             token, payload = taken
             self._inflight[0] = token
             try:
-                result = run_cancellable(handler, job.context, payload, self._in_task, self.tick_every_s)
+                result = run_cancellable(handler, job.context, payload, self._in_task, self.tick_every_s,
+                                         self.checkpoints.every_s)
             except TaskCancelled:
                 raise Interrupted(self.signals.stop_reason()) from None
-            job.merge(token, result)           # done (or stopped, the rest handed back as open)
+            self._merge(job, token, result)    # done (or stopped, the rest handed back as open)
             del self._inflight[0]
             self.tasks_per_rank[0] += 1
             last_note = self._note(job, last_note)
@@ -401,8 +412,15 @@ class Engine:
             self._batched[0] += seconds
             self._batched[1] += len(token)
         for t, result in zip(token, msg, strict=True) if isinstance(token, Batch) else [(token, msg)]:
-            job.merge(t, result)
+            self._merge(job, t, result)
             self.tasks_per_rank[w] += 1
+
+    def _merge(self, job, token, result) -> None:
+        """job.merge; a Continuation (a long task paused) makes the checkpoint due, so that
+        the next safe point saves its progress."""
+        job.merge(token, result)
+        if isinstance(result, Continuation) and self.checkpoints.active:
+            self.checkpoints.next_at = 0.0
 
     def _stop_workers(self, job, timeout: float = 60.0) -> None:
         """SIGTERM/SIGINT on the master, inside a job, once the checkpoint of the state at

@@ -18,6 +18,7 @@ import json
 
 import numpy as np
 
+from hpcwedge.parallel.cancel import Continuation
 from hpcwedge.parallel.checkpoint import CheckpointError
 
 
@@ -32,7 +33,12 @@ class TaskJob:
     layout differs takes the saved one, with payloads_for(saved layout) as its
     payloads, so that the finished tasks stay valid (without payloads_for a
     differing layout is a CheckpointError). Results should then say which task they
-    answer: their order follows the adopted payloads."""
+    answer: their order follows the adopted payloads.
+
+    A task may return a `Continuation` (cancel.task_pausing): its payload replaces the
+    task's, the task stays open and is handed out next; the checkpoint keeps such payloads
+    (JSON, attribute "continued"), so a resumed run goes on from there. It is not a task
+    done (counters["tasks"] counts results; counters["continued"] the continuations)."""
 
     def __init__(self, name: str, handler, context, payloads: list, *, kind: str | None = None,
                  layout=None, payloads_for=None):
@@ -43,6 +49,7 @@ class TaskJob:
         self.results: list = [None] * len(self.payloads)
         self._todo = list(range(len(self.payloads)))[::-1]
         self.counters = {"tasks": 0}
+        self._continued: dict = {}       # index -> payload of a task continued, while open
 
     def pending(self) -> int:
         return len(self._todo)
@@ -58,6 +65,12 @@ class TaskJob:
         return k, self.payloads[k]
 
     def merge(self, token, result) -> None:
+        if isinstance(result, Continuation):
+            self.payloads[token] = self._continued[token] = result.payload
+            self._todo.append(token)
+            self.counters["continued"] = self.counters.get("continued", 0) + 1
+            return
+        self._continued.pop(token, None)
         self.results[token] = result
         self.counters["tasks"] += 1
 
@@ -75,8 +88,10 @@ class TaskJob:
                 arrs = [np.atleast_1d(np.asarray(v)) for v in vals]
                 data[key] = np.concatenate(arrs, axis=0)
                 data[key + "_offsets"] = np.cumsum([0] + [len(a) for a in arrs])
+        continued = {str(k): p for k, p in self._continued.items() if self.results[k] is None}
         return {"attrs": {"n_tasks": len(self.payloads), "result_keys": json.dumps(keys),
-                          "layout": json.dumps(self.layout)}, "data": data}
+                          "layout": json.dumps(self.layout), "continued": json.dumps(continued)},
+                "data": data}
 
     def load(self, state: dict) -> None:
         a, d = state["attrs"], state["data"]
@@ -101,6 +116,9 @@ class TaskJob:
                 else:
                     res[key] = d[key][row].item()
             self.results[k] = res
+        self._continued = {int(k): p for k, p in json.loads(a.get("continued", "{}")).items()}
+        for k, p in self._continued.items():
+            self.payloads[k] = p
         self._todo = [k for k in range(len(self.payloads)) if self.results[k] is None][::-1]
         self.counters["tasks"] = len(done)
 

@@ -53,14 +53,14 @@ def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_
         if tag == mpi.HELLO:
             master_pid = msg[1] if msg[0] == host else None
             continue
-        job_id, payload, fresh = msg
+        job_id, payload, fresh, pause_every_s = msg
         if fresh is not None:
             ctx_id, (kind, handler, ctx) = job_id, fresh
         try:
             if ctx_id != job_id:
                 raise RuntimeError(f"task of job {job_id} without its context")
             result = run_cancellable(handler, ctx, payload,
-                                     lambda: mpi.probe(comm, 0, mpi.STOP, status), tick_every_s)
+                                     lambda: mpi.probe(comm, 0, mpi.STOP, status), tick_every_s, pause_every_s)
         except TaskCancelled:
             comm.send(None, dest=0, tag=mpi.CANCELLED)     # the stop is read next
         except MemoryError:

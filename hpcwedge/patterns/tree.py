@@ -12,13 +12,13 @@ the subtree (never pruned on doubt); an undecided full pattern is reported in
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from hpcwedge.contact.problem import Parametrization, blocks
 from hpcwedge.nodesets import bits_to_mask, bits_to_nodes, to_bits
-from hpcwedge.parallel.cancel import task_stopping
+from hpcwedge.parallel.cancel import TaskCancelled, task_stopping
 from hpcwedge.patterns.symmetry import Symmetry
 from hpcwedge.results.record import TreeStats
 from hpcwedge.solvers.feasibility import TREE_OPTIONS, Decision, SolverOptions, decide
@@ -180,7 +180,7 @@ class PatternTree:
 
         Stops early, handing back the rest as open like a spent budget, when the
         engine asks (parallel.task_stopping: a SIGTERM, a master's stop; checked
-        between tree nodes, so within one solve).
+        between tree nodes, and inside a solve, which then hands its node back open).
 
         3D: the SOCP of a tree node minimises u_n of the node branched on next;
         its optimum lies on u_n = 0 when the contact child is feasible (the
@@ -199,25 +199,36 @@ class PatternTree:
                 stopped = True
                 break
             node, x = stack.pop()
-            stats.nodes += 1
-            doubt = no_contact = False
-            if x is None:
-                dec = self._solve(node, mu, stats)
-                if dec.status == Status.INFEASIBLE:
+            before = (replace(stats, statuses=dict(stats.statuses), extra=dict(stats.extra)),
+                      len(found), len(undecided), x)
+            try:
+                stats.nodes += 1
+                doubt = no_contact = False
+                if x is None:
+                    dec = self._solve(node, mu, stats)
+                    if dec.status == Status.INFEASIBLE:
+                        continue
+                    if dec.status == Status.UNDECIDED:
+                        stats.undecided += 1
+                        doubt = True
+                    x, no_contact = dec.x, dec.positive
+                else:
+                    stats.skipped += 1
+                if node.depth == self.m:
+                    self._leaf(node, x, doubt, mu, stats, found, undecided)
+                    if first_only:
+                        stack.clear()
+                        break
                     continue
-                if dec.status == Status.UNDECIDED:
-                    stats.undecided += 1
-                    doubt = True
-                x, no_contact = dec.x, dec.positive
-            else:
-                stats.skipped += 1
-            if node.depth == self.m:
-                self._leaf(node, x, doubt, mu, stats, found, undecided)
-                if first_only:
-                    stack.clear()
-                    break
-                continue
-            stack.extend(reversed(self._children(node, x, no_contact, mu, stats)))
+                stack.extend(reversed(self._children(node, x, no_contact, mu, stats)))
+            except TaskCancelled:
+                # a solve cut short by the stop (conic: Clarabel asks task_stopping every
+                # iteration): the node goes back open, as if not visited, so no count changes
+                stats, n_found, n_undecided, x = before
+                del found[n_found:], undecided[n_undecided:]
+                stack.append((node, x))
+                stopped = True
+                break
         stats.lps = stats.statuses.get("lp_calls", 0) + stats.statuses.get("screen_lps", 0)
         rest = stack[::-1]
         return Explored(found, [node for node, _ in rest], stats, undecided,

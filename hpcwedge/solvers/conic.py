@@ -32,6 +32,12 @@ verified either way; the enumeration at a given mu uses them. Near a mu^c the fe
 set thins out and long steps fail more: the global mu^c tree on plug3d 4 x 6 left 1 node
 undecided with them and 2 at 0.9999 (3 x 8: 0 and 2), none with 0.99, so the mu^c searches
 keep Clarabel's steps.
+
+Every solve is bounded: by TIME_LIMIT_S (Clarabel's time_limit; MaxTime is UNDECIDED, which
+every caller treats as deciding nothing) and, inside an engine task, by the engine's stop:
+Clarabel asks parallel.task_stopping() after every iteration (its termination callback),
+and a solve cut short so raises TaskCancelled, so that no caller reads an answer from it
+(a stop is served within one interior-point iteration: ~0.1 s at m = 128).
 """
 from __future__ import annotations
 
@@ -43,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from hpcwedge.parallel.cancel import task_scope
+from hpcwedge.parallel.cancel import TaskCancelled, task_scope, task_stopping
 from hpcwedge.solvers.rows import Status
 
 #: the attempts of the ladder (module doc), and the one that seeks the least-norm point
@@ -51,6 +57,11 @@ ATTEMPTS = 4
 LEAST_NORM_ATTEMPT = 1
 #: max_step_fraction of a long-step first attempt (Clarabel's default: 0.99; module doc)
 LONG_STEP = 0.999
+#: Clarabel's time_limit on every solve (seconds). The slowest attempt measured on the
+#: largest SOCP tested (plug3d 8 x 16, m = 128; patterns of 70 % contact and all contact,
+#: mu 0.1763 / 0.5 / 2, plain and tight) took 2.8 s (the least-norm attempt; 5.6 s once on
+#: the shared 2-core machine): the limit is ~10x that, so no answer at a tested size changes
+TIME_LIMIT_S = 30.0
 
 
 @functools.lru_cache(maxsize=32)
@@ -70,6 +81,7 @@ def settings(attempt: int, tight: bool = False, feasibility: bool = False, long_
     # no b here is infinite, so presolve would remove no row; off, a kept solver takes data
     # updates (_KeptSolvers)
     s.presolve_enable = False
+    s.time_limit = TIME_LIMIT_S
     if attempt < 3:
         s.equilibrate_enable = False
     if attempt == 0 and feasibility:
@@ -147,7 +159,8 @@ class Solution:
 def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = False) -> Solution:
     """One Clarabel solve of `problem` with the settings of `attempt` (long_steps: see
     `settings`): on a kept solver of the same structure when there is one (`_KeptSolvers`),
-    else on a new one."""
+    else on a new one. Raises TaskCancelled when the engine stops the task mid-solve
+    (module doc)."""
     import clarabel
     n = problem.A.shape[1]
     identity = problem.q is None and attempt == LEAST_NORM_ATTEMPT
@@ -163,6 +176,7 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
         else:
             solver.update(A=data, b=_floats(problem.b), q=_floats(problem.q))
         sol = Solution(solver.solve())
+        _raise_if_stopped(sol)
         if sol.status == Status.UNDECIDED:
             # a solve that fails on its first step restores Clarabel's "previous iterate",
             # which on a kept solver is the last problem's: again on a new solver
@@ -176,10 +190,25 @@ def solve(problem: ConicProblem, attempt: int, tight: bool, long_steps: bool = F
         cones += [clarabel.SecondOrderConeT(3) for _ in range(problem.n_soc)]
         q = np.zeros(n) if problem.q is None else problem.q
         solver = clarabel.DefaultSolver(_csc_square(n, identity), q, A, problem.b, cones, opts)
+        solver.set_termination_callback(_stopping)
         sol = Solution(solver.solve())
+        _raise_if_stopped(sol)
     if sol.status != Status.UNDECIDED:
         _KEPT.keep(key, solver, entries)
     return sol
+
+
+def _stopping(info) -> bool:
+    """Clarabel's termination callback (after every iteration): the engine is stopping."""
+    return task_stopping()
+
+
+def _raise_if_stopped(sol: Solution) -> None:
+    """TaskCancelled for a solve that decided nothing while the engine stops the task (the
+    callback ended it, or it failed as the stop came: task_stopping stays True, so either
+    way no caller reads it)."""
+    if sol.status == Status.UNDECIDED and task_stopping():
+        raise TaskCancelled()
 
 
 class _KeptSolvers(threading.local):

@@ -53,3 +53,19 @@ def test_task_scopes_wrap_every_task(monkeypatch):
     with pytest.raises(cancel.TaskCancelled):
         cancel.run_cancellable(lambda ctx, p: cancel.task_tick(), None, None, lambda: True, tick_every_s=0.0)
     assert seen[3:] == ["in", "out"]
+def test_task_pausing_after_its_period_or_at_a_stop():
+    """task_pausing(): False outside a task and before pause_every_s; True once that has
+    passed (the engine saying go on), and at once when the engine stops."""
+    import time
+
+    def paused_after(ctx, payload):
+        t0 = time.monotonic()
+        assert cancel.task_pausing() is False
+        while not cancel.task_pausing():
+            time.sleep(0.001)
+        return time.monotonic() - t0
+
+    assert cancel.task_pausing() is False
+    assert 0.05 <= cancel.run_cancellable(paused_after, None, None, lambda: False, 0.0, pause_every_s=0.05) < 1.0
+    assert cancel.run_cancellable(lambda ctx, p: cancel.task_pausing(), None, None, lambda: True, 0.0) is True
+    assert cancel.task_pausing() is False

@@ -1,10 +1,19 @@
 """Jobs and their checkpoint state (hpcwedge/parallel/jobs.py; tests/test_jobs.py is about the
 batch scripts in jobs/): a job saved with tasks in flight and loaded afresh finishes with
 the answers of one pass."""
+import json
+import os
+import signal
+import time
+
 import numpy as np
+import pytest
 from instances import tree_factory
 
-from hpcwedge.parallel.engine import Engine
+from hpcwedge.errors import Interrupted
+from hpcwedge.parallel import cancel
+from hpcwedge.parallel.checkpoint import read_checkpoint
+from hpcwedge.parallel.engine import Engine, run_tasks
 from hpcwedge.parallel.jobs import TaskJob, TreeJob
 from hpcwedge.patterns.job import SubtreeJob, run_patterns
 
@@ -115,3 +124,88 @@ def test_tree_job_finds_every_leaf_for_any_budget_and_resumes_mid_way():
     out = Engine().run(again)
     assert [sorted(f) for f in out.found] == [leaves, leaves]
     assert all(sorted(f) == [x for x in leaves if sum(x) % 2] for f in out.flagged)
+
+
+# ---------------------------------------------------------------- continuations
+
+STEPS = 30
+
+
+def _long_sum(ctx, payload):
+    """A long task: sum of (k + 1)^2 over k < STEPS, one step at a time (each a few ms); when
+    task_pausing() says so it hands back its state as a Continuation. ctx["starts"] records
+    the step each run of the task started from (the context is shared in-process)."""
+    state = payload if isinstance(payload, dict) else {"k": 0, "acc": 0}
+    ctx["starts"].append((state["k"], os.getpid()))
+    k, acc = state["k"], state["acc"]
+    while k < STEPS:
+        if k > state["k"] and cancel.task_pausing():
+            return cancel.Continuation({"k": k, "acc": acc})
+        time.sleep(0.004)
+        if ctx.get("kill_at") == k and len(ctx["starts"]) > 2:
+            os.kill(os.getpid(), signal.SIGTERM)
+        acc += (k + 1) ** 2
+        k += 1
+    return {"sum": acc}
+
+
+def _sums(n: int) -> list:
+    """The answers of _long_sum for n tasks, from the closed form (not the loop)."""
+    return [STEPS * (STEPS + 1) * (2 * STEPS + 1) // 6] * n
+
+
+def test_task_job_keeps_a_continuation_in_its_checkpoint_state():
+    """A continued task stays open with the new payload, is handed out next, is saved (JSON)
+    and loaded by a fresh job; results and the task count are those of one pass."""
+    job = TaskJob("t", _task, None, [None, None, None])
+    k, _ = job.take(1)
+    job.merge(k, cancel.Continuation({"k": 4, "acc": 30}))
+    assert job.pending() == 3 and job.take(1) == (k, {"k": 4, "acc": 30})
+    again = TaskJob("t", _task, None, [None, None, None])
+    again.load(job.save([k]))
+    assert again.pending() == 3 and again.payloads[k] == {"k": 4, "acc": 30}
+    assert [again.take(1)[0] for _ in range(3)] == [0, 1, 2]
+    again.merge(k, {"sum": 1})
+    assert again.counters["tasks"] == 1 and json.loads(again.save([])["attrs"]["continued"]) == {}
+
+
+def test_long_tasks_pause_for_the_timer_checkpoint_and_resume_after_a_sigterm(tmp_path):
+    """In-process engine, checkpoint every 0.03 s: each long task pauses several times (the
+    timer checkpoint holds its state, a continued payload), the answers are the closed
+    form's. A SIGTERM in the middle of a task continued before: Interrupted, the stop
+    checkpoint holds the continuation, and a resumed engine starts that task from it and
+    ends with the same answers."""
+    ctx = {"starts": []}
+    eng = Engine()
+    eng.use_checkpoint(str(tmp_path / "a.ckpt"), "hash", "scene", 0.03, resume=False)
+    try:
+        got = [r["sum"] for r in run_tasks(_long_sum, ctx, [None, None], engine=eng, kind="sums")]
+    finally:
+        eng.close()
+    assert got == _sums(2)
+    assert eng.checkpoints_written >= 2 and eng.summary()["jobs"]["sums"]["tasks"] == 2
+    assert 0 < eng.summary()["jobs"]["sums"]["continued"] == len(ctx["starts"]) - 2
+
+    ckpt = str(tmp_path / "b.ckpt")
+    ctx = {"starts": [], "kill_at": STEPS - 5}
+    eng = Engine(tick_every_s=0.0)            # the stop seen at the next look
+    eng.use_checkpoint(ckpt, "hash", "scene", 0.03, resume=False)
+    eng.install_signals()
+    try:
+        with pytest.raises(Interrupted):
+            run_tasks(_long_sum, ctx, [None, None], engine=eng, kind="sums")
+        assert eng.write_checkpoint("SIGTERM")
+    finally:
+        eng.close()
+    continued = json.loads(read_checkpoint(ckpt)["jobs"]["sums"]["attrs"]["continued"])
+    (state,) = continued.values()                            # the task that ran at the stop
+    stopped_at = state["k"]
+    assert STEPS - 4 <= stopped_at < STEPS                  # paused within a tick of the stop
+    ctx = {"starts": []}
+    eng = Engine()
+    assert eng.use_checkpoint(ckpt, "hash", "scene", 0.03, resume=True)
+    try:
+        got = [r["sum"] for r in run_tasks(_long_sum, ctx, [None, None], engine=eng, kind="sums")]
+    finally:
+        eng.close()
+    assert got == _sums(2) and ctx["starts"][0][0] == stopped_at

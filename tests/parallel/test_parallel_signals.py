@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import shutil
 import signal
 import time
 
@@ -316,3 +317,91 @@ def test_kill9_inside_the_global_search_then_resume(tmp_path, global_plain):
     got = show_json(out)
     assert got["stats"]["parallel"]["resumes"] >= 1 and not os.path.exists(ckpt)
     assert same_part(got) == same_part(want)
+
+
+def bracket_in_checkpoint(ckpt: str) -> tuple[int, dict] | None:
+    """(tasks done, continued payloads) of the global bracket job in the checkpoint; None
+    when there is none to read (not written yet, or being replaced)."""
+    try:
+        job = read_checkpoint(ckpt)["jobs"].get("global_bracket")
+    except Exception:                            # not written yet, or being replaced
+        return None
+    if job is None:
+        return None
+    return json.loads(job["attrs"]["counters"])["tasks"], json.loads(job["attrs"].get("continued", "{}"))
+
+
+def test_the_bracket_task_is_checkpointed_while_it_runs_and_resumes_after_kill9(tmp_path):
+    """The global bracket is one long task: with checkpoint_every_s = 0.02 the timer
+    checkpoint is written again and again while it runs, and the bracket pauses between its
+    steps (a Continuation) so that a checkpoint holds its progress (its best value so far and
+    the next bound). kill -9 with that checkpoint on disk (a copy taken as it is seen: the
+    bracket's last step is short), then --resume: the run ends with the plain run's answers
+    and stats, the bracket resumed from its continuation."""
+    scene = tmp_path / "global.toml"
+    scene.write_text(GLOBAL.replace("checkpoint_every_s = 0.3", "checkpoint_every_s = 0.02"))
+    scene = str(scene)
+    run(None, "run", scene, "-o", str(tmp_path / "plain.h5"), "-q")
+    want = show_json(str(tmp_path / "plain.h5"))
+    out = str(tmp_path / "r.h5")
+    ckpt = out + ".ckpt"
+    p = launch(None, "run", scene, "-o", out, "-q")
+    snaps, held, last = [], None, None
+    end = time.monotonic() + 120
+    while held is None and time.monotonic() < end and p.poll() is None:
+        try:
+            mtime = os.stat(ckpt).st_mtime
+        except FileNotFoundError:
+            mtime = None
+        if mtime is not None and mtime != last:
+            last = mtime
+            snaps.append(f"{ckpt}.{len(snaps)}")
+            shutil.copy(ckpt, snaps[-1])     # each version, as the run replaces it (atomically)
+            got = bracket_in_checkpoint(snaps[-1])
+            if got is not None and got[0] == 0 and got[1] and got[1]["0"]["best"] is not None:
+                held = got[1]["0"]
+                shutil.copy(snaps[-1], ckpt + ".kept")
+        time.sleep(0.005)
+    p.kill()
+    p.wait(timeout=60)
+    p.stdout.close()
+    p.stderr.close()
+    assert held is not None, "no checkpoint held the bracket with a value"
+    running = [s for s in snaps if (bracket_in_checkpoint(s) or (1,))[0] == 0]
+    assert len(running) >= 2                                  # checkpoints while the bracket ran
+    os.replace(ckpt + ".kept", ckpt)
+    assert held["best"] * (1 - 1e-2) == held["bound"] and want["mu_c"] <= held["best"]
+    run(None, "run", scene, "-o", out, "-q", "--resume")
+    got = show_json(out)
+    assert got["stats"]["parallel"]["resumes"] == 1 and not os.path.exists(ckpt)
+    assert same_part(got) == same_part(want)
+
+
+#: plug3d 6 x 8 (m = 48) without its symmetry, the global mu^c: a bracket of ~20 s whose
+#: first dive (r_t free) and steps are single Clarabel-bound tree dives of seconds
+GLOBAL_48 = GLOBAL.replace("levels = 3", "levels = 6").replace("mu = [1.0]", "mu = [0.1]")
+
+
+def test_sigterm_inside_a_long_bracket_at_m48_is_served_at_once(tmp_path):
+    """SIGTERM while the global bracket of plug3d 6 x 8 (m = 48) runs its tree dives (Clarabel
+    solves that ask task_stopping every iteration): the checkpoint is written and the
+    run says so within 2 s of the signal, and it exits 75 (the rest of the exit is the
+    interpreter's teardown, ~1-2 s on the shared 2-core machine); the checkpoint holds the
+    bracket job."""
+    scene = tmp_path / "g48.toml"
+    scene.write_text(GLOBAL_48)
+    out = str(tmp_path / "r.h5")
+    p = launch(None, "run", str(scene), "-o", out, "-q")
+    end = time.monotonic() + 180
+    while (bracket_in_checkpoint(out + ".ckpt") or (1,))[0] != 0:   # a checkpoint: the bracket runs
+        assert p.poll() is None and time.monotonic() < end, p.communicate()
+        time.sleep(0.05)
+    t = time.monotonic()
+    p.send_signal(signal.SIGTERM)
+    line = p.stderr.readline()
+    said = time.monotonic() - t
+    assert p.wait(timeout=60) == 75, line + p.stderr.read()
+    gone = time.monotonic() - t
+    assert "checkpoint written" in line and said < 2.0, (line, said)
+    assert gone < 6.0, gone
+    assert bracket_in_checkpoint(out + ".ckpt") is not None

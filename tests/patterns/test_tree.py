@@ -268,3 +268,30 @@ def _global_of(data: dict) -> float:
     res = run_scene(parse_scene(scene))
     assert res.stats["bnb"]["unsettled"] == 0
     return res.mu_c
+def test_a_stop_inside_a_solve_hands_the_node_back_uncounted():
+    """plug3d 2 x 5 (m = 10) at mu = 1: the engine stops the exploration after k looks at
+    task_stopping (between nodes, or inside a Clarabel solve, which then raises
+    TaskCancelled); the stopped exploration followed by its open subtrees finds the
+    patterns of one pass and counts its nodes and solves exactly, for every k (some of
+    which fall inside solves: more looks than nodes visited)."""
+    from instances import plug3d_param
+
+    from hpcwedge.parallel.cancel import run_cancellable
+    param, m = plug3d_param(2, 5)
+    tree = PatternTree(param, m, 1.0)
+    ref = tree.explore(Subtree(0))
+    inside = 0
+    for k in (3, 10, 25, 60, 150):
+        looks = []
+        first = run_cancellable(lambda ctx, p: tree.explore(Subtree(0)), None, None,
+                                lambda: looks.append(1) or len(looks) > k, tick_every_s=0.0)
+        assert first.stopped
+        inside += len(looks) > first.stats.nodes + 2
+        found, nodes, solves = list(first.found), first.stats.nodes, first.stats.solves
+        for node, x in zip(first.open, first.open_x):
+            rest = tree.explore(node, x=x)
+            found += rest.found
+            nodes, solves = nodes + rest.stats.nodes, solves + rest.stats.solves
+        assert sorted(s.contact for s in found) == sorted(s.contact for s in ref.found)
+        assert (nodes, solves) == (ref.stats.nodes, ref.stats.solves)
+    assert inside > 0

@@ -163,3 +163,29 @@ def test_a_task_starts_without_kept_solvers_and_gives_them_back():
     inside = run_cancellable(task, None, None, lambda: False)
     assert inside and not inside & set(outer)
     assert conic._KEPT._solvers == outer
+def test_a_solve_is_bounded_in_time_and_stops_with_its_task():
+    """Every attempt carries Clarabel's time limit; inside a task the engine stops, a solve
+    raises TaskCancelled within an interior-point iteration or two (Clarabel's termination
+    callback asks task_stopping), on a new solver and on a kept one, where outside a task
+    the same problem is decided. plug3d 4 x 8 (m = 32), every node in contact."""
+    import time
+
+    import pytest
+
+    from hpcwedge.parallel.cancel import TaskCancelled, run_cancellable
+    from hpcwedge.solvers.conic import TIME_LIMIT_S, solve
+    assert all(settings(k, t, f).time_limit == TIME_LIMIT_S for k in range(4) for t in (False, True) for f in (False, True))
+    p, m = plug3d_param(4, 8)
+    problem = pattern_socp(pattern_rows(p, m, np.ones(m, bool), np.zeros(m, bool)), 0.5)
+    asked = []
+
+    def check():
+        asked.append(time.monotonic())
+        return len(asked) > 2                   # go on for two iterations, then stop
+
+    for _ in range(2):                          # a new solver, then the kept one
+        with pytest.raises(TaskCancelled):
+            run_cancellable(lambda ctx, pb: solve(pb, 1, False), None, problem, check, tick_every_s=0.0)
+        assert len(asked) == 3
+        asked.clear()
+    assert solve(problem, 1, False).status != Status.UNDECIDED
