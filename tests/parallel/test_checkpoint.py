@@ -208,8 +208,9 @@ def test_sigterm_to_mpirun(tmp_path):
     """SIGTERM to mpirun: it sends SIGCONT to every rank, SIGTERM 1 s later and
     SIGKILL ~1 s after that; the master writes its checkpoint in that grace.
     (A scene with four mu values, so that the run cannot end within the second
-    mpirun waits, and plug2d rows 8 (m = 16: about 10 s of work serially; rows 5 ended before the signal once the 2D LPs were kept warm); a run that
-    ends first anyway is simply started again.)"""
+    mpirun waits, and plug2d rows 8 (m = 16: about 10 s of work serially; rows 5 ended
+    before the signal once the 2D LPs were kept warm); a run that ends first anyway is
+    simply started again.)"""
     text = (scene_text(raw=False).replace("mu = [0.65, 1.0]", "mu = [0.65, 1.0, 2.0, 4.0]")
             .replace("rows = 4", "rows = 8"))
     scene = write_scene(tmp_path, text=text)
