@@ -75,7 +75,7 @@ def builtin_scene(kind: str, *, mu: float | Sequence[float] = DEFAULT_MU, name: 
     (2, {'rows': 3}, (0.3, 0.65), 'global')
     >>> builtin_scene("plug2d", row=3)
     Traceback (most recent call last):
-    hpcwedge.scene.values.SceneError: model.row: unknown parameter of plug2d (allowed: rows, cols, taper_deg)
+    hpcwedge.scene.values.SceneError: model.row: unknown parameter of plug2d; did you mean `rows`? (allowed: rows, cols, taper_deg)
     """
     return Scene.builtin(kind, mu=mu, name=name, **params)
 

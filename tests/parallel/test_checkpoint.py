@@ -659,6 +659,8 @@ def test_checkpoint_write_on_a_full_disk_keeps_the_last_and_goes_on(tmp_path, sm
         if not running:                             # ended (the result write failed) before the test looked
             continue
         lines = open(errors).read().splitlines()
+        if code == 2 and lines and "cannot write the result (No space left on device)" in lines[-1]:
+            continue                                # ended between the test's look and its freeing the disk
         assert code == 0 and lines and all(line.startswith(warning) for line in lines), lines
         assert answers(show_json(out)) == dict(reference, scene_hash=show_json(out)["scene_hash"])
         assert not os.path.exists(ckpt)

@@ -96,7 +96,7 @@ sys.exit(cli.main())
 def test_sigterm_inside_a_long_milp_exits_75_within_2_s_with_a_checkpoint(tmp_path):
     """`hpcwedge run` (global mu^c, plug2d rows 40, m = 80, the MILP route without its dive)
     gets SIGTERM 1 s into its MILP at mu_max = 100 (a 46 s HiGHS call on its own): exit 75
-    with the checkpoint written, within 1 s of the process's CPU time after the signal and
+    with the checkpoint written, within 2 s of the process's CPU time after the signal and
     2 s of wall time (times the machine's load per core, when it is shared beyond its cores).
     Before: the signal waited for the MILP's end (13 s even with only the simplex polled)."""
     import signal
@@ -133,6 +133,6 @@ def test_sigterm_inside_a_long_milp_exits_75_within_2_s_with_a_checkpoint(tmp_pa
     cpu = usage.ru_utime + usage.ru_stime - cpu
     load = max(1.0, os.getloadavg()[0] / os.cpu_count())
     rest = p.stderr.read()
-    assert p.returncode == 75 and cpu < 1.0 and took < 2.0 * load, (p.returncode, cpu, took, load, rest)
+    assert p.returncode == 75 and cpu < 2.0 and took < 2.0 * load, (p.returncode, cpu, took, load, rest)
     with h5py.File(checkpoint_path(out), "r") as f:
         assert f.attrs["reason"] == "SIGTERM"
