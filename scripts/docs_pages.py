@@ -503,6 +503,178 @@ def faults() -> str:
         f"\n\n{d['cases']} cases in {d['seconds']:.0f} s (`{d['command']}`)."
 
 
+# ---- tables that must survive a missing file or column (results other helpers extend) -------
+
+def _records(name: str, key: str = "records") -> list[dict] | None:
+    """The rows under `key` of results/NAME; None when this checkout has no such file."""
+    if not os.path.exists(os.path.join(ROOT, "results", name)):
+        return None
+    return _load(name).get(key) or []
+
+
+def not_measured(*names: str) -> str:
+    """The one-cell table that stands for a result not in this checkout."""
+    return table(["result"], [["not measured: no " + ", ".join(f"`results/{n}`" for n in names) + " in this checkout"]])
+
+
+def _g(r: dict, key: str, digits: int = 3) -> str:
+    """A row's value as a cell: "–" when the column is missing or empty."""
+    v = r.get(key)
+    if v is None or v == "":
+        return "–"
+    return _s(v, digits) if isinstance(v, float) and v >= 0 else v if isinstance(v, str) else _num(v, digits)
+
+
+def _seconds_or_status(r: dict, key: str = "seconds") -> str:
+    """Seconds of a finished row; "> N (cut)" for one cut at its limit; else its status."""
+    status, v = r.get("status", "ok"), r.get(key)
+    if status == "timeout":
+        return f"> {v:g} (cut)" if isinstance(v, (int, float)) else "cut"
+    if v is None or status not in ("ok", "found", "optimal"):
+        return str(status)
+    return _s(v)
+
+
+def _fixed(r: dict, key: str, places: int, sign: str = "") -> str:
+    """A row's fraction to `places` decimals ("+" shows the sign); "–" when missing."""
+    v = r.get(key)
+    return "–" if v is None else f"{v:{sign}.{places}f}"
+
+
+def _error(r: dict, key: str = "rel_error") -> str:
+    v = r.get(key)
+    return "–" if v is None else f"{v:.1e}"
+
+
+def bench_global_scale() -> str:
+    """results/bench_global_scale.json: the global mu^c of issue 41's meshed-body targets through
+    `hpcwedge run` (scripts/bench_global_scale.py), ours and any peer rows ("engine"/"peer"),
+    against tan 10 deg; a row cut at the limit shows "> limit (cut)"."""
+    recs = _records("bench_global_scale.json")
+    if recs is None:
+        return not_measured("bench_global_scale.json")
+    rows = []
+    for r in recs:
+        target = r.get("target_seconds")
+        met = r.get("target_met")
+        goal = "–" if target is None else f"≤ {target:g}" + ("" if met is None else " (met)" if met else " (**missed**)")
+        bound = "–" if r.get("bound_solves") is None else \
+            f"{r['bound_solves']:,} / {'yes' if r.get('bound_certified') else 'no'}"
+        rows.append([r.get("case", "–"), r.get("engine") or r.get("peer") or "ours", _g(r, "m"),
+                     _seconds_or_status(r), goal, _error(r), _g(r, "route"),
+                     _g(r, "nodes") if r.get("nodes") is not None else _g(r, "milp_nodes"),
+                     f"{_g(r, 'solves')} / {_g(r, 'lps')}", _g(r, "milp_solves"), bound, _g(r, "undecided")])
+    return table(["case", "engine", "m", "seconds", "target s", "mu^c error", "route", "nodes",
+                  "solves (SOCPs 3D, LPs 2D) / pyramid LPs", "MILPs", "bound solves / certified", "undecided"], rows)
+
+
+def bench_near_critical() -> str:
+    """results/bench_near_critical.json: the 3D tree near the critical mu (scripts/bench_near_critical.py),
+    one row per record, grouped by search and body, "before" above "after"."""
+    recs = _records("bench_near_critical.json")
+    if recs is None:
+        return not_measured("bench_near_critical.json")
+    order = {"before": 0, "after": 1}
+    key = lambda r: (r.get("task", ""), r.get("body", ""), r.get("m") or 0, order.get(r.get("label"), 2))  # noqa: E731
+    rows = []
+    for r in sorted(recs, key=key):
+        answer = ("–" if r.get("status") != "ok" else f"mu^c {r['mu_c']:.12g}" if r.get("mu_c") is not None
+                  else f"{r['patterns']:,} pattern" + "s" * (r["patterns"] != 1) if r.get("patterns") is not None else "–")
+        if r.get("certified") is not None:
+            answer += ", certified" if r["certified"] else ", not certified"
+        if r.get("finished") is False:
+            answer += " (probe: not finished)"
+        mu = r.get("mu")
+        rows.append([r.get("label", "–"), r.get("task", "–"), r.get("body", "–"),
+                     f"{r.get('levels', '?')} × {r.get('ring', '?')}", _g(r, "m"), "global" if mu is None else f"{mu:.6g}",
+                     _seconds_or_status(r, "wall"), _g(r, "seconds"), _g(r, "nodes"), _g(r, "socps"), _g(r, "lps"),
+                     _g(r, "undecided"), answer])
+    return table(["run", "search", "body", "levels × ring", "m", "mu", "wall s", "CPU s", "nodes", "SOCPs", "LPs",
+                  "undecided", "answer"], rows)
+
+
+#: the files of bench_highs_lp's table and how each is labelled
+HIGHS_LP_FILES = (("bench_highs_lp_before.json", "before"), ("bench_highs_lp_final.json", "after"),
+                  ("bench_highs_lp.json", "earlier state of the change"))
+
+
+def bench_highs_lp() -> str:
+    """results/bench_highs_lp{_before,_final,}.json: the 2D tree's LPs through highspy kept warm
+    (scripts/bench_highs_lp.py): per body and file the wall and CPU seconds, tree nodes, LPs
+    and the mu^c error."""
+    got = [(label, _records(name)) for name, label in HIGHS_LP_FILES]
+    if all(recs is None for _, recs in got):
+        return not_measured(*(n for n, _ in HIGHS_LP_FILES))
+    rows = []
+    for label, recs in got:
+        for r in recs or []:
+            rows.append([r.get("model", "–"), _g(r, "rows"), _g(r, "m"), label, _seconds_or_status(r, "wall"),
+                         _g(r, "cpu_with_setup"), _g(r, "route"), _g(r, "tree_nodes"), _g(r, "lps"),
+                         _error(r, "error")])
+    rows.sort(key=lambda c: (c[0], int(c[1].replace(",", "")) if c[1] != "–" else 0))
+    missing = [n for (n, _), (_, recs) in zip(HIGHS_LP_FILES, got) if recs is None]
+    note = f"\n\nNot measured: {', '.join(missing)}." if missing else ""
+    return table(["body", "rows", "m", "run", "wall s", "CPU s", "route", "tree nodes", "LPs", "mu^c error"],
+                 rows) + note
+
+
+def bench_matrix() -> str:
+    """results/bench_matrix.json: a stiffness in PETSc binary against the built-in body, condensed
+    under mpirun (scripts/bench_matrix.py): per route the seconds, peak memory per rank and how
+    often a rank loaded the whole matrix."""
+    if _records("bench_matrix.json", "rows") is None:
+        return not_measured("bench_matrix.json")
+    d = _load("bench_matrix.json")
+    rows = [[r.get("route", "–"), _g(r, "ranks"), _g(r, "n_dofs"), _g(r, "build_s"), _g(r, "condense_s"),
+             _g(r, "wall_s"), ", ".join(f"{v:,.0f}" for v in r.get("maxrss_mb_per_rank") or []) or "–",
+             ", ".join(str(v) for v in r.get("whole_loads_per_rank") or []) or "–"] for r in d.get("rows") or []]
+    body, diff = d.get("body") or {}, d.get("rel_diff_matrix_vs_builtin")
+    about = (f"\n\n{d.get('model', 'the body')}: {_g(body, 'nnz')} stored entries, {_g(body, 'file_mb')} MB; "
+             f"condensed K, matrix against built-in: {'–' if diff is None else f'{diff:.1e}'} relative.")
+    return table(["route", "ranks", "DOFs", "model build s", "condense s", "wall s", "peak RSS per rank (MB)",
+                  "whole matrix loaded (per rank)"], rows) + about
+
+
+def bench_scale() -> str:
+    """results/bench_scale.json: the engine's master loop at 3-65 ranks on sleeping tasks, measured,
+    and its discrete-event model beyond (scripts/bench_scale.py)."""
+    measured = _records("bench_scale.json", "measured")
+    if measured is None:
+        return not_measured("bench_scale.json")
+    rows = [[_g(r, "ranks"), r.get("workload", "–"), _g(r, "tasks"), _g(r, "tasks_per_s"), _fixed(r, "master_busy", 2),
+             _fixed(r, "efficiency", 3), _fixed(r, "model_error", 3, "+")] for r in measured]
+    out = table(["ranks", "workload", "tasks", "tasks/s", "master busy", "efficiency", "model − measured"], rows)
+    modelled = _records("bench_scale.json", "modelled") or []
+    rows = [[_g(r, "ranks"), r.get("workload", "–"), _g(r, "worker_seconds", 4), _fixed(r, "efficiency", 3),
+             _fixed(r, "master_busy", 2)] for r in modelled]
+    return out + "\n\nModelled:\n\n" + table(["ranks", "workload", "worker-seconds", "efficiency", "master busy"], rows)
+
+
+#: the serial 3D tables of scripts/bench_3d.py (plug3d levels x ring)
+BENCH_3D_FILES = (("bench_3d_2x5.json", "2 × 5"), ("bench_3d_3x4.json", "3 × 4"), ("bench_3d_3x5.json", "3 × 5"))
+
+
+def bench_3d() -> str:
+    """results/bench_3d_*.json: per body the patterns and SOCPs of the tree at each mu (against
+    the brute force's 2^m SOCPs), every pattern's mu^c at mu = 1, and the global mu^c."""
+    rows = []
+    for name, size in BENCH_3D_FILES:
+        if _records(name, "runs") is None:
+            rows.append([size] + ["not measured"] + ["–"] * 5)
+            continue
+        d = _load(name)
+        runs, mp, gl = d.get("runs") or [], d.get("mu_c_patterns") or {}, d.get("global") or {}
+        per_mu = ", ".join(f"{r['mu']:g}: {r['patterns']:,} / {r['solves']:,}" for r in runs)
+        brute = _equal([r.get("brute_equal") for r in runs])
+        pat = "–" if not mp else (f"{mp.get('n', 0):,} patterns, {mp.get('polished', 0):,} polished, "
+                                  f"{mp.get('solves', 0):,} solves, {_s(mp.get('seconds'))} s")
+        glob = "–" if not gl else f"{_error(gl)} off tan(taper), {_s(gl.get('seconds'))} s, {_g(gl, 'solves')} solves"
+        rows.append([size, _g(d, "m"), per_mu, f"{sum(r.get('bnb_seconds', 0) for r in runs):.2f} / "
+                     f"{sum(r.get('brute_seconds', 0) for r in runs):.1f}", brute, pat, glob])
+    return table(["plug3d", "m", "mu: patterns / SOCPs", "B&B / brute force s (all mu)", "= brute force",
+                  "mu^c of every pattern at mu = 1", "global mu^c"], rows)
+
+
 #: benchmark name -> (function rendering its Markdown table from results/*.json, the files,
 #: the command that writes them: `make bench` runs each)
 BENCHMARKS: dict = {
@@ -532,6 +704,16 @@ BENCHMARKS: dict = {
     "stress_3d": (stress_3d, "results/stress_3d.json, results/stress_3d_before.json",
                   "PYTHONPATH=. .venv/bin/python scripts/stress_3d.py"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
+    "bench_global_scale": (bench_global_scale, "results/bench_global_scale.json",
+                           ".venv/bin/python scripts/bench_global_scale.py [--limit 300]"),
+    "bench_near_critical": (bench_near_critical, "results/bench_near_critical.json",
+                            ".venv/bin/python scripts/bench_near_critical.py"),
+    "bench_highs_lp": (bench_highs_lp, ", ".join(f"results/{f}" for f, _ in HIGHS_LP_FILES),
+                       ".venv/bin/python scripts/bench_highs_lp.py [--checkout DIR --out results/bench_highs_lp_before]"),
+    "bench_matrix": (bench_matrix, "results/bench_matrix.json", ".venv/bin/python scripts/bench_matrix.py"),
+    "bench_3d": (bench_3d, ", ".join(f"results/{f}" for f, _ in BENCH_3D_FILES),
+                 "PYTHONPATH=. .venv/bin/python scripts/bench_3d.py [--levels 3 --ring 4]"),
+    "bench_scale": (bench_scale, "results/bench_scale.json", "PYTHONPATH=. .venv/bin/python scripts/bench_scale.py --quick"),
 }
 
 
