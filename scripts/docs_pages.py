@@ -491,16 +491,24 @@ def examples() -> str:
 
 
 def faults() -> str:
-    """results/faults.json: the fault campaign's verdicts per category (scripts/fault_campaign.py);
-    a note instead of a table while no campaign result is committed."""
+    """results/faults.json: the fault campaign's verdicts per category (scripts/fault_campaign.py)
+    and every failed case as the campaign recorded it; a note instead of a table while no
+    campaign result is committed."""
     if not os.path.exists(os.path.join(ROOT, "results", "faults.json")):
         return "| campaign |\n|---|\n| no `results/faults.json` in this checkout yet: run the command below |"
     d = _load("faults.json")
     cats = d["by_category"]
     rows = [[c, str(v["pass"]), str(v["FAIL"]), str(v["skip"])] for c, v in cats.items()]
     rows.append(["**all**", *(f"**{sum(v[k] for v in cats.values())}**" for k in ("pass", "FAIL", "skip"))])
-    return table(["category", "pass", "fail", "skipped"], rows) + \
+    failed = [r for r in d.get("rows") or [] if r.get("verdict") == "FAIL"]
+    out = table(["category", "pass", "fail", "skipped"], rows) + \
         f"\n\n{d['cases']} cases in {d['seconds']:.0f} s (`{d['command']}`)."
+    if failed:
+        out += "\n\nFailed in this run:\n\n" + table(
+            ["case", "category", "expected", "observed", "seconds"],
+            [[r.get("case", "–"), r.get("category", "–"), r.get("expected", "–"),
+              str(r.get("observed", "–")).replace("|", "\\|"), _g(r, "seconds")] for r in failed])
+    return out
 
 
 # ---- tables that must survive a missing file or column (results other helpers extend) -------

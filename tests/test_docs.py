@@ -222,6 +222,13 @@ def test_faults_table_from_a_campaign_file(tmp_path, monkeypatch):
     out = docs_pages.faults()
     assert "| scene | 2 | 0 | 0 |" in out and "| signal | 0 | 1 | 0 |" in out
     assert "| **all** | **2** | **1** | **0** |" in out and "3 cases in 12 s" in out
+    assert "Failed in this run" not in out
+    doc["rows"] = [{"case": "SIGUSR1", "category": "signal", "expected": "exit 0", "observed": "exit 1 | x",
+                    "verdict": "FAIL", "seconds": 2.5}, {"case": "ok", "verdict": "pass"}]
+    (tmp_path / "results" / "faults.json").write_text(__import__("json").dumps(doc))
+    out = docs_pages.faults()
+    assert out.endswith("Failed in this run:\n\n| case | category | expected | observed | seconds |\n|---|---|---|---|---|\n"
+                        "| SIGUSR1 | signal | exit 0 | exit 1 \\| x | 2.5 |")
 
 
 #: the tables that must render while their results are missing or have fewer columns
