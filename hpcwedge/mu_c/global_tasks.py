@@ -33,8 +33,11 @@ from hpcwedge.patterns.tree import BnBStats, PatternTree, Subtree
 from hpcwedge.solvers.feasibility import DEFAULT_OPTIONS, Decision, decide
 from hpcwedge.solvers.rows import Status, pattern_rows
 
-#: tree nodes decided ahead in the first round and at most in one round
-CHAIN_FIRST, CHAIN_MAX = 16, 64
+#: tree nodes decided ahead in the first round and at most in one round. The first round
+#: shares its job with the bracket's task, and a job's tasks go to whichever worker is free,
+#: so its nodes fill in for that task's length (plug3d 8 x 16: the bracket ~10 s, a node's
+#: LP ~0.5 s, 129 nodes in rounds of 32, 64 and 33)
+CHAIN_FIRST, CHAIN_MAX = 32, 64
 #: the decision statuses as task results carry them (an index)
 STATUSES = tuple(Status)
 

@@ -127,11 +127,11 @@ def test_the_walk_follows_explore_where_the_path_breaks(monkeypatch):
     assert len([j for j in engine.summary()["jobs"] if j.startswith("global_dive_")]) >= 2
 
 
-GLOBAL_16 = """name = "plug3d-2x8"
+GLOBAL_32 = """name = "plug3d-4x8"
 dim = 3
 [model]
 kind = "plug3d"
-levels = 2
+levels = 4
 ring = 8
 taper_deg = 10.0
 [friction]
@@ -147,11 +147,11 @@ symmetry = false
 @pytest.mark.mpi
 @needs_mpirun
 def test_mpirun_3_global_mu_c_is_the_serial_one(tmp_path):
-    """plug3d 2 x 8 (m = 16: two rounds of node tasks beside the bracket): `mpirun -n 3`
+    """plug3d 4 x 8 (m = 32: two rounds of node tasks, the first beside the bracket): `mpirun -n 3`
     gives the serial run's global mu^c bit for bit and the same stats.bnb, and its workers
     really shared the bracket's job."""
     scene = tmp_path / "g.toml"
-    scene.write_text(GLOBAL_16)
+    scene.write_text(GLOBAL_32)
     run(None, "run", str(scene), "-o", str(tmp_path / "serial.h5"), "-q")
     run(3, "run", str(scene), "-o", str(tmp_path / "mpi.h5"), "-q")
     a, b = show_json(str(tmp_path / "serial.h5")), show_json(str(tmp_path / "mpi.h5"))
@@ -160,5 +160,5 @@ def test_mpirun_3_global_mu_c_is_the_serial_one(tmp_path):
     assert a["stats"]["bnb"] == b["stats"]["bnb"]
     par = b["stats"]["parallel"]
     assert par["ranks"] == 3 and all(n > 0 for n in par["tasks_per_rank"][1:]), par
-    assert par["jobs"]["global_bracket"]["tasks"] == a["stats"]["parallel"]["jobs"]["global_bracket"]["tasks"] == 17
+    assert par["jobs"]["global_bracket"]["tasks"] == a["stats"]["parallel"]["jobs"]["global_bracket"]["tasks"] == 1 + 32
     assert "global_dive_1" in par["jobs"]
