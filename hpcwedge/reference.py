@@ -289,10 +289,13 @@ def _scip_solve(model, counts: dict) -> str:
 
 def scip_status(param, m: int, mu: float, counts: dict, time_limit: float | None = None) -> str:
     """SCIP's status on `scip_model` at mu ("optimal": wedged, "infeasible": not, else
-    undecided), at most `time_limit` seconds (None: no limit). Counts milp_solves / milp_nodes."""
+    undecided), at most `time_limit` seconds with the model's building (None: no limit).
+    Counts milp_solves / milp_nodes."""
+    import time
+    start = time.perf_counter()
     model, _ = scip_model(param, m, mu)
     if time_limit is not None:
-        model.setParam("limits/time", max(float(time_limit), 0.0))
+        model.setParam("limits/time", max(float(time_limit) - (time.perf_counter() - start), 0.0))
     return _scip_solve(model, counts)
 
 

@@ -29,7 +29,8 @@ large": the model exceeds Gurobi's size-limited licence, checked before it is bu
 "missing": the package is not installed), seconds, mu_c and rel_error, the bracket
 (mu_lo, mu_hi; the last one when it timed out), milp_solves, milp_nodes (the peer's
 branch-and-bound nodes), undecided, the model's n_vars and n_cons. --skip-ours: only the
-peers, the "ours" rows of the output file kept as they are.
+peers. The output keeps the rows of its earlier version whose case and engine this run does
+not measure (rows without an engine are ours).
 
     .venv/bin/python scripts/bench_global_scale.py [--quick] [--limit 300] [--only plug3d-8x8 ...]
                                                    [--peers scip gurobi] [--skip-ours]
@@ -131,13 +132,16 @@ def peer_line(row: dict) -> str:
             f"milps={row.get('milp_solves')} nodes={row.get('milp_nodes')} size={row.get('n_vars')}x{row.get('n_cons')}")
 
 
-def kept_ours(base: str) -> list[dict]:
-    """The "ours" rows of an earlier base.json (rows without an engine are ours); [] without one."""
+def kept(base: str, rows: list[dict]) -> list[dict]:
+    """The rows of an earlier base.json whose (case, engine) is not among `rows` (rows without
+    an engine are ours), then `rows`: a run of some engines or cases keeps the others'."""
     try:
         with open(base + ".json") as f:
-            return [{**r, "engine": "ours"} for r in json.load(f)["records"] if r.get("engine", "ours") == "ours"]
+            before = [{**r, "engine": r.get("engine", "ours")} for r in json.load(f)["records"]]
     except FileNotFoundError:
-        return []
+        before = []
+    done = {(r["case"], r["engine"]) for r in rows}
+    return [r for r in before if (r["case"], r["engine"]) not in done] + rows
 
 
 def main() -> int:
@@ -147,12 +151,12 @@ def main() -> int:
     ap.add_argument("--only", nargs="*", help="case names to run (default: all)")
     ap.add_argument("--out", default=None, help="output base (default results/bench_global_scale[_quick])")
     ap.add_argument("--peers", nargs="*", default=[], choices=PEERS, help="peers to run on each case too")
-    ap.add_argument("--skip-ours", action="store_true", help="peers only; keep the output's earlier 'ours' rows")
+    ap.add_argument("--skip-ours", action="store_true", help="peers only (the output keeps its earlier rows of the rest)")
     args = ap.parse_args()
     cases = [c for c in (QUICK if args.quick else CASES) if not args.only or c[0] in args.only]
     base = args.out or os.path.join(OUT, "bench_global_scale" + ("_quick" if args.quick else ""))
     tmp = tempfile.mkdtemp(prefix="bench_global_scale_")
-    rows = kept_ours(base) if args.skip_ours else []
+    rows = []
     for name, dim, model, m, target in cases:
         for peer in args.peers:
             rows.append(run_peer(tmp, peer, name, dim, model, m, args.limit))
@@ -169,7 +173,7 @@ def main() -> int:
         else:
             print(f"{name:<14} m={m:<4} {row['status']} after {row['seconds']:.1f} s {row.get('error', '')}",
                   flush=True)
-    write_records(base, rows, extra={"limit_seconds": args.limit, "taper_deg": TAPER_DEG,
+    write_records(base, kept(base, rows), extra={"limit_seconds": args.limit, "taper_deg": TAPER_DEG,
                                      "command": "python -m hpcwedge run scene.toml -o out.h5 -q (serial)",
                                      "peers": "python scripts/peers_global.py PEER scene.toml --limit LIMIT",
                                      "peer_grace_seconds": PEER_GRACE})
