@@ -10,20 +10,21 @@ import json
 import numpy as np
 import pytest
 import scipy.linalg as sla
-from instances import plug3d_param, random_problem_3d, rigid_modes_local_3d
+from instances import plug3d_param, random_problem_3d, rigid_modes_local_3d, symmetric_problem_3d
 from mpi_helpers import needs_mpirun, run, show_json
 
 from hpcwedge.contact.problem import ContactProblem, parametrize
 from hpcwedge.mu_c import global_tasks
 from hpcwedge.mu_c.global_search import BRACKET_STATUS, GlobalSearch, bracket_task, run_bracket
 from hpcwedge.parallel.engine import Engine, run_tasks
+from hpcwedge.patterns.symmetry import node_symmetries
 from hpcwedge.patterns.tree import PatternTree, Subtree
 from hpcwedge.solvers.feasibility import DEFAULT_OPTIONS, Decision
 from hpcwedge.solvers.rows import Status
 
 
-def search_of(param, m: int) -> GlobalSearch:
-    return GlobalSearch(param, m, 100.0, "accurate", 1e-6, None, None, "auto", True)
+def search_of(param, m: int, symmetry=None) -> GlobalSearch:
+    return GlobalSearch(param, m, 100.0, "accurate", 1e-6, symmetry, None, "auto", True)
 
 
 def same_bracket(a: dict, b: dict) -> None:
@@ -38,13 +39,17 @@ def same_bracket(a: dict, b: dict) -> None:
 
 
 def bodies():
-    """Free and supported random bodies (m = 5..7), a free plug with a leaf at every mu."""
+    """(param, m, symmetry): free and supported random bodies (m = 5..7), a free plug, and a
+    symmetric random body searched with its node symmetries (orbital branching and fixing)."""
     out = []
     for seed in range(3):
         for free in (True, False):
             m = 5 + seed
-            out.append((parametrize(random_problem_3d(np.random.default_rng(seed), m, free)), m))
-    out.append(plug3d_param(2, 5))
+            out.append((parametrize(random_problem_3d(np.random.default_rng(seed), m, free)), m, None))
+    out.append((*plug3d_param(2, 5), None))
+    prob = symmetric_problem_3d(np.random.default_rng(1), 6, free=True)
+    out.append((parametrize(prob), 6, node_symmetries(prob.K, 3)))
+    assert out[-1][2].order >= 6
     return out
 
 
@@ -54,8 +59,8 @@ def test_split_bracket_is_the_one_task_bracket(monkeypatch, chain):
     on random bodies and a plug, in several rounds of node tasks."""
     monkeypatch.setattr(global_tasks, "CHAIN_FIRST", chain[0])
     monkeypatch.setattr(global_tasks, "CHAIN_MAX", chain[1])
-    for param, m in bodies():
-        search = search_of(param, m)
+    for param, m, symmetry in bodies():
+        search = search_of(param, m, symmetry)
         want = run_tasks(bracket_task, search, [0], engine=Engine(), kind="global_bracket")[0]
         engine = Engine()
         got = run_bracket(search, engine)
