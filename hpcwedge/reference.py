@@ -10,7 +10,7 @@
 - brute-force extreme rays of a small cone {A x >= 0} (`brute_force_rays`);
 - the peers (bench extras, imported lazily): pycddlib's double description (`cdd_generators`,
   `cdd_zero`, `complementary_filter`) and SCIP on the indicator MILP (2D) / MISOCP (3D) of a
-  wedged configuration (`scip_model`: one solve `scip_wedged`, all contact sets by a no-good
+  wedged configuration (`scip_model`: one solve `scip_wedged` / `scip_status`, all contact sets by a no-good
   loop `scip_patterns`).
 
 Contact sets are int bitsets (bit i: node i in contact); a full pattern's gap set is the rest.
@@ -287,12 +287,23 @@ def _scip_solve(model, counts: dict) -> str:
     return model.getStatus()
 
 
+def scip_status(param, m: int, mu: float, counts: dict, time_limit: float | None = None) -> str:
+    """SCIP's status on `scip_model` at mu ("optimal": wedged, "infeasible": not, else
+    undecided), at most `time_limit` seconds with the model's building (None: no limit).
+    Counts milp_solves / milp_nodes."""
+    import time
+    start = time.perf_counter()
+    model, _ = scip_model(param, m, mu)
+    if time_limit is not None:
+        model.setParam("limits/time", max(float(time_limit) - (time.perf_counter() - start), 0.0))
+    return _scip_solve(model, counts)
+
+
 def scip_wedged(param, m: int, mu: float, counts: dict) -> bool:
     """SCIP on `scip_model` at mu: is there a wedged configuration? Counts milp_solves /
     milp_nodes / undecided; a run SCIP does not finish counts as wedged (keeps a bisection's
     upper end valid)."""
-    model, _ = scip_model(param, m, mu)
-    status = _scip_solve(model, counts)
+    status = scip_status(param, m, mu, counts)
     if status not in ("optimal", "infeasible"):
         counts["undecided"] = counts.get("undecided", 0) + 1
         return True
