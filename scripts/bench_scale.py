@@ -30,12 +30,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
 import time
 import traceback
+
+import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
@@ -49,6 +50,8 @@ RANKS, QUICK_RANKS, MODEL_RANKS = (3, 9, 17, 33, 65, 129), (3, 9, 17, 33, 65), (
 SECONDS_PER_WORKER = {"subtree": 24.0, "mu_c": 8.0, "face": 24.0}
 MODEL_SECONDS_PER_WORKER = {256: 20.0, 1024: 10.0, 4096: 3.0}
 MIN_WORKER_SECONDS = 2000.0
+#: the latencies (seconds from a task's send to its start) tried in the fit
+LATENCY_GRID = tuple(k * 2.5e-4 for k in range(25))
 
 
 def rank_run(durations_path: str, out: str, specs) -> None:
@@ -139,18 +142,31 @@ def model_run(workload: str, durations: dict, ranks: int, worker_seconds: float,
     return simulate(job, ranks - 1, costs, task_seconds)
 
 
-def master_costs(measured: list[dict]) -> dict:
-    """{workload: MasterCosts} from the measured runs (see the module's docstring)."""
+def master_costs(measured: list[dict], durations: dict) -> dict:
+    """{workload: MasterCosts} fitted to the measured runs (see the module's docstring)."""
+    from scipy.optimize import nnls
+
     from hpcwedge.parallel.model import MasterCosts
-    fewest = min(r["ranks"] for r in measured)
-    out = {}
-    for w in {r["workload"] for r in measured}:
-        rows = [r for r in measured if r["workload"] == w]
-        per_message = statistics.median(r["busy_s"] / r["messages"] for r in rows)
-        idle = statistics.median((r["workers"] * r["wall_s"] - r["task_s"]) / r["messages"]
-                                 for r in rows if r["ranks"] == fewest)
-        out[w] = MasterCosts(send_s=per_message / 2, merge_s=per_message / 2,
-                             latency_s=max(0.0, idle - per_message))
+    workloads = sorted({r["workload"] for r in measured})
+    # the probes of each run, as the model's master (zero costs) makes them
+    rows, busy = [], []
+    for r in measured:
+        sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
+                        MasterCosts(0.0, 0.0))
+        rows.append([r["messages"] * (w == r["workload"]) for w in workloads] + [sim.probes])
+        busy.append(r["busy_s"])
+    fit, _ = nnls(np.array(rows, dtype=float), np.array(busy))
+    probe_s, out = float(fit[-1]), {}
+    for i, w in enumerate(workloads):
+        per_message = float(fit[i])
+        runs = [r for r in measured if r["workload"] == w]
+
+        def worst(latency):
+            c = MasterCosts(per_message / 2, per_message / 2, latency, probe_s=probe_s)
+            return max(abs(model_run(w, durations, r["ranks"], r["worker_seconds_asked"], r["seed"], c).efficiency
+                           - r["efficiency"]) for r in runs)
+        latency = min(LATENCY_GRID, key=worst)
+        out[w] = MasterCosts(per_message / 2, per_message / 2, latency, probe_s=probe_s)
     return out
 
 
@@ -198,7 +214,7 @@ def main() -> None:
     t0 = time.perf_counter()
     seconds = {w: a.seconds or SECONDS_PER_WORKER[w] for w in WORKLOADS}
     measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)]
-    costs = master_costs(measured)
+    costs = master_costs(measured, durations)
     for r in measured:
         sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
                         costs[r["workload"]])
