@@ -12,13 +12,20 @@ wall time outside mpi.wait_any's waits), efficiency = the sum of the task second
 x wall), wall from the first task sent to the last result merged (start-up excluded); the
 master is busy when it is not asleep (its waits sleep between bursts of probes).
 
-Modelled: parallel.model.simulate on the same jobs with costs measured here: the master's
-busy seconds per message (a task, or a batch of a TaskJob's tasks; each workload's median
-over the measured runs, half to send and half to merge) and a message's latency (the
-workers' idle time per message at the fewest ranks, less the master's costs: calibrated there, validated at the other rank counts);
-"model_error" = modelled minus measured efficiency of each measured run;
-then 256, 1,024 and 4,096 ranks with max(MIN_WORKER_SECONDS, MODEL_SECONDS_PER_WORKER[ranks] x
-workers) worker-seconds (fewer per worker at 4,096 ranks: the model runs the tree's nodes).
+Modelled: parallel.model.simulate on the same jobs with costs fitted to the measured runs:
+the master's busy seconds = a_workload x messages + p x probes (non-negative least squares
+over every measured run; the probes are the model's count of the master's wake-ups while it
+waits: with tasks of a second most of its busy time at 65 ranks), a message's cost half to
+send and half to merge; then each workload's latency (send to start) from LATENCY_GRID, the
+one whose worst |model_error| over its runs is least (one number per workload, fitted, not
+predicted); "model_error" = modelled minus measured efficiency of each measured run.
+Predictions use the same fit to the master's CPU seconds: on 2 cores the master's probes and
+sends wait for a core (Open MPI yields it when oversubscribed: a probe took 1.9 ms of wall
+and ~0.1 ms of CPU at 33 ranks, cProfile), which a rank with a core of its own does not;
+then 256, 1,024 and 4,096 ranks with MODEL_SECONDS_PER_WORKER[ranks] x workers worker-seconds
+("sized": "job": a job of two minutes at 256 and 1,024 ranks, 30 s at 4,096, where the model
+runs the tree's nodes for minutes; --quick a quarter of it), and 1,024 ranks with the issue's
+floor of MIN_WORKER_SECONDS ("sized": "floor": 2 s per worker).
 
 Writes results/bench_scale.json ("measured", "modelled", the costs, the load) and
 results/bench_scale.png (efficiency against ranks).
@@ -30,12 +37,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
 import time
 import traceback
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
@@ -47,8 +56,13 @@ WORKLOADS = ("subtree", "mu_c", "face")
 RANKS, QUICK_RANKS, MODEL_RANKS = (3, 9, 17, 33, 65, 129), (3, 9, 17, 33, 65), (256, 1024, 4096)
 #: measured runs: worker-seconds per worker; modelled runs: the same, at least MIN_WORKER_SECONDS
 SECONDS_PER_WORKER = {"subtree": 24.0, "mu_c": 8.0, "face": 24.0}
-MODEL_SECONDS_PER_WORKER = {256: 20.0, 1024: 10.0, 4096: 3.0}
+MODEL_SECONDS_PER_WORKER = {256: 120.0, 1024: 120.0, 4096: 30.0}
+#: the issue's floor: a workload of this many worker-seconds should keep 1,024 ranks busy
 MIN_WORKER_SECONDS = 2000.0
+#: --quick models jobs of MODEL_SECONDS_PER_WORKER / QUICK_MODEL_DIVISOR (the tree's nodes take minutes)
+QUICK_MODEL_DIVISOR = 4
+#: the latencies (seconds from a task's send to its start) tried in the fit
+LATENCY_GRID = tuple(k * 2.5e-4 for k in range(25))
 
 
 def rank_run(durations_path: str, out: str, specs) -> None:
@@ -139,19 +153,33 @@ def model_run(workload: str, durations: dict, ranks: int, worker_seconds: float,
     return simulate(job, ranks - 1, costs, task_seconds)
 
 
-def master_costs(measured: list[dict]) -> dict:
-    """{workload: MasterCosts} from the measured runs (see the module's docstring)."""
+def master_costs(measured: list[dict], durations: dict) -> tuple[dict, dict]:
+    """({workload: MasterCosts} fitted to the measured runs' busy wall seconds (the model's
+    validation), the same with the master's CPU seconds (its predictions); see the module's
+    docstring)."""
+    from scipy.optimize import nnls
+
     from hpcwedge.parallel.model import MasterCosts
-    fewest = min(r["ranks"] for r in measured)
-    out = {}
-    for w in {r["workload"] for r in measured}:
-        rows = [r for r in measured if r["workload"] == w]
-        per_message = statistics.median(r["busy_s"] / r["messages"] for r in rows)
-        idle = statistics.median((r["workers"] * r["wall_s"] - r["task_s"]) / r["messages"]
-                                 for r in rows if r["ranks"] == fewest)
-        out[w] = MasterCosts(send_s=per_message / 2, merge_s=per_message / 2,
-                             latency_s=max(0.0, idle - per_message))
-    return out
+    workloads = sorted({r["workload"] for r in measured})
+    rows = []                           # messages by workload, and the model's probes, per run
+    for r in measured:
+        sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
+                        MasterCosts(0.0, 0.0))
+        rows.append([r["messages"] * (w == r["workload"]) for w in workloads] + [sim.probes])
+    wall, _ = nnls(np.array(rows, dtype=float), np.array([r["busy_s"] for r in measured]))
+    cpu, _ = nnls(np.array(rows, dtype=float), np.array([r["cpu_s"] for r in measured]))
+    validated, predicting = {}, {}
+    for i, w in enumerate(workloads):
+        runs = [r for r in measured if r["workload"] == w]
+
+        def worst(latency):
+            c = MasterCosts(wall[i] / 2, wall[i] / 2, latency, probe_s=wall[-1])
+            return max(abs(model_run(w, durations, r["ranks"], r["worker_seconds_asked"], r["seed"], c).efficiency
+                           - r["efficiency"]) for r in runs)
+        latency = min(LATENCY_GRID, key=worst)
+        validated[w] = MasterCosts(float(wall[i]) / 2, float(wall[i]) / 2, latency, probe_s=float(wall[-1]))
+        predicting[w] = MasterCosts(float(cpu[i]) / 2, float(cpu[i]) / 2, latency, probe_s=float(cpu[-1]))
+    return validated, predicting
 
 
 def plot(measured: list[dict], modelled: list[dict], path: str) -> None:
@@ -162,7 +190,7 @@ def plot(measured: list[dict], modelled: list[dict], path: str) -> None:
     for i, w in enumerate(WORKLOADS):
         meas = [r for r in measured if r["workload"] == w]
         mod = sorted([(r["ranks"], r["efficiency"] + r["model_error"]) for r in meas]
-                     + [(r["ranks"], r["efficiency"]) for r in modelled if r["workload"] == w])
+                     + [(r["ranks"], r["efficiency"]) for r in modelled if r["workload"] == w and r["sized"] == "job"])
         if not meas:
             continue
         ax.plot([r["ranks"] for r in meas], [r["efficiency"] for r in meas], "o", color=f"C{i}",
@@ -198,24 +226,30 @@ def main() -> None:
     t0 = time.perf_counter()
     seconds = {w: a.seconds or SECONDS_PER_WORKER[w] for w in WORKLOADS}
     measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)]
-    costs = master_costs(measured)
+    costs, predicting = master_costs(measured, durations)
     for r in measured:
         sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
                         costs[r["workload"]])
         r["model_error"] = sim.efficiency - r["efficiency"]
+    per_worker = {n: v / (QUICK_MODEL_DIVISOR if a.quick else 1) for n, v in MODEL_SECONDS_PER_WORKER.items()}
+    specs = [(w, n, ws, seed, sized) for n in MODEL_RANKS for seed, w in enumerate(a.workloads)
+             for ws, sized in [(per_worker[n] * (n - 1), "job")]
+             + ([(MIN_WORKER_SECONDS, "floor")] if n == 1024 else [])]
+    with ProcessPoolExecutor(2) as pool:        # the tree's nodes: minutes of model at 1,024 ranks
+        sims = list(pool.map(model_run, *zip(*[(w, durations, n, ws, seed, predicting[w]) for w, n, ws, seed, _ in specs])))
     modelled = []
-    for n in MODEL_RANKS:
-        for seed, w in enumerate(a.workloads):
-            ws = max(MIN_WORKER_SECONDS, MODEL_SECONDS_PER_WORKER[n] * (n - 1))
-            sim = model_run(w, durations, n, ws, seed, costs[w])
-            modelled.append({"workload": w, "ranks": n, "worker_seconds": sim.task_s, "efficiency": sim.efficiency,
-                             "tasks": sim.tasks, "messages": sim.messages, "master_busy": sim.master_busy, "wall_s": sim.wall_s})
-            print(f"model {n:5d} ranks {w:8s} {sim.task_s:9.0f} worker-s efficiency {sim.efficiency:.3f} "
-                  f"busy {sim.master_busy:.3f}", flush=True)
+    for (w, n, _, _, sized), sim in zip(specs, sims):
+        modelled.append({"workload": w, "ranks": n, "worker_seconds": sim.task_s, "efficiency": sim.efficiency,
+                         "sized": sized, "seconds_per_worker": sim.task_s / (n - 1), "tasks": sim.tasks,
+                         "messages": sim.messages, "master_busy": sim.master_busy, "wall_s": sim.wall_s})
+        print(f"model {n:5d} ranks {w:8s} {sim.task_s:9.0f} worker-s efficiency {sim.efficiency:.3f} "
+              f"busy {sim.master_busy:.3f}", flush=True)
     keys = ("ranks", "workload", "tasks", "tasks_per_s", "master_busy", "efficiency", "model_error")
     write_json(a.out + ".json", {
         "measured": [{k: r[k] for k in keys} for r in measured], "modelled": modelled,
-        "measured_detail": measured, "costs": {w: vars(c) for w, c in costs.items()}, "seconds_per_worker": seconds,
+        "measured_detail": measured, "costs": {w: vars(c) for w, c in costs.items()},
+        "costs_predicting": {w: vars(c) for w, c in predicting.items()}, "seconds_per_worker": seconds,
+        "model_seconds_per_worker": per_worker,
         "machine": f"{os.cpu_count()} cores, shared", "bench_seconds": time.perf_counter() - t0,
         "command": " ".join(python_command(*sys.argv))})
     plot(measured, modelled, a.out + ".png")

@@ -1,12 +1,12 @@
 """SIGTERM to jobs/wedge-mpirun.sh at many rank counts (issue 42): the exit status (75:
 the checkpoint written and the run stopped) and the seconds from the signal to the exit.
 
-    PYTHONPATH=. python scripts/bench_sigterm.py [--ranks 33 65] [--out results/bench_sigterm.json]
+    PYTHONPATH=. python scripts/bench_sigterm.py [--ranks 3 9 17 33 65] [--out results/bench_sigterm.json]
 
 Each case runs plug3d 2 x 6 at two mu without its symmetry (tests/parallel/test_resume_ranks.py's
 scene) under `jobs/wedge-mpirun.sh -n RANKS` (oversubscribed past the cores) and sends the
-script SIGTERM once the first checkpoint is written. The test covers 3, 9 and 17 ranks; this
-script the larger counts, which take minutes on 2 cores.
+script SIGTERM once the first checkpoint is written. The tests cover 3, 9 and 17 ranks; this
+script every count from 3 to 65 in one record (the larger take minutes on 2 cores).
 """
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ def stop_once(ranks: int, folder: str) -> dict:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--ranks", type=int, nargs="+", default=[33, 65])
+    ap.add_argument("--ranks", type=int, nargs="+", default=[3, 9, 17, 33, 65])
     ap.add_argument("--out", default=os.path.join(ROOT, "results", "bench_sigterm.json"))
     args = ap.parse_args()
     cases = []

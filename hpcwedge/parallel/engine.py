@@ -42,20 +42,20 @@ from hpcwedge.parallel.jobs import TaskJob
 EXIT_INTERRUPTED = 75
 #: the master checks the memory guard (Engine.guard) at most this often (seconds)
 GUARD_EVERY_S = 1.0
-#: a TaskJob's tasks go to a worker in batches that last about workers x MESSAGE_S / MAX_BUSY
-#: seconds (by the mean task seconds so far): the master, whose every message costs it up
-#: to ~MESSAGE_S (0.1-1 ms measured, scripts/bench_scale.py), stays at most ~MAX_BUSY busy
-MESSAGE_S, MAX_BUSY = 1e-3, 0.8
+#: tasks go to a worker in batches that last about workers x MESSAGE_S / MAX_BUSY seconds (by
+#: the mean task seconds so far): the master, whose every message costs it up to ~MESSAGE_S
+#: (0.01-1.2 ms fitted, scripts/bench_scale.py), stays at most ~MAX_BUSY busy
+MESSAGE_S, MAX_BUSY = 2e-3, 0.8
 
 
-def batch_size(workers: int, mean_task_s: float | None) -> int:
-    """Tasks of a TaskJob in the next message to a worker (>= 1): enough for the batch to
-    last workers x MESSAGE_S / MAX_BUSY seconds at `mean_task_s` (None, no task done yet:
-    1). Smaller batches at the end would flood the master; the last batches' tail is about
-    that long. Answers do not depend on it."""
+def batch_size(workers: int, mean_task_s: float | None, pending: int) -> int:
+    """Tasks in the next message to a worker (>= 1), with `pending` in the pool: enough for
+    the batch to last workers x MESSAGE_S / MAX_BUSY seconds at `mean_task_s` (None, no task
+    done yet: 1), at most pending / (2 x workers) (guided self-scheduling: the pool is
+    shared out while it is short, the last batches are short). Answers do not depend on it."""
     if not mean_task_s:
         return 1
-    return max(1, math.ceil(workers * MESSAGE_S / MAX_BUSY / mean_task_s))
+    return max(1, min(math.ceil(workers * MESSAGE_S / MAX_BUSY / mean_task_s), pending // (2 * workers)))
 
 
 def run_batch(ctx, payloads: list) -> tuple[list, float]:
@@ -151,8 +151,8 @@ class Master:
 
     def send_task(self, w: int, job_id: int, job, payload, batched: bool = False) -> None:
         """batched: payload is a list of the job's payloads (run_batch runs them)."""
-        fresh = self._ctx_sent.get(w) != job_id
-        self._ctx_sent[w] = job_id
+        fresh = self._ctx_sent.get(w) != (job_id, batched)    # a TreeJob's first batch: run_batch
+        self._ctx_sent[w] = (job_id, batched)
         handler, ctx = (run_batch, (job.handler, job.context)) if batched else (job.handler, job.context)
         self.comm.send((job_id, payload, (job.kind, handler, ctx) if fresh else None, self.pause_every_s),
                        dest=w, tag=mpi.TASK)
@@ -197,7 +197,8 @@ class Engine:
         self._inflight: dict = {}        # rank -> token of its task in flight
         self._job_id = 0
         self._job_start = (time.monotonic(), 0)    # (when, tasks done) as the current job started
-        self._batched = [0.0, 0]         # the current job's batches: seconds, tasks (batch_size)
+        self._batched = [0.0, 0]         # the current job's tasks: seconds, count (batch_size)
+        self._sent_at: dict = {}         # rank -> when its unbatched task was sent (its seconds)
         self._guarded = 0.0
 
     @property
@@ -376,21 +377,21 @@ class Engine:
             last_note = self._note(job, last_note)
 
     def _hand_out(self, job, idle: list) -> None:
-        """A task (a TaskJob: a batch of them, batch_size) to each idle worker while the pool lasts."""
+        """A batch of tasks (batch_size; a TreeJob's task alone while that is 1) to each idle
+        worker while the pool lasts."""
         n_workers = len(self.master.workers)
-        batched = isinstance(job, TaskJob)
         while idle:
             secs, done = self._batched
-            k = batch_size(n_workers, secs / done if done else None) if batched else 1
+            k = batch_size(n_workers, secs / done if done else None, job.pending())
             taken = [t for t in (job.take(n_workers) for _ in range(k)) if t is not None]
             if not taken:
                 return
             w = idle.pop()
-            if batched:
+            if isinstance(job, TaskJob) or len(taken) > 1:
                 self._inflight[w] = Batch(t for t, _ in taken)
                 self.master.send_task(w, self._job_id, job, [p for _, p in taken], batched=True)
             else:
-                self._inflight[w], payload = taken[0]
+                (self._inflight[w], payload), self._sent_at[w] = taken[0], time.monotonic()
                 self.master.send_task(w, self._job_id, job, payload)
 
     def _take_result(self, job, w: int, tag: int, msg) -> None:
@@ -407,10 +408,10 @@ class Engine:
             # all the command line prints; the whole traceback after it (HPCWEDGE_DEBUG=1)
             cause = (str(msg).strip().splitlines() or ["?"])[-1]
             raise RuntimeError(f"worker rank {w} failed on a {job.kind!r} task: {cause}\n{msg}")
-        if isinstance(token, Batch):
-            msg, seconds = msg
-            self._batched[0] += seconds
-            self._batched[1] += len(token)
+        # a batch's seconds as its worker measured them; a task alone's from send to answer
+        msg, seconds = msg if isinstance(token, Batch) else (msg, time.monotonic() - self._sent_at[w])
+        self._batched[0] += seconds
+        self._batched[1] += len(token) if isinstance(token, Batch) else 1
         for t, result in zip(token, msg, strict=True) if isinstance(token, Batch) else [(token, msg)]:
             self._merge(job, t, result)
             self.tasks_per_rank[w] += 1

@@ -3,11 +3,13 @@ its efficiency at rank counts a machine cannot run.
 
 The job is real (its take() and merge() run, and so does its handler, which must
 not sleep: `seconds(result)` says how long the task would have run); only time is
-simulated. A TaskJob's tasks travel in batches (engine.batch_size), one message each, as
+simulated. Tasks travel in batches (engine.batch_size), one message each, as
 the engine sends them. The master is one server: each message costs it `send_s` (take and
 send) and each answer `merge_s` (receive and merge); between answers it waits as mpi.wait_any
 does (probes, then sleeps that grow by POLL_FRACTION of the wait up to `poll_max_s`),
-so it notices a result at its next wake-up. A task starts `latency_s` after its send
+so it notices a result at its next wake-up; each wake-up probes, at `probe_s` of its busy
+time (Open MPI's probe runs its progress engine: with tasks of a second at 64 ranks the
+probes, not the messages, are most of the master's busy time). A task starts `latency_s` after its send
 and its result reaches the master when it ends. Results are taken in the order they
 arrive; after each the master refills every idle worker, as the engine does.
 """
@@ -17,26 +19,28 @@ import heapq
 from dataclasses import dataclass
 
 from hpcwedge.parallel.engine import batch_size
-from hpcwedge.parallel.jobs import TaskJob
 from hpcwedge.parallel.mpi import POLL_FRACTION, POLL_MAX_MASTER
 
 
 @dataclass(frozen=True)
 class MasterCosts:
-    """The master's costs per message (seconds): take + send, receive + merge; the wire and
-    worker wake-up before a task starts; the master's longest sleep while it waits."""
+    """The master's costs (seconds): per message take + send, receive + merge; the wire and
+    worker wake-up before a task starts; the master's longest sleep while it waits; one
+    probe (a wake-up while it waits)."""
 
     send_s: float
     merge_s: float
     latency_s: float = 0.0
     poll_max_s: float = POLL_MAX_MASTER
+    probe_s: float = 0.0
 
 
 @dataclass(frozen=True)
 class Simulated:
     """One simulated run: workers, wall seconds (first send to the last merge), the sum of
     the tasks' seconds, the tasks, the master's busy seconds, the messages (tasks or
-    batches) sent; efficiency = task seconds / (workers x wall), master_busy = busy / wall."""
+    batches) sent, the master's probes while it waited; efficiency = task seconds /
+    (workers x wall), master_busy = busy / wall."""
 
     workers: int
     wall_s: float
@@ -44,6 +48,7 @@ class Simulated:
     tasks: int
     busy_s: float
     messages: int
+    probes: int = 0
 
     @property
     def efficiency(self) -> float:
@@ -59,18 +64,25 @@ def noticed_at(since: float, arrival: float, poll_max_s: float) -> float:
     `arrival`: its first wake-up at or after it (wake-ups at since, then every
     min(poll_max_s, max(1e-4, POLL_FRACTION x time waited))); poll_max_s 0: a master
     that never sleeps sees it at once."""
+    return waited(since, arrival, poll_max_s)[0]
+
+
+def waited(since: float, arrival: float, poll_max_s: float) -> tuple[float, int]:
+    """(noticed_at(since, arrival, poll_max_s), the wake-ups up to it, the one at `since`
+    and the one that sees it included: each probes once)."""
     if arrival <= since or poll_max_s <= 0:
-        return max(since, arrival)
-    t = since
+        return max(since, arrival), 1
+    t, wakes = since, 1
     # the sleeps grow geometrically up to the cap, then stay at it
     while True:
         step = min(poll_max_s, max(1e-4, POLL_FRACTION * (t - since)))
         if step >= poll_max_s:
             k = -(-(arrival - t) // poll_max_s)          # ceil: whole capped sleeps to reach it
-            return t + k * poll_max_s
+            return t + k * poll_max_s, wakes + int(k)
         t += step
+        wakes += 1
         if t >= arrival:
-            return t
+            return t, wakes
 
 
 def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
@@ -82,12 +94,11 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
     idle = list(range(workers))[::-1]
     events: list = []                  # (answer arrives, seq, worker, [(token, result)], seconds)
     t = busy = task_s = 0.0
-    seq = tasks = 0
-    batched = isinstance(job, TaskJob)
+    seq = tasks = probes = 0
     merged_s = 0.0                     # the merged tasks' seconds (the engine's batch sizes)
     while True:
         while idle:
-            k = batch_size(workers, merged_s / tasks if tasks else None) if batched else 1
+            k = batch_size(workers, merged_s / tasks if tasks else None, job.pending())
             taken = [x for x in (job.take(workers) for _ in range(k)) if x is not None]
             if not taken:
                 break
@@ -99,11 +110,13 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
             heapq.heappush(events, (t + costs.latency_s + d, seq, idle.pop(), done, d))
             seq += 1
         if not events:
-            return Simulated(workers, t, task_s, tasks, busy, seq)
+            return Simulated(workers, t, task_s, tasks, busy, seq, probes)
         arrival, _, w, done, d = heapq.heappop(events)
         merged_s += d
-        t = noticed_at(t, arrival, costs.poll_max_s) + costs.merge_s
-        busy += costs.merge_s
+        t, wakes = waited(t, arrival, costs.poll_max_s)
+        t += costs.merge_s
+        probes += wakes
+        busy += costs.merge_s + wakes * costs.probe_s
         for token, result in done:
             job.merge(token, result)
         tasks += len(done)

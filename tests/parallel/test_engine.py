@@ -191,6 +191,69 @@ def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
             assert st["tasks_per_rank"][0] == 0                   # the master only dispatches
 
 
+#: rank 0 runs a TreeJob over the full binary tree of depth 12 (budget 1: a task visits one
+#: node and hands back its two children) and prints what it found and the messages it sent;
+#: MESSAGE_S 50 ms: batches of its tasks, however long a round trip takes on a loaded machine
+TREE_UNDER_MPIRUN = """
+import json
+from hpcwedge.parallel import engine as engine_module, mpi
+from hpcwedge.parallel.engine import Engine
+from hpcwedge.parallel.jobs import TreeJob
+from hpcwedge.parallel.worker import serve
+
+class Node(tuple):
+    depth = property(len)
+
+def explore(depth, payload):
+    _, node, budget, _ = payload
+    stack, found, visited = [node], [], 0
+    while stack and visited < budget:
+        n = stack.pop()
+        visited += 1
+        if len(n) == depth:
+            found.append(n)
+        else:
+            stack += [Node(n + (1,)), Node(n + (0,))]
+    return found, stack, {"nodes": visited}, [], [None] * len(stack)
+
+engine_module.MESSAGE_S = 0.05
+comm = mpi.world()
+if comm.rank:
+    serve(comm)
+else:
+    engine, sent = Engine(comm), []
+    send = engine.master.send_task
+    engine.master.send_task = lambda *a, **k: (sent.append(k.get("batched", False)), send(*a, **k))
+    job = engine.run(TreeJob("t", explore, 12, [Node(())], 1, {"nodes": 0}))
+    engine.close()
+    print(json.dumps({"found": sorted(map(list, job.found[0])), "counters": job.counters,
+                      "batches": sum(sent), "messages": len(sent)}))
+"""
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_a_tree_job_of_short_tasks_travels_in_batches_with_the_same_answer(tmp_path):
+    """mpirun -n 3, a tree job whose tasks take well under MESSAGE_S: its tasks go out in
+    batches (engine.batch_size), and the job still finds each of the 4,096 leaves once and
+    counts the tree's 8,191 nodes; every node handed back became one task (tasks and
+    handed_back depend on the split: the budget grows while the pool is long)."""
+    import json
+    import subprocess
+    import sys
+
+    from mpi_helpers import MPIRUN, env
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
+                        sys.executable, "-c", TREE_UNDER_MPIRUN], env=env(), capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout)
+    assert got["found"] == [[(k >> i) & 1 for i in reversed(range(12))] for k in range(4096)]
+    c = got["counters"]
+    assert c["nodes"] == 8191 and c["tasks"] == 1 + c["handed_back"]
+    assert got["batches"] > 0 and got["messages"] < c["tasks"]
+
+
 @pytest.mark.mpi
 @needs_mpirun
 def test_2d_exact_rays_identical_under_mpirun(tmp_path):

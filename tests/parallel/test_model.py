@@ -8,7 +8,7 @@ import pytest
 
 from hpcwedge.parallel import engine, mpi
 from hpcwedge.parallel.jobs import TaskJob, TreeJob
-from hpcwedge.parallel.model import MasterCosts, noticed_at, simulate
+from hpcwedge.parallel.model import MasterCosts, noticed_at, simulate, waited
 
 
 def _seconds_task(ctx, payload):
@@ -75,6 +75,13 @@ def test_a_tree_job_costs_its_tree_for_any_worker_count():
     assert walls[0] > walls[1] > walls[2] >= sum(1 + d for d in range(7))
 
 
+def test_batch_size_lasts_the_masters_target_and_shares_out_a_short_pool():
+    target = math.ceil(100 * engine.MESSAGE_S / engine.MAX_BUSY / 0.01)         # 25 tasks of 10 ms
+    assert engine.batch_size(100, 0.01, 10 ** 6) == target == 25
+    assert engine.batch_size(100, 0.01, 1000) == 5                               # 1000 / (2 x 100)
+    assert engine.batch_size(100, 0.01, 150) == engine.batch_size(100, None, 10 ** 6) == 1
+
+
 def test_the_master_notices_a_result_at_its_next_wake_up():
     """noticed_at against the wake-ups listed one by one, as mpi.wait_any sleeps."""
     cap = mpi.POLL_MAX_MASTER
@@ -85,16 +92,24 @@ def test_the_master_notices_a_result_at_its_next_wake_up():
     for arrival in (0.0, 5e-5, 0.0031, 0.0457, 0.1, 0.2345, 0.49):
         expect = next(w for w in wakes if w >= arrival)
         assert noticed_at(0.0, arrival, cap) == pytest.approx(expect, abs=1e-12)
+        t, probes = waited(0.0, arrival, cap)
+        assert probes == wakes.index(expect) + 1        # the wake-ups up to it, each probing once
     assert noticed_at(1.0, 0.5, cap) == 1.0
 
 
 def test_a_task_job_travels_in_batches_of_the_masters_target_length():
-    """400 tasks of 0.3 ms on 8 workers: a first round of single tasks, then batches that
-    last 8 x MESSAGE_S / MAX_BUSY (10 ms: 34 tasks); every task merged once, in its slot."""
-    durations = [0.0003 + 1e-9 * k for k in range(400)]
+    """4,000 tasks of 0.3 ms on 8 workers: a first round of single tasks, then batches that
+    last 8 x MESSAGE_S / MAX_BUSY (20 ms: 67 tasks) while the pool holds 16 x 67 tasks,
+    then pending / 16 down to 1 (guided self-scheduling); every task merged once, in its slot."""
+    durations = [0.0003 + 1e-9 * k for k in range(4000)]
     job = TaskJob("t", _seconds_task, None, durations)
     sim = simulate(job, 8, ZERO, _result_seconds)
-    assert [r["seconds"] for r in job.results] == durations and sim.tasks == 400
+    assert [r["seconds"] for r in job.results] == durations and sim.tasks == 4000
     k = math.ceil(8 * engine.MESSAGE_S / engine.MAX_BUSY / 0.0003)
-    assert k == 34 and sim.messages == 8 + math.ceil(392 / k)
+    sizes, pending = [], 4000 - 8
+    while pending:                        # one worker free at a time: one batch per answer
+        sizes.append(max(1, min(k, pending // 16)))
+        pending -= sizes[-1]
+    assert k == 67 and sizes[:3] == [67] * 3 and sizes[-3:] == [1, 1, 1]
+    assert sim.messages == 8 + len(sizes)
     assert sim.task_s == pytest.approx(sum(durations))
