@@ -199,7 +199,7 @@ def _verified(rows: Rows, act: np.ndarray, mu: float) -> bool:
     """The active rows at mu have a null vector (relative singular value <= POLISH_TOL)
     that, scaled to sum(r_n) = 1, satisfies every row to POLISH_TOL."""
     unit = rows_at(rows, mu)
-    _, s, vt = np.linalg.svd(unit[act])
+    _, s, vt = np.linalg.svd(unit[act], full_matrices=False)     # act >= d rows (polish): vt is (d, d)
     if len(s) >= vt.shape[0] and s[-1] > POLISH_TOL * s[0]:
         return False
     x = vt[-1]
