@@ -54,6 +54,9 @@ HIGHS_STATUS = {"kOptimal": Status.FEASIBLE, "kInfeasible": Status.INFEASIBLE}
 #: a stop interrupts a HiGHS call that has run this long (seconds); a shorter call ends, and
 #: the caller's own check stops the task between calls (a tree then hands back its open nodes)
 INTERRUPT_AFTER_S = 0.1
+#: |A^T y|_1 of an accepted dual ray of a warm model (TreeLp, PatternLp), relative to the
+#: bound it proves (y_norm)
+FARKAS_RTOL = 1e-9
 _banner_shown = False
 _call_started = 0.0
 
@@ -237,8 +240,7 @@ class TreeLp:
     |x|_inf < 1 / FARKAS_RTOL meets the rows). Anything else is UNDECIDED:
     the caller decides the pattern by `lp_feasible` (counted "warm_unsure")."""
 
-    #: |A^T y|_1 of an accepted dual ray, relative to the bound it proves (y_norm)
-    FARKAS_RTOL = 1e-9
+    FARKAS_RTOL = FARKAS_RTOL
 
     def __init__(self, param: Parametrization, m: int, mu: float):
         if not 0.0 < mu < np.inf:
@@ -299,17 +301,59 @@ class TreeLp:
 
     def _ray_holds(self, h) -> bool:
         """HiGHS's dual ray, either sign, proves {rows} empty (class doc)."""
-        _, has, y = h.getDualRay()
-        if not has:
-            return False
-        y = np.asarray(y, float)
-        ge = np.concatenate([self.upper[:-1] != 0.0, [False]])
-        for sign in (1.0, -1.0):
-            z = sign * y
-            z[ge] = np.maximum(z[ge], 0.0)   # rows >= 0 need z >= 0: zeroing keeps a valid combination
-            if z[-1] > 0 and np.abs(self.A.T @ z).sum() <= self.FARKAS_RTOL * z[-1]:
-                return True
+        return farkas_holds(h, self.A, np.concatenate([self.upper[:-1] != 0.0, [False]]), FARKAS_RTOL)
+
+
+def farkas_holds(h, A: np.ndarray, ge: np.ndarray, rtol: float) -> bool:
+    """HiGHS's dual ray y of the model {A v (>= 0 where ge, == 0 elsewhere), last row = 1},
+    either sign, proves it empty: z >= 0 on the rows ge (a negative entry zeroed: still a valid
+    combination), z_last > 0 and |A^T z|_1 <= rtol z_last, so no v with |v|_inf < 1 / rtol
+    meets the rows."""
+    _, has, y = h.getDualRay()
+    if not has:
         return False
+    y = np.asarray(y, float)
+    for sign in (1.0, -1.0):
+        z = sign * y
+        z[ge] = np.maximum(z[ge], 0.0)
+        if z[-1] > 0 and np.abs(A.T @ z).sum() <= rtol * z[-1]:
+            return True
+    return False
+
+
+def image_point(E: np.ndarray, G: np.ndarray, rank_rtol: float = 1e-9) -> np.ndarray | None:
+    """A point x of {E x = 0, G x >= 0, sum G x = 1} (E (e, d), G (g, d)) found in the image
+    coordinates b = G x: (0, b) must lie in the range of M = [E; G], i.e. N^T (0, b) = 0 for a
+    basis N of M's left null space (singular values below rank_rtol times the largest) — an LP
+    in b >= 0 with only those rows and sum b = 1, where M is nearly square (the all-contact
+    pattern without friction: [U_n; R_n], m = 160: 1 row, against a dense 320 x 320 LP). Its
+    vertex is solved again on its support in double precision; x = M^+ (0, b), the least-norm
+    preimage; None: HiGHS found no point. The caller checks x against its rows (`point_holds`)."""
+    import scipy.linalg as sla
+    M = np.vstack([E, G])
+    U, sv, Vt = sla.svd(M, full_matrices=True)
+    r = int((sv > rank_rtol * sv[0]).sum()) if sv.size else 0
+    N = U[:, r:]                               # left null space (2m - r columns)
+    Nb, k, g = N[E.shape[0]:], N.shape[1], G.shape[0]
+    A = np.vstack([Nb.T, np.ones((1, g))])
+    h = highs_instance({**LP_METHODS["simplex"], **LP_OPTIONS}, LP_TIME_LIMIT_S)
+    h.passModel(highs_lp(A, np.concatenate([np.zeros(k), [1.0]]), np.concatenate([np.zeros(k), [1.0]]),
+                         np.zeros(g), np.full(g, np.inf)))
+    if highs_run(h) != Status.FEASIBLE:
+        return None
+    b = np.maximum(np.array(h.getSolution().col_value), 0.0)
+    S = np.flatnonzero(b > 0)
+    if S.size == k + 1:                        # a vertex: its support solved exactly
+        with np.errstate(all="ignore"):
+            try:
+                bs = np.linalg.solve(A[:, S], np.concatenate([np.zeros(k), [1.0]]))
+            except np.linalg.LinAlgError:
+                bs = None
+        if bs is not None and np.all(bs >= 0):
+            b = np.zeros(g)
+            b[S] = bs
+    v = np.concatenate([np.zeros(E.shape[0]), b])
+    return Vt[:r].T @ ((U[:, :r].T @ v) / sv[:r])
 
 
 def lp_violation(rows: Rows, mu: float, x: np.ndarray) -> float:

@@ -204,3 +204,23 @@ def test_a_stop_interrupts_an_lp_past_its_grace_time(monkeypatch):
     monkeypatch.setattr(lp, "INTERRUPT_AFTER_S", 0.0)
     with pytest.raises(TaskCancelled):
         run_cancellable(stopping, None, None, lambda: True, tick_every_s=0.0)
+
+
+
+def test_image_point_agrees_with_the_lp_in_x_on_the_all_contact_pattern():
+    """image_point (an LP in b = R_n x >= 0 with the left null space of [U_n; R_n] as its
+    only rows) against lp_feasible (the LP in x) on the all-contact pattern without friction
+    (u_n = 0, r_n >= 0, sum r_n = 1) of random supported and free bodies: a point whose rows
+    hold to 1e-10 exactly where lp_feasible finds the pattern feasible, both kinds met."""
+    from hpcwedge.solvers.lp import image_point
+    seen = {True: 0, False: 0}
+    for seed in range(40):
+        rng = np.random.default_rng(900 + seed)
+        m = int(rng.integers(2, 7))
+        p = parametrize(random_problem(rng, m, bool(seed % 2)))
+        rows = pattern_rows(p, m, np.ones(m, bool), np.zeros(m, bool), friction=False)
+        x = image_point(p.U[:m], p.R[:m])
+        holds = x is not None and abs(rows.norm @ x - 1) <= 1e-10 and lp_violation(rows, 0.0, x) <= 1e-10
+        assert holds == (lp_feasible(rows, 0.0)[0] == Status.FEASIBLE), seed
+        seen[holds] += 1
+    assert min(seen.values()) >= 2, seen
