@@ -103,6 +103,11 @@ class ReactionSOCP:
     lin_scale: np.ndarray
     g: float
     beta_map: np.ndarray | None
+    #: the rows of `problem` after sum r_n = 1, as rows of the layout's [E; U_n]: row
+    #: `order[j]` divided by `row_scale[j]` (negative: a lin row, -u_n)
+    order: np.ndarray | None = None
+    row_scale: np.ndarray | None = None
+    mu: float = 0.0
 
     def _unscaled(self, v: np.ndarray) -> np.ndarray:
         """v (one entry per column of `cols`) with its tangential entries times g."""
@@ -136,6 +141,31 @@ class ReactionSOCP:
         # this problem's cone rows are (mu r_n, r_t) / g
         cones = (z[p.n_zero + p.n_lin:].reshape(-1, 3) * (rows.scale[:, None] / self.g)).ravel()
         return np.concatenate([z[:1], lin, cones])
+
+
+def farkas_decisions(first: ReactionSOCP, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The decisions a Farkas certificate z of first.problem rests on: (contact, gap) masks
+    (m,), subsets of the pattern's zero_u and zero_r. The same multipliers prove every
+    pattern infeasible that keeps these decisions, whatever it does with the other nodes:
+    a contact node left out has its u_n row's multiplier y_i <= 0 (that of a lin row,
+    -u_n >= 0, of the same functional), a gap node left out has the functional h_i that the
+    rows' multipliers put on its reactions w_i (columns as in `problem`) in the dual of its
+    friction cone, h_n >= mu' ||h_t|| (a cone multiplier (h_n / mu', h_t) cancels it). The
+    residual A^T z on the columns both patterns keep is the same; the inequalities are
+    checked without a margin (a decision on the boundary is kept)."""
+    lay = _reaction_layout(first.rows.reactions, first.rows.zero_u.shape[0])
+    z = z / -z[0]                                # b = e_0: b^T z = -1
+    y = np.zeros(lay.rest.shape[0])
+    y[first.order] = z[1:1 + first.order.size] / first.row_scale
+    h = lay.rest.T @ y
+    h[lay.cols[:, 0]] += z[0]
+    h = h[lay.cols]                              # (m, 3), tangential columns as posed: r_t / g
+    if first.g != 1.0:
+        h[:, 1:] *= first.g
+    k = lay.equilibrium.size
+    contact = first.rows.zero_u & (y[k:] > 0)
+    gap = first.rows.zero_r & ~(h[:, 0] >= first.mu * np.hypot(h[:, 1], h[:, 2]))
+    return contact, gap
 
 
 def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
@@ -172,7 +202,8 @@ def reaction_socp(rows: ConeRows, mu: float) -> ReactionSOCP:
     b = np.zeros(A.shape[0])
     b[0] = 1.0
     problem = ConicProblem(A, b, 1 + len(eq), len(lin), len(nodes))
-    return ReactionSOCP(problem, rows, cols, lin - lay.equilibrium.size, size[lin], g, lay.beta_map)
+    return ReactionSOCP(problem, rows, cols, lin - lay.equilibrium.size, size[lin], g, lay.beta_map,
+                        order, scale, mu / g)
 
 
 @functools.lru_cache(maxsize=64)

@@ -1,7 +1,7 @@
 """The pattern SOCP for Clarabel (socp.py): the ladder of attempts, the two forms, the
 Farkas check of what Clarabel returns."""
 import numpy as np
-from instances import partial_rows, plug3d_param, random_problem_3d
+from instances import brute_3d, partial_masks, partial_rows, plug3d_param, random_problem_3d
 
 from hpcwedge.contact.problem import parametrize
 from hpcwedge.solvers.conic import ATTEMPTS, CLARABEL_STATUS, LEAST_NORM_ATTEMPT
@@ -116,3 +116,45 @@ def test_small_taper_tree_is_decided_by_first_attempts():
                 if d.status == Status.FEASIBLE:
                     brute.add(zu.tobytes())
             assert tree == brute and len(tree) == n
+
+
+def test_farkas_decisions_prune_only_infeasible_patterns():
+    """farkas_decisions of a certified reaction-form certificate (plug3d 2 x 4, random partial
+    patterns at mu 0.2 and 0.4, 1.13 and 2.3 mu^c) name a subset of the pattern's fixings
+    that no feasible full pattern of brute force keeps, and every random partial pattern
+    keeping them is decided infeasible by its own solve. Dropping the gap decisions without
+    their dual-cone check does prune feasible patterns: the check can fail."""
+    from hpcwedge.solvers.conic import solve
+    from hpcwedge.solvers.socp import farkas_decisions, reaction_socp
+    p, m = plug3d_param(2, 4)
+    rng = np.random.default_rng(3)
+    full = (1 << m) - 1
+    smaller = unchecked_wrong = certified = 0
+    for mu in (0.2, 0.4):
+        feasible = brute_3d(p, m, mu)
+        for _ in range(60):
+            masks = partial_masks(rng, m)
+            if masks is None:
+                continue
+            first = reaction_socp(pattern_rows(p, m, *masks), mu)
+            sol = solve(first.problem, 0, False)
+            if sol.status != Status.INFEASIBLE or not certificate_ok(
+                    first.problem.A, first.problem.b, sol.z, first.problem.n_zero, first.problem.n_lin):
+                continue
+            certified += 1
+            contact, gap = farkas_decisions(first, np.asarray(sol.z))
+            assert not (contact & ~masks[0]).any() and not (gap & ~masks[1]).any()
+            smaller += int(contact.sum() + gap.sum() < masks[0].sum() + masks[1].sum())
+            c_bits = int(sum(1 << int(i) for i in contact.nonzero()[0]))
+            g_bits = int(sum(1 << int(i) for i in gap.nonzero()[0]))
+            assert not [b for b in feasible if b & c_bits == c_bits and (full & ~b) & g_bits == g_bits]
+            # the gap decisions the check kept, dropped unchecked: a feasible pattern is pruned
+            unchecked_wrong += bool(gap.any()) and any(b & c_bits == c_bits for b in feasible)
+            for _ in range(3):                    # other partial patterns keeping the decisions
+                zu, zr = contact.copy(), gap.copy()
+                state = rng.integers(0, 3, m)
+                zu |= (state == 1) & ~gap
+                zr |= (state == 2) & ~zu
+                if (~zr).any():
+                    assert decide(pattern_rows(p, m, zu, zr), mu).status == Status.INFEASIBLE
+    assert certified >= 25 and smaller >= 10 and unchecked_wrong >= 1, (certified, smaller, unchecked_wrong)
