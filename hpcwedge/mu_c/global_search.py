@@ -34,6 +34,12 @@ MILP_STEPS = (1e-2, 1e-4, 1e-6)
 #: (87 s; 1e-2: 4.5 s). Fewer, longer steps also mean fewer dives and mu^c computations:
 #: random 3D bodies, m = 7, 2,934 tree nodes at 1e-5, 2,725 at 1e-2
 TREE_STEP = 1e-2
+#: tree route: a dive below an incumbent gets STEP_DIVE_NODES * m + 1 tree nodes; when they run
+#: out the bracket ends and the settling tree (complete at best (1 + 1e-9)) takes over, so the
+#: budget sets the work, not the answer. The last dive finds nothing, and unbudgeted it
+#: explored nearly the settling tree's nodes again (curved neck 4 x 8: 2,811 nodes beside the
+#: settling tree's 3,393; 6 x 8: 24,077)
+STEP_DIVE_NODES = 4
 #: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
 DIVE_NODES = 2
 #: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
@@ -191,27 +197,34 @@ class GlobalSearch:
             return None, "none_at_any_mu"
         return self._tree_steps(stats, pattern_of, None, mu_max)
 
-    def _first_leaf(self, stats: BnBStats, mu: float, friction: bool = True):
-        """The masks of the first feasible leaf of the tree at mu (None: none); TaskCancelled
-        when the engine stops the dive."""
+    def _first_leaf(self, stats: BnBStats, mu: float, friction: bool = True, budget: int | None = None):
+        """The masks of the first feasible leaf of the tree at mu (None: none; "spent": none
+        in `budget` tree nodes, None: no budget); TaskCancelled when the engine stops the dive."""
         # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
         tree = PatternTree(self.param, self.m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS)
-        out = tree.explore(Subtree(0), first_only=True)
+        out = tree.explore(Subtree(0), budget=budget, first_only=True)
         stats.add(out.stats)
         if out.stopped:                   # the engine is stopping: no answer from this dive
             raise TaskCancelled()
-        return out.found[0].masks(m=self.m) if out.found else None
+        if out.found:
+            return out.found[0].masks(m=self.m)
+        return "spent" if out.open else None
 
     def _tree_steps(self, stats: BnBStats, pattern_of: dict, best: float | None, bound: float):
-        """The tree route's steps from (best, bound): a dive at bound, the certified mu^c of
-        its leaf, the next bound best (1 - TREE_STEP); a Continuation when pausing (bracket)."""
+        """The tree route's steps from (best, bound): a dive at bound (below an incumbent:
+        STEP_DIVE_NODES * m + 1 tree nodes at most), the certified mu^c of its leaf, the next
+        bound best (1 - TREE_STEP); a Continuation when pausing (bracket)."""
         solve = partial(_recorded, self.solve, pattern_of)
+        budget = None if best is None else STEP_DIVE_NODES * self.m + 1
         while True:
             state = _step_state(stats, pattern_of, best, bound, self.m)
             if task_pausing():
                 return Continuation(state)
             try:
-                leaf = self._first_leaf(stats, bound)
+                leaf = self._first_leaf(stats, bound, budget=budget)
+                if isinstance(leaf, str):
+                    count(stats.statuses, "step_dive_spent")
+                    break
                 r = None if leaf is None else solve(*leaf, mu_hi=bound)
             except TaskCancelled:
                 return Continuation(state)
@@ -220,7 +233,7 @@ class GlobalSearch:
             _absorb(stats, r)
             if r.mu_c is None or (best is not None and r.mu_c >= best):
                 break
-            best = r.mu_c
+            best, budget = r.mu_c, STEP_DIVE_NODES * self.m + 1
             bound = best * (1 - TREE_STEP)
         return (None, "none_up_to_mu_max") if best is None else (best, "settle")
 
