@@ -40,6 +40,10 @@ TREE_STEP = 1e-2
 #: explored nearly the settling tree's nodes again (curved neck 4 x 8: 2,811 nodes beside the
 #: settling tree's 3,393; 6 x 8: 24,077)
 STEP_DIVE_NODES = 4
+#: tree route: the 3D trees' branching rule (PatternTree's branch): on the node of largest relaxed
+#: r_n, whose gap child fails first near mu^c (the settling tree of curved neck 4 x 8: 1,945
+#: nodes instead of 3,393 by the enumeration's rule)
+TREE_BRANCH = "reaction"
 #: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
 DIVE_NODES = 2
 #: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
@@ -58,8 +62,10 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     representatives). scale: passed to mu_critical (2D balanced coordinates).
 
     Two stages. The bracket: an upper value `best` (the certified mu^c of a pattern) with no
-    pattern feasible below best (1 - TREE_STEP), found by
-      route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D);
+    pattern feasible below best (1 - TREE_STEP) (tree route: or a dive below best spent its
+    STEP_DIVE_NODES * m + 1 nodes), found by
+      route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D;
+        3D trees branch by TREE_BRANCH);
       route "milp" (2D; 3D runs the tree): `global_bracket_milp`, per step a short dive of
         the tree and, where it does not settle the step, one MILP (HiGHS); each pattern
         it returns checked by our LP and its mu^c computed by our certified route; any doubt
@@ -127,7 +133,7 @@ def settled(search: GlobalSearch, best: float, stats: BnBStats, pattern_of: dict
     pattern_of[value] = the pattern of every value computed."""
     param, m = search.param, search.m
     top = best * (1 + 1e-9)
-    make_tree = partial(PatternTree, param, m, symmetry=search.symmetry, options=DEFAULT_OPTIONS)
+    make_tree = partial(PatternTree, param, m, symmetry=search.symmetry, options=DEFAULT_OPTIONS, branch=TREE_BRANCH)
     pats = run_patterns(make_tree, [top], engine=engine, budget=budget, name="global_patterns")
     c = pats.counters
     for k in STAT_KEYS:
@@ -201,7 +207,8 @@ class GlobalSearch:
         """The masks of the first feasible leaf of the tree at mu (None: none; "spent": none
         in `budget` tree nodes, None: no budget); TaskCancelled when the engine stops the dive."""
         # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
-        tree = PatternTree(self.param, self.m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS)
+        tree = PatternTree(self.param, self.m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS,
+                           branch=TREE_BRANCH)
         out = tree.explore(Subtree(0), budget=budget, first_only=True)
         stats.add(out.stats)
         if out.stopped:                   # the engine is stopping: no answer from this dive
