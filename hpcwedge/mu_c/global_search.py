@@ -191,6 +191,8 @@ class GlobalSearch:
             best = resume["best"]
             if best is not None:
                 pattern_of[best] = (np.array(resume["zero_u"], dtype=bool), np.array(resume["zero_r"], dtype=bool))
+            if resume["bound"] is None:            # the steps found none up to mu_max
+                return self._at_any_mu(stats, pattern_of)
             return self._tree_steps(stats, pattern_of, best, resume["bound"])
         param, m, mu_max = self.param, self.m, self.mu_max
         if (self.route == "milp" or (self.route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
@@ -199,9 +201,17 @@ class GlobalSearch:
             if best is not None:
                 return best, "found"
         stats.extra["route"] = "tree"
-        if self._first_leaf(stats, np.inf, friction=False) is None:
-            return None, "none_at_any_mu"
         return self._tree_steps(stats, pattern_of, None, mu_max)
+
+    def _at_any_mu(self, stats: BnBStats, pattern_of: dict):
+        """The outcome when no pattern is feasible up to mu_max: "none_at_any_mu" when the tree
+        with r_t free has no leaf either, else "none_up_to_mu_max" (asked only then: a wedge
+        at mu_max is one at every larger mu); a Continuation when the engine stops its dive."""
+        try:
+            leaf = self._first_leaf(stats, np.inf, friction=False)
+        except TaskCancelled:
+            return Continuation(_step_state(stats, pattern_of, None, None, self.m))
+        return None, "none_at_any_mu" if leaf is None else "none_up_to_mu_max"
 
     def _first_leaf(self, stats: BnBStats, mu: float, friction: bool = True, budget: int | None = None):
         """The masks of the first feasible leaf of the tree at mu (None: none; "spent": none
@@ -242,12 +252,13 @@ class GlobalSearch:
                 break
             best, budget = r.mu_c, STEP_DIVE_NODES * self.m + 1
             bound = best * (1 - TREE_STEP)
-        return (None, "none_up_to_mu_max") if best is None else (best, "settle")
+        return self._at_any_mu(stats, pattern_of) if best is None else (best, "settle")
 
 
-def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: float, m: int) -> dict:
+def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: float | None, m: int) -> dict:
     """The bracket's state before a step (JSON data, a Continuation's payload): best, its
-    pattern (zero_u, zero_r lists; all False without one), bound and the counts so far."""
+    pattern (zero_u, zero_r lists; all False without one), bound (None: no pattern up to
+    mu_max, the dive with r_t free is next) and the counts so far."""
     none = [False] * m
     zu, zr = pattern_of.get(best, (none, none))
     return {"best": best, "bound": bound, "zero_u": [bool(v) for v in zu], "zero_r": [bool(v) for v in zr],

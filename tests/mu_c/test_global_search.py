@@ -219,3 +219,24 @@ def test_3d_global_mu_c_is_the_brute_force_least_for_every_step_dive_budget(monk
         spent.append(st.statuses.get("step_dive_spent", 0))
     # cut at once, a dive below the incumbent is spent unless its root fails (random 3d-6 does)
     assert spent[2] == 0 and spent[0] <= 1 and (spent[0] == 1 or not body.startswith("neck"))
+
+
+def test_no_wedge_up_to_mu_max_is_told_from_none_at_any_mu_and_resumes_between():
+    """3D tree route: plug3d 2 x 5 (mu^c = tan 10 deg) searched up to mu_max = 0.1 has no
+    wedge there but one with r_t free ("none_up_to_mu_max"); a single uncoupled node has none
+    at all ("none_at_any_mu"). The dive with r_t free follows the dive at mu_max that found
+    nothing; a bracket resumed between the two (a Continuation's payload, bound None) ends
+    with the uninterrupted bracket's outcome and counts."""
+    from hpcwedge.contact.problem import ContactProblem
+    from hpcwedge.mu_c.global_search import GlobalSearch, _counts_json, _step_state
+    single = parametrize(ContactProblem(3, np.diag([2.0, 1.0, 3.0]), np.zeros((3, 0))))
+    for (p, m), want in ((plug3d_param(2, 5), "none_up_to_mu_max"), ((single, 1), "none_at_any_mu")):
+        assert global_mu_critical(p, m, 0.1) == (None, want)
+        search = GlobalSearch(p, m, 0.1, "accurate", 1e-6, None, None, "auto")
+        whole = BnBStats()
+        assert search.bracket(whole, {}) == (None, want)
+        before = BnBStats(extra={"route": "tree"})
+        assert search._first_leaf(before, 0.1) is None
+        resumed = BnBStats()
+        assert search.bracket(resumed, {}, resume=_step_state(before, {}, None, None, m)) == (None, want)
+        assert _counts_json(resumed) == _counts_json(whole) and whole.nodes > before.nodes > 0
