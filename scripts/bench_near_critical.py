@@ -2,7 +2,7 @@
 """The 3D search near mu^c and on bodies where elasticity sets mu^c (issue 41): counts and times.
 
     PYTHONPATH=. python scripts/bench_near_critical.py [--quick] [--limit 300] [--label after]
-                                                       [--out results/bench_near_critical]
+                                                       [--only enumerate|global] [--out results/bench_near_critical]
 
 Every row is one `hpcwedge run` route (pipeline.run_scene) in its own process
 (bench_2d.run_script, killed at --limit seconds: status "timeout"), serial, `run.symmetry = false`:
@@ -12,7 +12,8 @@ Every row is one `hpcwedge run` route (pipeline.run_scene) in its own process
   global     the global mu^c (`enumerate = false`, `mu_c = "global"`) of tests/instances.py's
              curved_neck LEVELS x RING (seed 0: a flaring neck, random bar stiffness, jittered
              ring; elasticity sets its mu^c: 0.37 at m = 32, 7x tan 3 deg, the wall's angle at
-             its foot): 4 x 8, 6 x 8, 8 x 8 (m = 32, 48, 64): seconds, nodes, SOCPs, mu^c, certified (no undecided solve, every pattern's
+             its foot): 4 x 8, 6 x 8, 8 x 8 (m = 32, 48, 64): seconds, nodes, SOCPs, bound solves (the
+             certified lower bound's conic programs), mu^c, certified (no undecided solve, every pattern's
              mu^c polished, none unsettled)
 An enumeration cut by --limit is run once more as `probe` (the same tree, PatternTree with
 `hpcwedge run`'s options, explored in budgets of PROBE_BUDGET nodes until 0.8 * --limit wall
@@ -78,6 +79,7 @@ def worker(task: str, levels: int, ring: int, mu: float) -> dict:
         out["contact_sets"] = sorted(len(p.contact) for p in pats)[:8]
     else:
         out["mu_c"] = res.mu_c
+        out["bound_solves"] = bnb.get("bound_solves")
         out["certified"] = (bnb.get("undecided") == 0 and bnb.get("unsettled", 0) == 0
                             and res.stats.get("mu_c_unpolished", 0) == 0)
     return out
@@ -112,6 +114,7 @@ def main() -> None:
     ap.add_argument("--limit", type=float, default=300.0, help="seconds per run")
     ap.add_argument("--label", default="current", help="tag of this run's rows")
     ap.add_argument("--probe-only", action="store_true", help="only the probes of the enumerations beyond m = 32")
+    ap.add_argument("--only", choices=("enumerate", "global"), help="only the rows of this task")
     ap.add_argument("--out", default=os.path.join(bench_2d.ROOT, "results", "bench_near_critical"))
     ap.add_argument("--worker", nargs=4, metavar=("TASK", "LEVELS", "RING", "MU"), help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -124,6 +127,8 @@ def main() -> None:
     plan += [("global", lv, rg, 0.0) for lv, rg in GLOBAL[:1 if args.quick else None]]
     if args.probe_only:
         plan = [("probe", lv, rg, mu) for lv, rg, mu in ENUMERATE[1:]]
+    if args.only:
+        plan = [row for row in plan if row[0] == args.only]
     records = _previous(args.out)
     for task, levels, ring, mu in plan:
         rec = _run(args, records, task, levels, ring, mu)
@@ -161,14 +166,15 @@ def _previous(out: str) -> list[dict]:
 
 
 def line(r: dict) -> str:
-    keys = ("mu", "finished", "patterns", "nodes", "socps", "socps_per_pattern", "lps", "undecided", "mu_c",
-            "certified", "seconds")
+    keys = ("mu", "finished", "patterns", "nodes", "socps", "socps_per_pattern", "lps", "bound_solves", "undecided",
+            "mu_c", "certified", "seconds")
     return f"{r['label']:8s} {r['task']:9s} {r['body']:8s} m={r['m']:3d} {r['status']:7s} {bench_2d.fields(r, keys, 6)}"
 
 
 #: the CSV's columns
 COLUMNS = ["label", "task", "body", "levels", "ring", "m", "mu", "status", "patterns", "nodes", "socps", "skipped",
-           "socps_per_pattern", "lps", "undecided", "finished", "mu_c", "certified", "seconds", "wall"]
+           "socps_per_pattern", "lps", "bound_solves", "undecided", "finished", "mu_c", "certified", "seconds",
+           "wall"]
 
 
 if __name__ == "__main__":

@@ -36,6 +36,16 @@ MILP_STEPS = (1e-2, 1e-4, 1e-6)
 #: (87 s; 1e-2: 4.5 s). Fewer, longer steps also mean fewer dives and mu^c computations:
 #: random 3D bodies, m = 7, 2,934 tree nodes at 1e-5, 2,725 at 1e-2
 TREE_STEP = 1e-2
+#: tree route: a dive below an incumbent gets STEP_DIVE_NODES * m + 1 tree nodes; when they run
+#: out the bracket ends and the settling tree (complete at best (1 + 1e-9)) takes over, so the
+#: budget sets the work, not the answer. The last dive finds nothing, and unbudgeted it
+#: explored nearly the settling tree's nodes again (curved neck 4 x 8: 2,811 nodes beside the
+#: settling tree's 3,393; 6 x 8: 24,077)
+STEP_DIVE_NODES = 4
+#: tree route: the 3D trees' branching rule (PatternTree's branch): on the node of largest relaxed
+#: r_n, whose gap child fails first near mu^c (the settling tree of curved neck 4 x 8: 1,945
+#: nodes instead of 3,393 by the enumeration's rule)
+TREE_BRANCH = "reaction"
 #: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
 DIVE_NODES = 2
 #: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
@@ -54,8 +64,10 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     representatives). scale: passed to mu_critical (2D balanced coordinates).
 
     Two stages. The bracket: an upper value `best` (the certified mu^c of a pattern) with no
-    pattern feasible below best (1 - TREE_STEP), found by
-      route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D);
+    pattern feasible below best (1 - TREE_STEP) (tree route: or a dive below best spent its
+    STEP_DIVE_NODES * m + 1 nodes), found by
+      route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D;
+        3D trees branch by TREE_BRANCH);
       route "milp" (2D; 3D runs the tree): `global_bracket_milp`, per step a short dive of
         the tree and, where it does not settle the step, one MILP (HiGHS); each pattern
         it returns checked by our LP and its mu^c computed by our certified route; any doubt
@@ -145,7 +157,7 @@ def settled(search: GlobalSearch, best: float, stats: BnBStats, pattern_of: dict
     pattern_of[value] = the pattern of every value computed."""
     param, m = search.param, search.m
     top = best * (1 + 1e-9)
-    make_tree = partial(PatternTree, param, m, symmetry=search.symmetry, options=DEFAULT_OPTIONS)
+    make_tree = partial(PatternTree, param, m, symmetry=search.symmetry, options=DEFAULT_OPTIONS, branch=TREE_BRANCH)
     pats = run_patterns(make_tree, [top], engine=engine, budget=budget, name="global_patterns")
     c = pats.counters
     for k in STAT_KEYS:
@@ -203,6 +215,8 @@ class GlobalSearch:
             best = resume["best"]
             if best is not None:
                 pattern_of[best] = (np.array(resume["zero_u"], dtype=bool), np.array(resume["zero_r"], dtype=bool))
+            if resume["bound"] is None:            # the steps found none up to mu_max
+                return self._at_any_mu(stats, pattern_of)
             return self._tree_steps(stats, pattern_of, best, resume["bound"])
         param, m, mu_max = self.param, self.m, self.mu_max
         if (self.route == "milp" or (self.route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
@@ -211,31 +225,47 @@ class GlobalSearch:
             if best is not None:
                 return best, "found"
         stats.extra["route"] = "tree"
-        if self._first_leaf(stats, np.inf, friction=False) is None:
-            return None, "none_at_any_mu"
         return self._tree_steps(stats, pattern_of, None, mu_max)
 
-    def _first_leaf(self, stats: BnBStats, mu: float, friction: bool = True):
-        """The masks of the first feasible leaf of the tree at mu (None: none); TaskCancelled
-        when the engine stops the dive."""
+    def _at_any_mu(self, stats: BnBStats, pattern_of: dict):
+        """The outcome when no pattern is feasible up to mu_max: "none_at_any_mu" when the tree
+        with r_t free has no leaf either, else "none_up_to_mu_max" (asked only then: a wedge
+        at mu_max is one at every larger mu); a Continuation when the engine stops its dive."""
+        try:
+            leaf = self._first_leaf(stats, np.inf, friction=False)
+        except TaskCancelled:
+            return Continuation(_step_state(stats, pattern_of, None, None, self.m))
+        return None, "none_at_any_mu" if leaf is None else "none_up_to_mu_max"
+
+    def _first_leaf(self, stats: BnBStats, mu: float, friction: bool = True, budget: int | None = None):
+        """The masks of the first feasible leaf of the tree at mu (None: none; "spent": none
+        in `budget` tree nodes, None: no budget); TaskCancelled when the engine stops the dive."""
         # Clarabel's own steps: every tree solve here lies near mu^c (socp module doc)
-        tree = PatternTree(self.param, self.m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS)
-        out = tree.explore(Subtree(0), first_only=True)
+        tree = PatternTree(self.param, self.m, mu, friction, symmetry=self.symmetry, options=DEFAULT_OPTIONS,
+                           branch=TREE_BRANCH)
+        out = tree.explore(Subtree(0), budget=budget, first_only=True)
         stats.add(out.stats)
         if out.stopped:                   # the engine is stopping: no answer from this dive
             raise TaskCancelled()
-        return out.found[0].masks(m=self.m) if out.found else None
+        if out.found:
+            return out.found[0].masks(m=self.m)
+        return "spent" if out.open else None
 
     def _tree_steps(self, stats: BnBStats, pattern_of: dict, best: float | None, bound: float):
-        """The tree route's steps from (best, bound): a dive at bound, the certified mu^c of
-        its leaf, the next bound best (1 - TREE_STEP); a Continuation when pausing (bracket)."""
+        """The tree route's steps from (best, bound): a dive at bound (below an incumbent:
+        STEP_DIVE_NODES * m + 1 tree nodes at most), the certified mu^c of its leaf, the next
+        bound best (1 - TREE_STEP); a Continuation when pausing (bracket)."""
         solve = partial(_recorded, self.solve, pattern_of)
+        budget = None if best is None else STEP_DIVE_NODES * self.m + 1
         while True:
             state = _step_state(stats, pattern_of, best, bound, self.m)
             if task_pausing():
                 return Continuation(state)
             try:
-                leaf = self._first_leaf(stats, bound)
+                leaf = self._first_leaf(stats, bound, budget=budget)
+                if isinstance(leaf, str):
+                    count(stats.statuses, "step_dive_spent")
+                    break
                 r = None if leaf is None else solve(*leaf, mu_hi=bound)
             except TaskCancelled:
                 return Continuation(state)
@@ -244,14 +274,15 @@ class GlobalSearch:
             _absorb(stats, r)
             if r.mu_c is None or (best is not None and r.mu_c >= best):
                 break
-            best = r.mu_c
+            best, budget = r.mu_c, STEP_DIVE_NODES * self.m + 1
             bound = best * (1 - TREE_STEP)
-        return (None, "none_up_to_mu_max") if best is None else (best, "settle")
+        return self._at_any_mu(stats, pattern_of) if best is None else (best, "settle")
 
 
-def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: float, m: int) -> dict:
+def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: float | None, m: int) -> dict:
     """The bracket's state before a step (JSON data, a Continuation's payload): best, its
-    pattern (zero_u, zero_r lists; all False without one), bound and the counts so far."""
+    pattern (zero_u, zero_r lists; all False without one), bound (None: no pattern up to
+    mu_max, the dive with r_t free is next) and the counts so far."""
     none = [False] * m
     zu, zr = pattern_of.get(best, (none, none))
     return {"best": best, "bound": bound, "zero_u": [bool(v) for v in zu], "zero_r": [bool(v) for v in zr],

@@ -176,3 +176,67 @@ def test_global_search_is_the_same_for_every_split_into_tasks(body):
     assert seen[0][1] == "found"
     assert abs(seen[0][0] - math.tan(math.radians(10))) <= 1e-12
     assert seen[0] == seen[1] == seen[2]
+
+
+def _brute_global(p, m: int, mu_max: float) -> float:
+    """The least certified mu^c over the feasible full patterns at mu_max, every partition
+    tried (reference.brute_force_patterns: 2^m SOCPs)."""
+    from instances import brute_3d
+    values = []
+    for bits in brute_3d(p, m, mu_max):
+        zu = np.array([bool(bits >> i & 1) for i in range(m)])
+        values.append(mu_critical(p, m, zu, ~zu, mu_hi=mu_max).mu_c)
+    return min(v for v in values if v is not None)
+
+
+@pytest.mark.parametrize("body", ["neck-2x5-s0", "neck-3x3-s1", "random3d-6", "random3d-7"])
+def test_3d_global_mu_c_is_the_brute_force_least_for_every_step_dive_budget(monkeypatch, body):
+    """3D tree route on bodies where elasticity sets mu^c (curved necks, m = 9, 10) and random
+    free bodies (m = 6, 7): the global mu^c is the least certified mu^c of the brute force's
+    patterns, to 1e-9, whether the dives below the incumbent are cut at once
+    (STEP_DIVE_NODES = 0: the settling tree starts from the first pattern's value), get the
+    default budget, or none (the bracket's steps to the end); no value unsettled. (Undecided
+    tree solves, kept as feasible, occur on neck 3 x 3 in the dives at every budget.)"""
+    from instances import curved_neck, random_problem_3d, scene_param
+
+    import hpcwedge.mu_c.global_search as gs
+    if body.startswith("neck"):
+        shape, seed = body.split("-")[1:]
+        levels, ring = map(int, shape.split("x"))
+        p, m = scene_param(curved_neck(levels, ring, int(seed[1:])))
+    else:
+        m = int(body.split("-")[1])
+        p = parametrize(random_problem_3d(np.random.default_rng(m), m, free=True))
+    mu_max = 5.0
+    want = _brute_global(p, m, mu_max)
+    spent = []
+    for nodes in (0, gs.STEP_DIVE_NODES, 10**6):
+        monkeypatch.setattr(gs, "STEP_DIVE_NODES", nodes)
+        st = BnBStats()
+        mu, status = global_mu_critical(p, m, mu_max, stats=st, bound=False)
+        assert status == "found" and abs(mu - want) <= 1e-9 * want, (nodes, mu, want)
+        assert st.extra.get("mu_c_unsettled", 0) == 0
+        spent.append(st.statuses.get("step_dive_spent", 0))
+    # cut at once, a dive below the incumbent is spent unless its root fails (random 3d-6 does)
+    assert spent[2] == 0 and spent[0] <= 1 and (spent[0] == 1 or not body.startswith("neck"))
+
+
+def test_no_wedge_up_to_mu_max_is_told_from_none_at_any_mu_and_resumes_between():
+    """3D tree route: plug3d 2 x 5 (mu^c = tan 10 deg) searched up to mu_max = 0.1 has no
+    wedge there but one with r_t free ("none_up_to_mu_max"); a single uncoupled node has none
+    at all ("none_at_any_mu"). The dive with r_t free follows the dive at mu_max that found
+    nothing; a bracket resumed between the two (a Continuation's payload, bound None) ends
+    with the uninterrupted bracket's outcome and counts."""
+    from hpcwedge.contact.problem import ContactProblem
+    from hpcwedge.mu_c.global_search import GlobalSearch, _counts_json, _step_state
+    single = parametrize(ContactProblem(3, np.diag([2.0, 1.0, 3.0]), np.zeros((3, 0))))
+    for (p, m), want in ((plug3d_param(2, 5), "none_up_to_mu_max"), ((single, 1), "none_at_any_mu")):
+        assert global_mu_critical(p, m, 0.1) == (None, want)
+        search = GlobalSearch(p, m, 0.1, "accurate", 1e-6, None, None, "auto")
+        whole = BnBStats()
+        assert search.bracket(whole, {}) == (None, want)
+        before = BnBStats(extra={"route": "tree"})
+        assert search._first_leaf(before, 0.1) is None
+        resumed = BnBStats()
+        assert search.bracket(resumed, {}, resume=_step_state(before, {}, None, None, m)) == (None, want)
+        assert _counts_json(resumed) == _counts_json(whole) and whole.nodes > before.nodes > 0
