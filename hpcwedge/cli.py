@@ -20,7 +20,8 @@ import sys
 from hpcwedge.errors import Interrupted, UserError
 
 #: stop signals received before the run's handlers were in (main -> run_batch)
-_EARLY_STOP: list = []
+#: SIGUSR1/SIGTERM received before the run's own handlers are in, replayed by run_batch
+EARLY_SIGNALS: list = []
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,13 +32,13 @@ def main(argv: list[str] | None = None) -> int:
     from hpcwedge.environment import set_thread_variables
     set_thread_variables()          # the thread policy (environment.py), before numpy loads
     # a checkpoint request (SIGUSR1, forwarded by mpirun to every rank) that arrives
-    # during start-up must not kill a rank: ignored until the master's handler is in
+    # during start-up must not kill a rank: kept for the master's handler (run_batch)
     import threading
     main_thread = threading.current_thread() is threading.main_thread()
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT)
              } if main_thread and argv is not None else {}
     if main_thread:
-        signal.signal(signal.SIGUSR1, signal.SIG_IGN)
+        signal.signal(signal.SIGUSR1, lambda signum, frame: EARLY_SIGNALS.append(signum))
     stderr = sys.stderr
     sys.stderr = _Stderr(stderr)
     parser = _parser()
@@ -46,6 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
+        EARLY_SIGNALS.clear()
         if argv is not None:
             sys.stderr = stderr
     if code == 75 and argv is None and "mpi4py.MPI" not in sys.modules:
@@ -122,7 +124,7 @@ def _command(parser: argparse.ArgumentParser, argv: list[str] | None, main_threa
         if main_thread and args.cmd == "run":
             # a stop signal before the run's own handlers are in (imports: ~0.4 s) is kept
             # for them (run_batch), not the default death with status 143 and no word
-            signal.signal(signal.SIGTERM, lambda signum, frame: _EARLY_STOP.append(signum))
+            signal.signal(signal.SIGTERM, lambda signum, frame: EARLY_SIGNALS.append(signum))
         return {"run": _run, "show": _show, "plot": _plot, "export": _export}[args.cmd](args)
     except UserError as e:                      # a scene key, a file, an index, a launch
         return _error(str(e), 2)
@@ -220,7 +222,7 @@ def _to_devnull(stream) -> None:
 def _run(args) -> int:
     """hpcwedge run: one batch run (run/batch.py)."""
     from hpcwedge.run.batch import run_batch
-    return run_batch(args.scene, args.output, resume=args.resume, quiet=args.quiet, early_stops=_EARLY_STOP)
+    return run_batch(args.scene, args.output, resume=args.resume, quiet=args.quiet, early_stops=EARLY_SIGNALS)
 
 
 def _read(path: str, with_rays: bool = True):

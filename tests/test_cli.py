@@ -869,6 +869,29 @@ def test_sigterm_before_the_runs_handlers_are_in(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ["s.toml"]
 
 
+
+def test_sigusr1_before_the_runs_handlers_are_in(tmp_path):
+    """A real SIGUSR1 while `run` starts up (before the engine's handlers are in) is kept:
+    the run goes on, ends with exit 0, and its first checkpoint is the one asked for
+    (before: ignored, last_checkpoint_reason ''); `python -m hpcwedge` keeps one that comes
+    while its modules load the same way (hpcwedge/__main__.py)."""
+    scene = write(tmp_path, _t(PLUG))
+    out = str(tmp_path / "r.h5")
+    code = ("import os, signal, sys\n"
+            "from hpcwedge import cli\n"
+            "from hpcwedge.parallel.engine import Engine\n"
+            "install = Engine.install_signals\n"
+            "def early(self):\n"
+            "    os.kill(os.getpid(), signal.SIGUSR1)\n"
+            "    install(self)\n"
+            "Engine.install_signals = early\n"
+            "sys.exit(cli.main())\n")
+    p = subprocess.run([sys.executable, "-c", code, "run", scene, "-o", out, "-q"], env=env(), capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    from hpcwedge.results.hdf5 import read_result
+    assert read_result(out).stats["parallel"]["last_checkpoint_reason"] == "SIGUSR1"
+
 # ----------------------------------------------------------------------------- a new user's first hour (issue 44)
 
 def _cli(cwd, *args, timeout=600):

@@ -24,6 +24,7 @@ every way out the engine is closed and the lock released.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import time
 
@@ -55,8 +56,8 @@ def run_batch(scene_path: str, output: str, resume: bool = False, quiet: bool = 
     this scene with --resume), EXIT_INTERRUPTED (stopped by a signal; the checkpoint written
     when there was work to save). Raises UserError for a failure the user can fix. resume:
     continue from the checkpoint OUTPUT.ckpt if there is one; quiet: no progress on stderr;
-    early_stops: stop signals received before the call, the last acted on (taken from the
-    list) once the handlers are in."""
+    early_stops: SIGUSR1 and stop signals received before the call, acted on (and taken
+    from the list) once the handlers are in (replay_early)."""
     comm = world()
     if comm is not None and comm.rank != 0:
         sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
@@ -99,6 +100,17 @@ def condense_on_ranks(scene: Scene | None, comm) -> Condensed | None:
     return Condensed(model, problem, time.perf_counter() - t) if comm.rank == 0 else None
 
 
+def replay_early(engine: Engine, early: list[int]) -> None:
+    """Signals received before the handlers were in, acted on now (and taken from `early`):
+    a SIGUSR1 asks for a checkpoint; of the stops, the last is acted on (it raises)."""
+    if signal.SIGUSR1 in early:
+        engine.signals.replay(signal.SIGUSR1)
+    stops = [s for s in early if s != signal.SIGUSR1]
+    early.clear()
+    if stops:
+        engine.signals.replay(stops[-1])
+
+
 class Batch:
     """The master's side of one batch run: its engine (serial when comm is None), progress,
     output file, checkpoint path and lock."""
@@ -116,8 +128,7 @@ class Batch:
         engine.install_signals()
         try:
             try:
-                if early_stops:
-                    engine.signals.replay(early_stops.pop())
+                replay_early(engine, early_stops)
                 # an error up to the collective start-up ends an mpirun job by MPI_Abort (cli)
                 scene = self.load(scene_path)
                 if not self.start(scene):
