@@ -36,12 +36,14 @@ MILP_STEPS = (1e-2, 1e-4, 1e-6)
 #: (87 s; 1e-2: 4.5 s). Fewer, longer steps also mean fewer dives and mu^c computations:
 #: random 3D bodies, m = 7, 2,934 tree nodes at 1e-5, 2,725 at 1e-2
 TREE_STEP = 1e-2
-#: tree route: a dive below an incumbent gets STEP_DIVE_NODES * m + 1 tree nodes; when they run
-#: out the bracket ends and the settling tree (complete at best (1 + 1e-9)) takes over, so the
-#: budget sets the work, not the answer. The last dive finds nothing, and unbudgeted it
-#: explored nearly the settling tree's nodes again (curved neck 4 x 8: 2,811 nodes beside the
-#: settling tree's 3,393; 6 x 8: 24,077)
-STEP_DIVE_NODES = 4
+#: tree route: a dive below an incumbent gets STEP_DIVE_FACTOR * max(n, m) + 1 tree nodes, n
+#: the longest dive that found a leaf so far; when they run out the bracket ends and the
+#: settling tree (complete at best (1 + 1e-9)) takes over, so the budget sets the work, not the
+#: answer. The last dive finds nothing, and unbudgeted it explored nearly the settling tree's
+#: nodes again (curved neck 4 x 8: 2,811 nodes beside the settling tree's 3,393; 6 x 8:
+#: 24,077); a fixed 4 m + 1 cut dives that would have found a leaf (plug3d 3 x 5 at a 0 deg
+#: taper: 235, 224, 239 and 616 nodes, m = 15) and left the settling tree many more patterns
+STEP_DIVE_FACTOR = 4
 #: tree route: the 3D trees' branching rule (PatternTree's branch): on the node of largest relaxed
 #: r_n, whose gap child fails first near mu^c (the settling tree of curved neck 4 x 8: 1,945
 #: nodes instead of 3,393 by the enumeration's rule)
@@ -65,7 +67,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
 
     Two stages. The bracket: an upper value `best` (the certified mu^c of a pattern) with no
     pattern feasible below best (1 - TREE_STEP) (tree route: or a dive below best spent its
-    STEP_DIVE_NODES * m + 1 nodes), found by
+    budget, STEP_DIVE_FACTOR), found by
       route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D;
         3D trees branch by TREE_BRANCH);
       route "milp" (2D; 3D runs the tree): `global_bracket_milp`, per step a short dive of
@@ -217,7 +219,7 @@ class GlobalSearch:
                 pattern_of[best] = (np.array(resume["zero_u"], dtype=bool), np.array(resume["zero_r"], dtype=bool))
             if resume["bound"] is None:            # the steps found none up to mu_max
                 return self._at_any_mu(stats, pattern_of)
-            return self._tree_steps(stats, pattern_of, best, resume["bound"])
+            return self._tree_steps(stats, pattern_of, best, resume["bound"], resume.get("longest", 0))
         param, m, mu_max = self.param, self.m, self.mu_max
         if (self.route == "milp" or (self.route == "auto" and m >= MILP_FROM_M)) and problem_dim(param, m) == 2:
             best = global_bracket_milp(param, m, mu_max, partial(_recorded, self.solve, pattern_of), stats,
@@ -251,21 +253,24 @@ class GlobalSearch:
             return out.found[0].masks(m=self.m)
         return "spent" if out.open else None
 
-    def _tree_steps(self, stats: BnBStats, pattern_of: dict, best: float | None, bound: float):
+    def _tree_steps(self, stats: BnBStats, pattern_of: dict, best: float | None, bound: float, longest: int = 0):
         """The tree route's steps from (best, bound): a dive at bound (below an incumbent:
-        STEP_DIVE_NODES * m + 1 tree nodes at most), the certified mu^c of its leaf, the next
-        bound best (1 - TREE_STEP); a Continuation when pausing (bracket)."""
+        STEP_DIVE_FACTOR * max(longest, m) + 1 tree nodes at most, `longest` the most nodes a
+        dive that found a leaf took), the certified mu^c of its leaf, the next bound
+        best (1 - TREE_STEP); a Continuation when pausing (bracket)."""
         solve = partial(_recorded, self.solve, pattern_of)
-        budget = None if best is None else STEP_DIVE_NODES * self.m + 1
         while True:
-            state = _step_state(stats, pattern_of, best, bound, self.m)
+            state = _step_state(stats, pattern_of, best, bound, self.m, longest)
             if task_pausing():
                 return Continuation(state)
+            budget = None if best is None else STEP_DIVE_FACTOR * max(longest, self.m) + 1
             try:
+                before = stats.nodes
                 leaf = self._first_leaf(stats, bound, budget=budget)
                 if isinstance(leaf, str):
                     count(stats.statuses, "step_dive_spent")
                     break
+                longest = max(longest, stats.nodes - before) if leaf is not None else longest
                 r = None if leaf is None else solve(*leaf, mu_hi=bound)
             except TaskCancelled:
                 return Continuation(state)
@@ -274,18 +279,19 @@ class GlobalSearch:
             _absorb(stats, r)
             if r.mu_c is None or (best is not None and r.mu_c >= best):
                 break
-            best, budget = r.mu_c, STEP_DIVE_NODES * self.m + 1
-            bound = best * (1 - TREE_STEP)
+            best, bound = r.mu_c, r.mu_c * (1 - TREE_STEP)
         return self._at_any_mu(stats, pattern_of) if best is None else (best, "settle")
 
 
-def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: float | None, m: int) -> dict:
+def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: float | None, m: int,
+                longest: int = 0) -> dict:
     """The bracket's state before a step (JSON data, a Continuation's payload): best, its
     pattern (zero_u, zero_r lists; all False without one), bound (None: no pattern up to
-    mu_max, the dive with r_t free is next) and the counts so far."""
+    mu_max, the dive with r_t free is next), longest (_tree_steps') and the counts so far."""
     none = [False] * m
     zu, zr = pattern_of.get(best, (none, none))
-    return {"best": best, "bound": bound, "zero_u": [bool(v) for v in zu], "zero_r": [bool(v) for v in zr],
+    return {"best": best, "bound": bound, "longest": longest, "zero_u": [bool(v) for v in zu],
+            "zero_r": [bool(v) for v in zr],
             "stats": _counts_json(stats)}
 
 

@@ -194,7 +194,7 @@ def test_3d_global_mu_c_is_the_brute_force_least_for_every_step_dive_budget(monk
     """3D tree route on bodies where elasticity sets mu^c (curved necks, m = 9, 10) and random
     free bodies (m = 6, 7): the global mu^c is the least certified mu^c of the brute force's
     patterns, to 1e-9, whether the dives below the incumbent are cut at once
-    (STEP_DIVE_NODES = 0: the settling tree starts from the first pattern's value), get the
+    (STEP_DIVE_FACTOR = 0: the settling tree starts from the first pattern's value), get the
     default budget, or none (the bracket's steps to the end); no value unsettled. (Undecided
     tree solves, kept as feasible, occur on neck 3 x 3 in the dives at every budget.)"""
     from instances import curved_neck, random_problem_3d, scene_param
@@ -210,11 +210,11 @@ def test_3d_global_mu_c_is_the_brute_force_least_for_every_step_dive_budget(monk
     mu_max = 5.0
     want = _brute_global(p, m, mu_max)
     spent = []
-    for nodes in (0, gs.STEP_DIVE_NODES, 10**6):
-        monkeypatch.setattr(gs, "STEP_DIVE_NODES", nodes)
+    for factor in (0, gs.STEP_DIVE_FACTOR, 10**6):
+        monkeypatch.setattr(gs, "STEP_DIVE_FACTOR", factor)
         st = BnBStats()
         mu, status = global_mu_critical(p, m, mu_max, stats=st, bound=False)
-        assert status == "found" and abs(mu - want) <= 1e-9 * want, (nodes, mu, want)
+        assert status == "found" and abs(mu - want) <= 1e-9 * want, (factor, mu, want)
         assert st.extra.get("mu_c_unsettled", 0) == 0
         spent.append(st.statuses.get("step_dive_spent", 0))
     # cut at once, a dive below the incumbent is spent unless its root fails (random 3d-6 does)
