@@ -25,8 +25,7 @@ Issue 13's target (plug3d 4 x 6 without symmetry, patterns only, 2 workers >= 1.
 The global mu^c search alone (plug3d 4 x 8 without symmetry, m = 32; stats.bnb compared too):
     .venv/bin/python scripts/bench_parallel.py --levels 4 --ring 8 --mu 1.0 --mu-c global \
         --no-symmetry --workers 0 1 2 --repeat 2 --out results/bench_parallel_global
-Issue 41's target (the m = 128 global mu^c, `mpirun -n 3` >= 1.8x over 1 worker; its bracket's
-tasks: mu_c/global_tasks.py; the same split measured in CPU seconds: scripts/bench_global_split.py):
+Issue 41's target (the m = 128 global mu^c, `mpirun -n 3` >= 1.8x over 1 worker):
     .venv/bin/python scripts/bench_parallel.py --levels 8 --ring 16 --mu 0.1 --mu-c global \
         --no-symmetry --workers 0 1 2 --repeat 1 --out results/bench_parallel_global_8x16
 """

@@ -13,7 +13,6 @@ import numpy as np
 
 from hpcwedge.contact.problem import Parametrization
 from hpcwedge.mu_c.critical import MuC, add_counts, mu_critical, run_mu_c
-from hpcwedge.mu_c.global_tasks import DiveContext, split_bracket
 from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at
 from hpcwedge.parallel.cancel import Continuation, TaskCancelled, task_pausing, task_tick
 from hpcwedge.parallel.engine import Engine, run_tasks
@@ -92,10 +91,8 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     stats.extra["mu_c_unsettled"] the settled patterns whose mu^c no solve decided (the
     answer is certified when it is 0 and every value is polished).
 
-    The stages run as jobs of `engine` (in-process by default; the master under
-    mpirun): "global_bracket" (one task: the bracket; in 3D beside the first tree nodes of its
-    frictionless dive, whose later ones are jobs "global_dive_<k>": global_tasks.py),
-    "global_patterns" (the settling tree
+    The stages run as three jobs of `engine` (in-process by default; the master under
+    mpirun): "global_bracket" (one task: the bracket), "global_patterns" (the settling tree
     as budgeted subtree tasks of `budget` nodes, shared by the workers) and "global_mu_c"
     (one mu^c task per pattern it found). A stop keeps the finished jobs and the tree's
     open subtrees in the checkpoint; the answer and every count are the same for every
@@ -112,7 +109,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     stats = stats if stats is not None else BnBStats()
     engine = engine or Engine()
     search = GlobalSearch(param, m, mu_max, method, tol, symmetry, scale, route, bound)
-    got = run_bracket(search, engine)
+    got = run_tasks(bracket_task, search, [0], engine=engine, kind="global_bracket")[0]
     best = None if math.isnan(got["best"]) else float(got["best"])
     status = BRACKET_STATUS[int(got["status"])]
     _absorb_json(stats, got["stats"])
@@ -129,26 +126,6 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
         if exact is not None:
             best = exact
     return best, status
-
-
-def run_bracket(search: GlobalSearch, engine: Engine) -> dict:
-    """bracket_task's result for `search`: one task in 2D; in 3D (global_tasks.split_bracket)
-    the frictionless dive's tree nodes as tasks beside the rest of the bracket from mu_max,
-    with the same answer and counts."""
-    m = search.m
-    if problem_dim(search.param, m) != 3:
-        return run_tasks(bracket_task, search, [0], engine=engine, kind="global_bracket")[0]
-    stats = BnBStats(extra={"route": "tree"})
-    start = _step_state(BnBStats(), {}, None, search.mu_max, m)
-    leaf, dive, got = split_bracket(DiveContext(search, bracket_task), start, engine)
-    stats.add(dive)
-    stats.extra.update(dive.extra)
-    if leaf is None:
-        none = np.zeros(m, dtype=bool)
-        got = {"best": math.nan, "status": BRACKET_STATUS.index("none_at_any_mu"), "zero_u": none, "zero_r": none}
-    else:
-        _absorb_json(stats, got["stats"])
-    return {**got, "stats": _counts_json(stats).encode()}
 
 
 def settled(search: GlobalSearch, best: float, stats: BnBStats, pattern_of: dict, engine: Engine,

@@ -284,8 +284,7 @@ def test_sigterm_inside_the_global_search_then_resume(tmp_path, global_plain, ra
     assert p.returncode == 75, err
     assert latency < 5.0 and "Traceback" not in err
     jobs = read_checkpoint(out + ".ckpt")["jobs"]
-    bracket = jobs["global_bracket"]["attrs"]      # done: the bracket and its node tasks (global_tasks.py)
-    assert json.loads(bracket["counters"])["tasks"] == int(bracket["n_tasks"]) >= 1
+    assert json.loads(jobs["global_bracket"]["attrs"]["counters"])["tasks"] == 1
     if ranks:
         assert all_gone(pids)
     run(ranks, "run", scene, "-o", out, "-q", "--resume")
