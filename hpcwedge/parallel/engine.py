@@ -44,7 +44,7 @@ EXIT_INTERRUPTED = 75
 GUARD_EVERY_S = 1.0
 #: tasks go to a worker in batches that last about workers x MESSAGE_S / MAX_BUSY seconds (by
 #: the mean task seconds so far): the master, whose every message costs it up to ~MESSAGE_S
-#: (0.01-1.2 ms fitted, scripts/bench_scale.py), stays at most ~MAX_BUSY busy
+#: (up to 1.2 ms of wall on 2 oversubscribed cores, 0.26 ms of CPU: bench_scale), stays ~MAX_BUSY busy
 MESSAGE_S, MAX_BUSY = 2e-3, 0.8
 
 
