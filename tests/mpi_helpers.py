@@ -102,9 +102,10 @@ def scene_text(every: float = 0.1, raw: bool = True) -> str:
 
 
 def write_scene(tmp_path, every: float = 0.1, name: str = "scene.toml", text: str | None = None,
-                raw: bool = True) -> str:
-    """The pattern scene in tmp_path (with plug8.npz, the condensed K and rigid modes)."""
-    _write_raw_plug(tmp_path, 4)
+                raw: bool = True, rows: int = 4) -> str:
+    """The pattern scene in tmp_path (with plug{2 rows}.npz, the condensed K and rigid modes;
+    the default scene names plug8.npz)."""
+    _write_raw_plug(tmp_path, rows)
     p = tmp_path / name
     p.write_text(text if text is not None else scene_text(every, raw))
     return str(p)

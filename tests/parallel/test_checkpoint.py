@@ -621,11 +621,16 @@ def _lines(path, phrase: str) -> list[str]:
         return [line for line in f if phrase in line]
 
 
-def test_checkpoint_write_on_a_full_disk_keeps_the_last_and_goes_on(tmp_path, small_fs, reference):
+def test_checkpoint_write_on_a_full_disk_keeps_the_last_and_goes_on(tmp_path, small_fs):
     """The output's file system fills up mid-run: every timer checkpoint that fails says so
     in one line, the last good checkpoint stays as it was, and the run goes on; once there
-    is room again it finishes with the uninterrupted answers."""
-    scene = write_scene(tmp_path, every=0.05)
+    is room again it finishes with the uninterrupted answers. (The plug of m = 12 at five
+    mu: ~1 s of enumeration, time for the disk to fill; the default scene's run is 0.13 s.)"""
+    text = scene_text(0.05).replace("plug8.npz", "plug12.npz").replace("mu = [0.65, 1.0]",
+                                                                       "mu = [0.65, 0.8, 1.0, 1.2, 1.5]")
+    scene = write_scene(tmp_path, text=text, rows=6)
+    run(None, "run", scene, "-o", str(tmp_path / "ref.h5"), "-q")
+    reference = show(str(tmp_path / "ref.h5"))
     out = str(small_fs / "r.h5")
     ckpt, filler, errors = checkpoint_path(out), small_fs / "filler", tmp_path / "stderr.txt"
     warning = f"hpcwedge: warning: checkpoint not written to {ckpt} (No space left on device)"
