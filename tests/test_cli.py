@@ -848,28 +848,31 @@ def test_show_prints_each_mu_as_given(tmp_path, capsys):
     assert rows[:3] == ["0.1763269807", "0.17632698071", "0.65"]
 
 
-def test_sigterm_before_the_runs_handlers_are_in(tmp_path):
-    """A real SIGTERM while `run` starts up, after its arguments are read and before the
-    engine's handlers are in (sent by the process to itself at that point): the run stops as
-    one stopped later does, one line and exit 75, nothing written (before: the default
-    action, status 143 and no word)."""
-    scene = write(tmp_path, _t(PLUG))
-    out = str(tmp_path / "r.h5")
+def _run_signalled_at_start(sig: str, scene: str, out: str, *extra: str) -> subprocess.CompletedProcess:
+    """`run SCENE -o OUT EXTRA` whose process sends itself the real signal `sig` (a name of
+    the signal module) after its arguments are read and before the engine's handlers are in."""
     code = ("import os, signal, sys\n"
             "from hpcwedge import cli\n"
             "from hpcwedge.parallel.engine import Engine\n"
             "install = Engine.install_signals\n"
             "def early(self):\n"
-            "    os.kill(os.getpid(), signal.SIGTERM)\n"
+            f"    os.kill(os.getpid(), signal.{sig})\n"
             "    install(self)\n"
             "Engine.install_signals = early\n"
             "sys.exit(cli.main())\n")
-    p = subprocess.run([sys.executable, "-c", code, "run", scene, "-o", out], env=env(), capture_output=True,
-                       text=True, timeout=120)
+    return subprocess.run([sys.executable, "-c", code, "run", scene, "-o", out, *extra], env=env(),
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_sigterm_before_the_runs_handlers_are_in(tmp_path):
+    """A real SIGTERM while `run` starts up, after its arguments are read and before the
+    engine's handlers are in (sent by the process to itself at that point): the run stops as
+    one stopped later does, one line and exit 75, nothing written (before: the default
+    action, status 143 and no word)."""
+    p = _run_signalled_at_start("SIGTERM", write(tmp_path, _t(PLUG)), str(tmp_path / "r.h5"))
     assert p.returncode == 75, p.stderr
     assert p.stderr == "[hpcwedge] SIGTERM: stopped before any checkpointable work\n", p.stderr
     assert sorted(os.listdir(tmp_path)) == ["s.toml"]
-
 
 
 def test_sigusr1_before_the_runs_handlers_are_in(tmp_path):
@@ -877,22 +880,12 @@ def test_sigusr1_before_the_runs_handlers_are_in(tmp_path):
     the run goes on, ends with exit 0, and its first checkpoint is the one asked for
     (before: ignored, last_checkpoint_reason ''); `python -m hpcwedge` keeps one that comes
     while its modules load the same way (hpcwedge/__main__.py)."""
-    scene = write(tmp_path, _t(PLUG))
     out = str(tmp_path / "r.h5")
-    code = ("import os, signal, sys\n"
-            "from hpcwedge import cli\n"
-            "from hpcwedge.parallel.engine import Engine\n"
-            "install = Engine.install_signals\n"
-            "def early(self):\n"
-            "    os.kill(os.getpid(), signal.SIGUSR1)\n"
-            "    install(self)\n"
-            "Engine.install_signals = early\n"
-            "sys.exit(cli.main())\n")
-    p = subprocess.run([sys.executable, "-c", code, "run", scene, "-o", out, "-q"], env=env(), capture_output=True,
-                       text=True, timeout=120)
+    p = _run_signalled_at_start("SIGUSR1", write(tmp_path, _t(PLUG)), out, "-q")
     assert p.returncode == 0, p.stderr
     from hpcwedge.results.hdf5 import read_result
     assert read_result(out).stats["parallel"]["last_checkpoint_reason"] == "SIGUSR1"
+
 
 # ----------------------------------------------------------------------------- a new user's first hour (issue 44)
 
