@@ -11,6 +11,10 @@ engine; prints when the job was interrupted and when close() returned.
 With the arguments "stuck PATH": every worker runs an 8 s task that never ticks; the master,
 checkpointing to PATH, gets SIGTERM after 0.5 s; prints when PATH appeared.
 
+With the argument "send": the worker starts serving only after 2 s; the master sends it a task
+whose context is 4 MB (engine.Master.send_task) and prints how long the send took, and the
+answer's tag once it is in.
+
 With the argument "boom": a worker's task raises ValueError("injected fault"); the master
 prints the first line of the RuntimeError it gets (all the command line shows of it)."""
 import json
@@ -137,6 +141,30 @@ def stuck(path):
     print(json.dumps(out), flush=True)
 
 
+def echo(ctx, payload):
+    return len(ctx)
+
+
+def send():
+    from hpcwedge.parallel import mpi
+    from hpcwedge.parallel.jobs import TaskJob
+    comm = world()
+    if comm.rank:
+        time.sleep(2.0)              # busy elsewhere: not in a receive
+        serve(comm)
+        return
+    engine = Engine(comm)
+    job = TaskJob("big", echo, b"x" * (4 << 20), [None])
+    t = time.perf_counter()
+    engine.master.send_task(1, 1, job, None)
+    out = {"send_s": time.perf_counter() - t}
+    answer = mpi.wait_any(comm, time.monotonic() + 60, lambda: False)
+    out["answer"] = None if answer is None else [answer[1], answer[2]]
+    out["answer_s"] = time.perf_counter() - t
+    engine.close()
+    print(json.dumps(out), flush=True)
+
+
 def fail():
     comm = _master()
     if comm is None:
@@ -153,4 +181,4 @@ if __name__ == "__main__":
     if sys.argv[1] == "stuck":
         stuck(sys.argv[2])
     else:
-        {"cancel": cancel, "boom": fail}.get(sys.argv[1], lambda: main(float(sys.argv[1])))()
+        {"cancel": cancel, "boom": fail, "send": send}.get(sys.argv[1], lambda: main(float(sys.argv[1])))()

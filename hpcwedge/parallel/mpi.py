@@ -105,6 +105,18 @@ def probe(comm, source, tag, status) -> bool:
     return False
 
 
+def pending(requests: list, timeout: float = 0.0) -> list:
+    """The requests of `requests` (mpi4py isend requests) not yet complete, after
+    testing them for up to `timeout` seconds (0: once). A request dropped from the list
+    is complete (its buffer can go)."""
+    end = time.monotonic() + timeout
+    while True:
+        requests = [r for r in requests if not r.Test()]
+        if not requests or time.monotonic() >= end:
+            return requests
+        time.sleep(0.001)
+
+
 def wait_any(comm, deadline: float, interrupted) -> tuple | None:
     """The next message from any rank as (source, tag, message), or None at the
     deadline (time.monotonic) or as soon as interrupted() is true."""

@@ -41,3 +41,19 @@ def test_slurm_ntasks_mismatch_fails_clearly(tmp_path):
     assert p.returncode == 2
     assert "SLURM_NTASKS=3" in p.stderr and "srun" in p.stderr and len(p.stderr.strip().splitlines()) == 1
     assert not out.exists()
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_a_large_task_message_does_not_wait_for_its_worker():
+    """The master's send of a task with a 4 MB context to a worker that reads it only after
+    2 s returns at once (an Open MPI blocking send of that size waits for the receive: ~2 s),
+    and the answer still arrives."""
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", "-x", "PYTHONPATH",
+                        sys.executable, os.path.join(ROOT, "tests", "engine_driver.py"), "send"],
+                       env=env(), capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout.strip().splitlines()[-1])
+    assert got["answer"] == [2, 4 << 20], got          # mpi.RESULT, the context's length
+    assert got["send_s"] < 0.5, got
+    assert got["answer_s"] >= 1.5, got                  # the worker did start late
