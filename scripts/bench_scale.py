@@ -18,14 +18,21 @@ over every measured run; the probes are the model's count of the master's wake-u
 waits: with tasks of a second most of its busy time at 65 ranks), a message's cost half to
 send and half to merge; then each workload's latency (send to start) from LATENCY_GRID, the
 one whose worst |model_error| over its runs is least (one number per workload, fitted, not
-predicted); "model_error" = modelled minus measured efficiency of each measured run.
+predicted), then one idle-probe delay for all workloads from IDLE_PROBE_GRID (MasterCosts.
+idle_probe_s: where 129 ranks share 2 cores, a send waits longer the more workers idle and
+probe, as in a tree's ramp-up and tail), then the latencies again; "model_error" = modelled
+minus measured efficiency of each measured run. --refit JSON redoes the fit and the model
+from a previous run's "measured_detail" without mpirun.
 Predictions use the same fit to the master's CPU seconds: on 2 cores the master's probes and
 sends wait for a core (Open MPI yields it when oversubscribed: a probe took 1.9 ms of wall
 and ~0.1 ms of CPU at 33 ranks, cProfile), which a rank with a core of its own does not;
 then 256, 1,024 and 4,096 ranks with MODEL_SECONDS_PER_WORKER[ranks] x workers worker-seconds
 ("sized": "job": a job of two minutes at 256 and 1,024 ranks, 30 s at 4,096, where the model
 runs the tree's nodes for minutes; --quick a quarter of it), and 1,024 ranks with the issue's
-floor of MIN_WORKER_SECONDS ("sized": "floor": 2 s per worker).
+floor of MIN_WORKER_SECONDS ("sized": "floor": 2 s per worker). The predictions set the
+idle-probe delay to 0 (a rank with a core of its own). "floor": per workload at 1,024 ranks,
+the smallest of FLOOR_SEARCH's job sizes modelled at >= 0.9, the longest task and a worker's
+share of the floor, and why the floor is missed where it is.
 
 Writes results/bench_scale.json ("measured", "modelled", the costs, the load) and
 results/bench_scale.png (efficiency against ranks).
