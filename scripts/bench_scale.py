@@ -18,14 +18,21 @@ over every measured run; the probes are the model's count of the master's wake-u
 waits: with tasks of a second most of its busy time at 65 ranks), a message's cost half to
 send and half to merge; then each workload's latency (send to start) from LATENCY_GRID, the
 one whose worst |model_error| over its runs is least (one number per workload, fitted, not
-predicted); "model_error" = modelled minus measured efficiency of each measured run.
+predicted), then one idle-probe delay for all workloads from IDLE_PROBE_GRID (MasterCosts.
+idle_probe_s: where 129 ranks share 2 cores, a send waits longer the more workers idle and
+probe, as in a tree's ramp-up and tail), then the latencies again; "model_error" = modelled
+minus measured efficiency of each measured run. --refit JSON redoes the fit and the model
+from a previous run's "measured_detail" without mpirun.
 Predictions use the same fit to the master's CPU seconds: on 2 cores the master's probes and
 sends wait for a core (Open MPI yields it when oversubscribed: a probe took 1.9 ms of wall
 and ~0.1 ms of CPU at 33 ranks, cProfile), which a rank with a core of its own does not;
 then 256, 1,024 and 4,096 ranks with MODEL_SECONDS_PER_WORKER[ranks] x workers worker-seconds
 ("sized": "job": a job of two minutes at 256 and 1,024 ranks, 30 s at 4,096, where the model
 runs the tree's nodes for minutes; --quick a quarter of it), and 1,024 ranks with the issue's
-floor of MIN_WORKER_SECONDS ("sized": "floor": 2 s per worker).
+floor of MIN_WORKER_SECONDS ("sized": "floor": 2 s per worker). The predictions set the
+idle-probe delay to 0 (a rank with a core of its own). "floor": per workload at 1,024 ranks,
+the smallest of FLOOR_SEARCH's job sizes modelled at >= 0.9, the longest task and a worker's
+share of the floor, and why the floor is missed where it is.
 
 Writes results/bench_scale.json ("measured", "modelled", the costs, the load) and
 results/bench_scale.png (efficiency against ranks).
@@ -59,10 +66,14 @@ SECONDS_PER_WORKER = {"subtree": 24.0, "mu_c": 8.0, "face": 24.0}
 MODEL_SECONDS_PER_WORKER = {256: 120.0, 1024: 120.0, 4096: 30.0}
 #: the issue's floor: a workload of this many worker-seconds should keep 1,024 ranks busy
 MIN_WORKER_SECONDS = 2000.0
+#: the job sizes (worker-seconds) tried at 1,024 ranks for the smallest one modelled at >= 0.9
+FLOOR_SEARCH = tuple(MIN_WORKER_SECONDS * 2 ** k for k in range(6))
 #: --quick models jobs of MODEL_SECONDS_PER_WORKER / QUICK_MODEL_DIVISOR (the tree's nodes take minutes)
 QUICK_MODEL_DIVISOR = 4
 #: the latencies (seconds from a task's send to its start) tried in the fit
 LATENCY_GRID = tuple(k * 2.5e-4 for k in range(25))
+#: the idle-probe delays tried in the fit (seconds per idle worker per worker, MasterCosts.idle_probe_s)
+IDLE_PROBE_GRID = tuple(k * 1e-5 for k in range(7))
 
 
 def rank_run(durations_path: str, out: str, specs) -> None:
@@ -153,6 +164,31 @@ def model_run(workload: str, durations: dict, ranks: int, worker_seconds: float,
     return simulate(job, ranks - 1, costs, task_seconds)
 
 
+def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 1024) -> dict:
+    """At `ranks`: the smallest of FLOOR_SEARCH's job sizes modelled at efficiency >= 0.9 (None:
+    none of them), each size's efficiency, the workload's longest task (the largest of the
+    recorded durations drawn, or the tree's longest task under the engine's budgets, at the
+    floor's size) and a worker's share of the
+    floor; the floor is met when the floor's own size reaches 0.9."""
+    tried, smallest, longest = [], None, 0.0
+    for ws in FLOOR_SEARCH:
+        sim = model_run(workload, durations, ranks, ws, seed, costs)
+        tried.append({"worker_seconds": sim.task_s, "efficiency": sim.efficiency})
+        longest = longest or sim.longest_s     # at the floor's size
+        if sim.efficiency >= 0.9:
+            smallest = sim.task_s
+            break
+    share = MIN_WORKER_SECONDS / (ranks - 1)
+    met = tried[0]["efficiency"] >= 0.9
+    why = ("met" if met else
+           f"its longest task ({longest:.2f} s) is {longest / share:.0%} of a worker's share of the floor "
+           f"({share:.2f} s): the schedule's tail alone leaves workers idle" if longest > 0.25 * share else
+           "the ramp-up and tail of the schedule, not the task lengths")
+    return {"workload": workload, "ranks": ranks, "floor_worker_seconds": MIN_WORKER_SECONDS,
+            "meets_floor": met, "smallest_worker_seconds_at_0.9": smallest, "tried": tried,
+            "longest_task_s": longest, "share_at_floor_s": share, "why": why}
+
+
 def master_costs(measured: list[dict], durations: dict) -> tuple[dict, dict]:
     """({workload: MasterCosts} fitted to the measured runs' busy wall seconds (the model's
     validation), the same with the master's CPU seconds (its predictions); see the module's
@@ -168,18 +204,31 @@ def master_costs(measured: list[dict], durations: dict) -> tuple[dict, dict]:
         rows.append([r["messages"] * (w == r["workload"]) for w in workloads] + [sim.probes])
     wall, _ = nnls(np.array(rows, dtype=float), np.array([r["busy_s"] for r in measured]))
     cpu, _ = nnls(np.array(rows, dtype=float), np.array([r["cpu_s"] for r in measured]))
-    validated, predicting = {}, {}
-    for i, w in enumerate(workloads):
-        runs = [r for r in measured if r["workload"] == w]
 
-        def worst(latency):
-            c = MasterCosts(wall[i] / 2, wall[i] / 2, latency, probe_s=wall[-1])
-            return max(abs(model_run(w, durations, r["ranks"], r["worker_seconds_asked"], r["seed"], c).efficiency
-                           - r["efficiency"]) for r in runs)
-        latency = min(LATENCY_GRID, key=worst)
-        validated[w] = MasterCosts(float(wall[i]) / 2, float(wall[i]) / 2, latency, probe_s=float(wall[-1]))
-        predicting[w] = MasterCosts(float(cpu[i]) / 2, float(cpu[i]) / 2, latency, probe_s=float(cpu[-1]))
+    def fit_latencies(idle_probe):      # per workload, the latency whose worst |model_error| is least
+        return {w: min(LATENCY_GRID, key=lambda lat: _worst(runs[w], durations, _costs(wall, i, lat, idle_probe)))
+                for i, w in enumerate(workloads)}
+    runs = {w: [r for r in measured if r["workload"] == w] for w in workloads}
+    latency = fit_latencies(0.0)
+    idle_probe = min(IDLE_PROBE_GRID, key=lambda k: max(
+        _worst(runs[w], durations, _costs(wall, i, latency[w], k)) for i, w in enumerate(workloads)))
+    latency = fit_latencies(idle_probe)
+    validated = {w: _costs(wall, i, latency[w], idle_probe) for i, w in enumerate(workloads)}
+    predicting = {w: _costs(cpu, i, latency[w], 0.0) for i, w in enumerate(workloads)}
     return validated, predicting
+
+
+def _costs(fitted, i: int, latency: float, idle_probe: float):
+    """Workload i's MasterCosts from an nnls fit [per-message costs..., probe]: half to send, half to merge."""
+    from hpcwedge.parallel.model import MasterCosts
+    return MasterCosts(float(fitted[i]) / 2, float(fitted[i]) / 2, latency, probe_s=float(fitted[-1]),
+                       idle_probe_s=idle_probe)
+
+
+def _worst(runs: list[dict], durations: dict, costs) -> float:
+    """The largest |modelled - measured efficiency| over `runs` with `costs`."""
+    return max(abs(model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"], costs).efficiency
+                   - r["efficiency"]) for r in runs)
 
 
 def plot(measured: list[dict], modelled: list[dict], path: str) -> None:
@@ -219,6 +268,8 @@ def main() -> None:
     ap.add_argument("--durations", default=os.path.join(RESULTS, "task_durations.json"))
     ap.add_argument("--workloads", nargs="+", default=list(WORKLOADS), choices=WORKLOADS)
     ap.add_argument("--out", default=os.path.join(RESULTS, "bench_scale"))
+    ap.add_argument("--refit", metavar="JSON", help="no mpirun: refit and remodel a previous run's "
+                    "measured_detail")
     ap.add_argument("--rank-run", nargs="+", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.rank_run:
@@ -228,7 +279,11 @@ def main() -> None:
     durations = load_durations(a.durations)
     t0 = time.perf_counter()
     seconds = {w: a.seconds or SECONDS_PER_WORKER[w] for w in WORKLOADS}
-    measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)]
+    if a.refit:
+        with open(a.refit) as f:
+            measured = [r for r in json.load(f)["measured_detail"] if r["workload"] in a.workloads]
+    else:
+        measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)]
     costs, predicting = master_costs(measured, durations)
     for r in measured:
         sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
@@ -240,6 +295,8 @@ def main() -> None:
              + ([(MIN_WORKER_SECONDS, "floor")] if n == 1024 else [])]
     with ProcessPoolExecutor(2) as pool:        # the tree's nodes: minutes of model at 1,024 ranks
         sims = list(pool.map(model_run, *zip(*[(w, durations, n, ws, seed, predicting[w]) for w, n, ws, seed, _ in specs])))
+        floors = list(pool.map(floor_search, a.workloads, [durations] * len(a.workloads),
+                               range(len(a.workloads)), [predicting[w] for w in a.workloads]))
     modelled = []
     for (w, n, _, _, sized), sim in zip(specs, sims):
         modelled.append({"workload": w, "ranks": n, "worker_seconds": sim.task_s, "efficiency": sim.efficiency,
@@ -247,10 +304,13 @@ def main() -> None:
                          "messages": sim.messages, "master_busy": sim.master_busy, "wall_s": sim.wall_s})
         print(f"model {n:5d} ranks {w:8s} {sim.task_s:9.0f} worker-s efficiency {sim.efficiency:.3f} "
               f"busy {sim.master_busy:.3f}", flush=True)
+    for f in floors:
+        print(f"floor {f['workload']:8s} at 1,024 ranks: {f['tried'][0]['efficiency']:.3f}; 0.9 from "
+              f"{f['smallest_worker_seconds_at_0.9']} worker-s; longest task {f['longest_task_s']:.2f} s", flush=True)
     keys = ("ranks", "workload", "tasks", "tasks_per_s", "master_busy", "efficiency", "model_error")
     write_json(a.out + ".json", {
         "measured": [{k: r[k] for k in keys} for r in measured], "modelled": modelled,
-        "measured_detail": measured, "costs": {w: vars(c) for w, c in costs.items()},
+        "floor": floors, "measured_detail": measured, "costs": {w: vars(c) for w, c in costs.items()},
         "costs_predicting": {w: vars(c) for w, c in predicting.items()}, "seconds_per_worker": seconds,
         "model_seconds_per_worker": per_worker,
         "machine": f"{os.cpu_count()} cores, shared", "bench_seconds": time.perf_counter() - t0,

@@ -655,7 +655,16 @@ def bench_scale() -> str:
     modelled = _records("bench_scale.json", "modelled") or []
     rows = [[_g(r, "ranks"), r.get("workload", "–"), _g(r, "worker_seconds", 4), _fixed(r, "efficiency", 3),
              _fixed(r, "master_busy", 2)] for r in modelled]
-    return out + "\n\nModelled:\n\n" + table(["ranks", "workload", "worker-seconds", "efficiency", "master busy"], rows)
+    out += "\n\nModelled:\n\n" + table(["ranks", "workload", "worker-seconds", "efficiency", "master busy"], rows)
+    floors = _records("bench_scale.json", "floor") or []
+    rows = [[r.get("workload", "–"), _fixed(r.get("tried", [{}])[0], "efficiency", 3),
+             "yes" if r.get("meets_floor") else "no", _g(r, "smallest_worker_seconds_at_0.9", 4),
+             _fixed(r, "longest_task_s", 2), _fixed(r, "share_at_floor_s", 2), r.get("why", "–")] for r in floors]
+    if rows:
+        out += "\n\nAt 1,024 ranks, the floor of 2,000 worker-seconds:\n\n" + table(
+            ["workload", "efficiency at the floor", "meets it", "smallest job at 0.9 (worker-s)",
+             "longest task (s)", "a worker's share (s)", "why"], rows)
+    return out
 
 
 #: the serial 3D tables of scripts/bench_3d.py (plug3d levels x ring)

@@ -9,8 +9,14 @@ send) and each answer `merge_s` (receive and merge); between answers it waits as
 does (probes, then sleeps that grow by POLL_FRACTION of the wait up to `poll_max_s`),
 so it notices a result at its next wake-up; each wake-up probes, at `probe_s` of its busy
 time (Open MPI's probe runs its progress engine: with tasks of a second at 64 ranks the
-probes, not the messages, are most of the master's busy time). A task starts `latency_s` after its send
-and its result reaches the master when it ends. Results are taken in the order they
+probes, not the messages, are most of the master's busy time). A task reaches its worker `latency_s` after its send; the worker
+notices it at its own next wake-up (worker.serve waits as the master does, sleeps capped at
+`worker_poll_max_s`, counted from the end of its previous task: a worker left idle for
+seconds, as in a tree's ramp-up and tail, starts its next task up to mpi.POLL_MAX late),
+and its result reaches the master when the task ends. Where ranks outnumber the cores, a send
+is slower the more workers idle (`idle_probe_s` x idle workers x workers: the idle ranks'
+probes, each over every peer, share the cores; fitted to measured runs, e.g. the ramp-up
+and tail of a tree at 129 ranks on 2 cores). Results are taken in the order they
 arrive; after each the master refills every idle worker, as the engine does.
 """
 from __future__ import annotations
@@ -19,27 +25,31 @@ import heapq
 from dataclasses import dataclass
 
 from hpcwedge.parallel.engine import batch_size
-from hpcwedge.parallel.mpi import POLL_FRACTION, POLL_MAX_MASTER
+from hpcwedge.parallel.mpi import POLL_FRACTION, POLL_MAX, POLL_MAX_MASTER
 
 
 @dataclass(frozen=True)
 class MasterCosts:
     """The master's costs (seconds): per message take + send, receive + merge; the wire and
     worker wake-up before a task starts; the master's longest sleep while it waits; one
-    probe (a wake-up while it waits)."""
+    probe (a wake-up while it waits); an idle worker's longest sleep (0: it never sleeps); a
+    send's extra delay per idle worker per worker (ranks sharing few cores: every idle rank's
+    probes poll each peer and take the cores from the rest; 0 where each rank has a core)."""
 
     send_s: float
     merge_s: float
     latency_s: float = 0.0
     poll_max_s: float = POLL_MAX_MASTER
     probe_s: float = 0.0
+    worker_poll_max_s: float = POLL_MAX
+    idle_probe_s: float = 0.0
 
 
 @dataclass(frozen=True)
 class Simulated:
     """One simulated run: workers, wall seconds (first send to the last merge), the sum of
     the tasks' seconds, the tasks, the master's busy seconds, the messages (tasks or
-    batches) sent, the master's probes while it waited; efficiency = task seconds /
+    batches) sent, the master's probes while it waited, the longest task's seconds; efficiency = task seconds /
     (workers x wall), master_busy = busy / wall."""
 
     workers: int
@@ -49,6 +59,7 @@ class Simulated:
     busy_s: float
     messages: int
     probes: int = 0
+    longest_s: float = 0.0
 
     @property
     def efficiency(self) -> float:
@@ -92,10 +103,11 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     idle = list(range(workers))[::-1]
+    idle_since = [0.0] * workers       # when each worker's previous task ended (it waits since)
     events: list = []                  # (answer arrives, seq, worker, [(token, result)], seconds)
     t = busy = task_s = 0.0
     seq = tasks = probes = 0
-    merged_s = 0.0                     # the merged tasks' seconds (the engine's batch sizes)
+    merged_s = longest = 0.0           # the merged tasks' seconds (the engine's batch sizes); the longest task
     while True:
         while idle:
             k = batch_size(workers, merged_s / tasks if tasks else None, job.pending())
@@ -105,12 +117,17 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
             t += costs.send_s
             busy += costs.send_s
             done = [(token, job.handler(job.context, payload)) for token, payload in taken]
-            d = sum(float(seconds(r)) for _, r in done)
+            each = [float(seconds(r)) for _, r in done]
+            d, longest = sum(each), max(longest, *each)
             task_s += d
-            heapq.heappush(events, (t + costs.latency_s + d, seq, idle.pop(), done, d))
+            w = idle.pop()
+            delay = costs.latency_s + costs.idle_probe_s * len(idle) * workers
+            start = noticed_at(idle_since[w], t + delay, costs.worker_poll_max_s)
+            idle_since[w] = start + d
+            heapq.heappush(events, (start + d, seq, w, done, d))
             seq += 1
         if not events:
-            return Simulated(workers, t, task_s, tasks, busy, seq, probes)
+            return Simulated(workers, t, task_s, tasks, busy, seq, probes, longest)
         arrival, _, w, done, d = heapq.heappop(events)
         merged_s += d
         t, wakes = waited(t, arrival, costs.poll_max_s)

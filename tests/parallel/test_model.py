@@ -40,7 +40,7 @@ def _result_seconds(r):
     return r["seconds"] if isinstance(r, dict) else r[2]["seconds"]
 
 
-ZERO = MasterCosts(send_s=0.0, merge_s=0.0, poll_max_s=0.0)
+ZERO = MasterCosts(send_s=0.0, merge_s=0.0, poll_max_s=0.0, worker_poll_max_s=0.0)
 
 
 def test_one_worker_is_the_serial_sum_and_equal_tasks_take_rounds():
@@ -55,7 +55,7 @@ def test_one_worker_is_the_serial_sum_and_equal_tasks_take_rounds():
 
 
 def test_zero_length_tasks_cost_the_master_alone():
-    costs = MasterCosts(send_s=0.001, merge_s=0.003, poll_max_s=0.0)
+    costs = MasterCosts(send_s=0.001, merge_s=0.003, poll_max_s=0.0, worker_poll_max_s=0.0)
     sim = simulate(TaskJob("t", _seconds_task, None, [0.0] * 50), 16, costs, _result_seconds)
     assert sim.wall_s == pytest.approx(50 * 0.004)
     assert sim.master_busy == pytest.approx(1.0)
@@ -113,3 +113,25 @@ def test_a_task_job_travels_in_batches_of_the_masters_target_length():
     assert k == 67 and sizes[:3] == [67] * 3 and sizes[-3:] == [1, 1, 1]
     assert sim.messages == 8 + len(sizes)
     assert sim.task_s == pytest.approx(sum(durations))
+
+
+def test_a_worker_left_idle_starts_at_its_own_capped_wake_up():
+    """One task of 1 s reaching its worker after a 1 s latency: the worker, asleep since 0 with
+    sleeps capped at mpi.POLL_MAX, starts it at its first wake-up at or after 1 s (within one
+    capped sleep); a worker that never sleeps starts it at once. The longest task is reported."""
+    job = lambda: TaskJob("t", _seconds_task, None, [1.0])  # noqa: E731
+    costs = MasterCosts(send_s=0.0, merge_s=0.0, latency_s=1.0, poll_max_s=0.0, worker_poll_max_s=mpi.POLL_MAX)
+    sim = simulate(job(), 1, costs, _result_seconds)
+    assert 2.0 < sim.wall_s <= 2.0 + mpi.POLL_MAX
+    assert sim.wall_s == pytest.approx(noticed_at(0.0, 1.0, mpi.POLL_MAX) + 1.0)
+    assert simulate(job(), 1, MasterCosts(0.0, 0.0, 1.0, 0.0, worker_poll_max_s=0.0), _result_seconds).wall_s == 2.0
+    assert sim.longest_s == 1.0
+
+
+def test_a_send_waits_for_the_idle_workers_probes():
+    """idle_probe_s x idle workers x workers: four 1 s tasks sent at 0 to four idle workers
+    start after 3, 2, 1 and 0 other idle workers' delays (0.01 x k x 4 s), so the wall is 1.12 s."""
+    costs = MasterCosts(send_s=0.0, merge_s=0.0, poll_max_s=0.0, worker_poll_max_s=0.0, idle_probe_s=0.01)
+    sim = simulate(TaskJob("t", _seconds_task, None, [1.0] * 4), 4, costs, _result_seconds)
+    assert sim.wall_s == pytest.approx(1.12)
+    assert sim.efficiency == pytest.approx(4 / (4 * 1.12))
