@@ -116,11 +116,33 @@ class PatternLp:
         elif status == Status.INFEASIBLE:
             ge = np.zeros(self._A.shape[0], bool)
             ge[:self.B0.shape[0]] = True
-            if farkas_holds(h, self._A[:, :-1], ge, self.ray_rtol):    # t is fixed at 0
+            if farkas_holds(h, self._A[:, :-1], ge, self.ray_rtol) or self.ray_proves_empty(h.getDualRay()[2]):
                 count(counts, "pattern_lp_infeasible")
                 return status, None
         count(counts, "pattern_lp_unsure")
         return Status.UNDECIDED, None
+
+    def ray_proves_empty(self, y) -> bool:
+        """A dual ray y of the model at its current mu (t fixed at 0), HiGHS's or any (k + q + 1,)
+        vector, proves it empty in x-space: z = y, then y projected on the null space of the
+        transposed rows of its support (the exact ray of HiGHS's basis: its residual is rounding,
+        HiGHS's is ~1e-10), either with z's rows >= 0 clipped at 0, z_last > 0 and
+        |g_y + W^T g_w|_2 <= ray_rtol z_last for g = A^T z. Any point of the rows has w = W y,
+        so z_last <= g . v = (g_y + W^T g_w) . y <= |..|_2 |x|_2 (Z orthonormal): no point with
+        |x|_2 below 10 times the largest lp_feasible accepts (rounding of g: far below the 10)."""
+        y = np.asarray(y, float)
+        if y.size != self._A.shape[0] or y[-1] == 0.0:
+            return False
+        y = y if y[-1] > 0 else -y
+        A, (k, p) = self._A[:, :-1], self.B0.shape
+        for z in (y, _null_projection(A, y)):
+            if z is None:
+                continue
+            z[:k] = np.maximum(z[:k], 0.0)
+            g = A.T @ z
+            if z[-1] > 0 and np.linalg.norm(g[:p] + self.W.T @ g[p:]) <= self.ray_rtol * z[-1]:
+                return True
+        return False
 
     def margin(self, mu: float, weight: np.ndarray | None = None) -> tuple[float, np.ndarray] | None:
         """(t, x): a point x of the rows with sum r_n = 1 of largest margin t on the mu-rows
@@ -144,6 +166,20 @@ class PatternLp:
             h.changeColCost(t, 0.0)
             h.changeColBounds(t, 0.0, 0.0)
         return None if sol is None else (float(sol[-1]), self.rows.Z @ sol[:self.B0.shape[1]])
+
+
+def _null_projection(A: np.ndarray, y: np.ndarray) -> np.ndarray | None:
+    """y (rows of A,) projected on the null space of A_S^T, S the support of y (|y_i| above
+    1e-13 max|y|), by a full QR of A_S; None when A_S has no more rows than columns."""
+    import scipy.linalg as sla
+    S = np.flatnonzero(np.abs(y) > 1e-13 * np.abs(y).max())
+    if S.size <= A.shape[1]:
+        return None
+    Q = sla.qr(A[S], mode="full")[0]
+    N = Q[:, A.shape[1]:]
+    z = np.zeros_like(y)
+    z[S] = N @ (N.T @ y[S])
+    return z
 
 
 #: a point whose unit rows all hold to this, relative to |x|, is taken whatever its

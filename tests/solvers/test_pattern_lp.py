@@ -116,3 +116,42 @@ def test_margin_steps_reach_the_cold_bisection_mu_c_from_above():
             assert abs(hi - want) <= 1e-6 * want + 1e-8, (seed, zu, zr, hi, want)   # mu^c 0: 1e-8
             checked += 1
     assert checked >= 15
+
+
+def test_ray_proves_empty_below_the_cold_mu_c_and_never_above():
+    """PatternLp.ray_proves_empty (a dual ray checked in x-space after its projection on its
+    basis): just below each random pattern's mu^c by a cold bisection (lp_feasible) HiGHS's
+    ray of the warm model is accepted, and the same ray is rejected once the model is at a mu
+    just above, where lp_feasible's point exists (a wrong proof); so are random vectors and
+    the ray with its last entry's sign flipped."""
+    accepted = rejected = 0
+    rng_y = np.random.default_rng(7)
+    for seed in range(8):
+        rng = np.random.default_rng(300 + seed)
+        m = 4
+        p = parametrize(random_problem(rng, m, bool(seed % 2)))
+        for _ in range(6):
+            zu = rng.random(m) < 0.5
+            zr = ~zu & (rng.random(m) < 0.3)
+            rows = pattern_rows(p, m, zu, zr)
+            if zr.all() or rows.Z is None:
+                continue
+            want = _cold_mu_c(rows)
+            if want is None or want < 1e-6:
+                continue
+            warm = PatternLp(rows)
+            status, _ = warm.solve(want * (1 - 1e-6))
+            _, has, y = warm._h.getDualRay()
+            if status == Status.INFEASIBLE and has:
+                assert warm.ray_proves_empty(y)
+                accepted += 1
+            above = want * (1 + 1e-6)
+            cold, x = lp_feasible(rows, above)
+            assert cold == Status.FEASIBLE and point_holds(rows, above, x)
+            warm.solve(above)
+            for z in ([y] if has else []) + [rng_y.standard_normal(len(y)) for _ in range(20)]:
+                flipped = np.array(z, float)
+                flipped[-1] = -flipped[-1]
+                assert not warm.ray_proves_empty(z) and not warm.ray_proves_empty(flipped)
+                rejected += 2
+    assert accepted >= 10 and rejected >= 200, (accepted, rejected)
