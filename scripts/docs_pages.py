@@ -603,7 +603,7 @@ def bench_near_critical() -> str:
 
 #: the files of bench_highs_lp's table and how each is labelled
 HIGHS_LP_FILES = (("bench_highs_lp_before.json", "before"), ("bench_highs_lp_final.json", "after"),
-                  ("bench_highs_lp.json", "earlier state of the change"))
+                  ("bench_highs_lp.json", "latest run"))
 
 
 def bench_highs_lp() -> str:

@@ -145,21 +145,18 @@ class Master:
         #: a task that can hand back a Continuation does so after this long (the checkpoint period)
         self.pause_every_s = math.inf
         self._ctx_sent: dict = {}        # worker -> job id whose context it holds
-        self._sends: list = []           # the tasks' isend requests not yet known complete
-        me = (socket.gethostname(), os.getpid())
+        self._sends: list = []           # isend requests not known complete
         for w in self.workers:           # small: an eager send, returns at once
-            comm.send(me, dest=w, tag=mpi.HELLO)
+            comm.send((socket.gethostname(), os.getpid()), dest=w, tag=mpi.HELLO)
 
     def send_task(self, w: int, job_id: int, job, payload, batched: bool = False) -> None:
-        """batched: payload is a list of the job's payloads (run_batch runs them). The send
-        does not wait for the worker: a message with the job's context is too large for an
-        eager send, and a blocking one waited for the worker's next probe (15 ms each at 129
-        ranks, 2 s of the start of a job)."""
+        """batched: payload is a list of the job's payloads (run_batch runs them). Sent by isend:
+        a blocking send of a context (too large to go eagerly) waits for the worker's probe."""
         fresh = self._ctx_sent.get(w) != (job_id, batched)    # a TreeJob's first batch: run_batch
         self._ctx_sent[w] = (job_id, batched)
         handler, ctx = (run_batch, (job.handler, job.context)) if batched else (job.handler, job.context)
-        self._sends.append(self.comm.isend((job_id, payload, (job.kind, handler, ctx) if fresh else None,
-                                            self.pause_every_s), dest=w, tag=mpi.TASK))
+        msg = (job_id, payload, (job.kind, handler, ctx) if fresh else None, self.pause_every_s)
+        self._sends.append(self.comm.isend(msg, dest=w, tag=mpi.TASK))
         if len(self._sends) >= 2 * len(self.workers):
             self._sends = mpi.pending(self._sends)
 
@@ -169,7 +166,7 @@ class Master:
             return
         self.stopped = True
         mpi.stop_workers(self.comm, self.workers, waiting, timeout, on_answer)
-        self._sends = mpi.pending(self._sends, timeout=1.0)
+        self._sends = mpi.pending(self._sends, timeout=1.0)      # a dead worker's stay pending
 
 
 class Engine:
