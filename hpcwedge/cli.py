@@ -62,6 +62,8 @@ def _exit_now(code: int) -> None:
     import atexit
     sys.stdout.flush()
     sys.stderr.flush()
+    if "hpcwedge.solvers.lp" in sys.modules:    # a MILP left running ends with the process
+        sys.modules["hpcwedge.solvers.lp"].release_left_running()
     atexit._run_exitfuncs()
     os._exit(code)
 

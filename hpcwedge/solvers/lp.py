@@ -77,6 +77,7 @@ def highs_instance(options: dict, time_limit: float | None, polled: bool = True)
     h.setOptionValue("output_flag", False)
     for k, v in options.items():
         h.setOptionValue(k, v)
+    h.run_limit_s = time_limit          # highs_run re-arms it: HiGHS's clock adds up over runs
     if time_limit is not None:
         h.setOptionValue("time_limit", float(time_limit))
     if polled:
@@ -90,12 +91,22 @@ def _interrupt_on_stop(event) -> None:
         event.interrupt()
 
 
+def _arm_time_limit(h) -> None:
+    """The instance's time limit (highs_instance's) from now: HiGHS compares time_limit with
+    the instance's run time summed over all its runs, so a model kept warm would otherwise
+    stop every run at once after time_limit seconds in all."""
+    limit = getattr(h, "run_limit_s", None)
+    if limit is not None:
+        h.setOptionValue("time_limit", h.getRunTime() + float(limit))
+
+
 def highs_run(h) -> Status:
     """Run HiGHS on its model: its status in the package's vocabulary (HIGHS_STATUS). A stop
     (parallel.cancel) interrupts a run past INTERRUPT_AFTER_S; an undecided run while the task
     is stopping raises TaskCancelled here (interrupted, or no answer anyway)."""
     global _call_started
     _call_started = time.monotonic()
+    _arm_time_limit(h)
     h.run()
     status = HIGHS_STATUS.get(h.getModelStatus().name, Status.UNDECIDED)
     if status == Status.UNDECIDED and task_stopping():
@@ -113,14 +124,21 @@ def _join_left_running() -> None:
         _left_running.pop().wait()
 
 
+def release_left_running() -> None:
+    """Do not wait at exit for the HiGHS runs a stop left behind: for an exit by os._exit,
+    which ends their threads with the process (an interpreter's normal exit must wait)."""
+    _left_running.clear()
+
+
 def highs_run_watched(h, grace_s: float = 0.3) -> Status:
     """highs_run for a long call (the MILP, made by highs_instance(..., polled=False)): HiGHS
     runs in a thread of its own while this one polls task_stopping() every 0.1 s. HiGHS's own
     interrupt points can lie seconds apart (presolve, root heuristics), so a stop asks HiGHS to
     stop and, when it has not within grace_s, leaves its thread behind (the task is being
-    dropped, the instance is never used again; the process's exit waits for HiGHS's next
-    interrupt point) and raises TaskCancelled."""
+    dropped, the instance is never used again; a normal exit waits for HiGHS's next interrupt
+    point, the command line's exit after a stop does not) and raises TaskCancelled."""
     h.HandleUserInterrupt = True
+    _arm_time_limit(h)
     h.startSolve()
     while not h.wait(0.1)[0]:
         if task_stopping():

@@ -185,6 +185,24 @@ def test_a_highs_call_at_its_time_limit_decides_nothing(monkeypatch):
     assert seen == {Status.FEASIBLE, Status.INFEASIBLE}
 
 
+def test_a_model_kept_warm_gets_its_time_limit_on_every_run():
+    """HiGHS sums an instance's run time over its runs and compares time_limit with the sum:
+    a model run ~1 ms at a time under a limit of 0.2 s must still solve after more than 1 s
+    of runs in all (it stopped at once, kTimeLimit, from the 0.2 s mark before highs_run
+    re-armed the limit)."""
+    from hpcwedge.solvers.lp import highs_instance, highs_lp, highs_run
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((20, 8))
+    h = highs_instance({"presolve": "off"}, 0.2)
+    h.passModel(highs_lp(A, np.full(20, -np.inf), np.ones(20), -np.ones(8), np.ones(8), rng.standard_normal(8)))
+    runs = 0
+    while h.getRunTime() < 1.0 and runs < 20000:
+        h.changeColsCost(8, np.arange(8, dtype=np.int32), rng.standard_normal(8))
+        assert highs_run(h) == Status.FEASIBLE, (runs, h.getRunTime(), h.getModelStatus())
+        runs += 1
+    assert h.getRunTime() >= 1.0, runs
+
+
 def test_a_stop_interrupts_an_lp_past_its_grace_time(monkeypatch):
     """Inside a task the engine is stopping (parallel.cancel.run_cancellable), an LP shorter
     than INTERRUPT_AFTER_S ends with its answer (the caller's own check stops the task); with
