@@ -58,14 +58,14 @@ def test_task_pausing_after_its_period_or_at_a_stop():
     passed (the engine saying go on), and at once when the engine stops."""
     import time
 
-    def paused_after(ctx, payload):
-        t0 = time.monotonic()
+    def paused_at(ctx, payload):
         assert cancel.task_pausing() is False
         while not cancel.task_pausing():
             time.sleep(0.001)
-        return time.monotonic() - t0
+        return time.monotonic()
 
     assert cancel.task_pausing() is False
-    assert 0.05 <= cancel.run_cancellable(paused_after, None, None, lambda: False, 0.0, pause_every_s=0.05) < 1.0
+    t0 = time.monotonic()               # before the task is handed out: its period counts from then on
+    assert 0.05 <= cancel.run_cancellable(paused_at, None, None, lambda: False, 0.0, pause_every_s=0.05) - t0 < 1.0
     assert cancel.run_cancellable(lambda ctx, p: cancel.task_pausing(), None, None, lambda: True, 0.0) is True
     assert cancel.task_pausing() is False
