@@ -71,6 +71,24 @@ def _cold_feasible(rows, mu: float) -> bool:
     return status == Status.FEASIBLE and lp_violation(rows, mu, x) <= 1e-12
 
 
+def _random_patterns():
+    """(rows, mu^c by _cold_mu_c) of 6 random patterns on each of 8 random bodies of m = 4
+    (supported and free in turn), those with a null space and a finite mu^c."""
+    for seed in range(8):
+        rng = np.random.default_rng(300 + seed)
+        m = 4
+        p = parametrize(random_problem(rng, m, bool(seed % 2)))
+        for _ in range(6):
+            zu = rng.random(m) < 0.5
+            zr = ~zu & (rng.random(m) < 0.3)
+            rows = pattern_rows(p, m, zu, zr)
+            if zr.all() or rows.Z is None:
+                continue
+            want = _cold_mu_c(rows)
+            if want is not None:
+                yield rows, want
+
+
 def _cold_mu_c(rows, mu_max: float = 50.0, rtol: float = 1e-10) -> float | None:
     """A pattern's mu^c by bisection on lp_feasible (a new HiGHS model per mu)."""
     if not _cold_feasible(rows, mu_max):
@@ -89,32 +107,20 @@ def test_margin_steps_reach_the_cold_bisection_mu_c_from_above():
     1e-6 (1e-8 absolute at mu^c = 0) on random supported and free bodies. full patterns; at
     most 30 steps each."""
     checked = 0
-    for seed in range(8):
-        rng = np.random.default_rng(300 + seed)
-        m = 4
-        p = parametrize(random_problem(rng, m, bool(seed % 2)))
-        for _ in range(6):
-            zu = rng.random(m) < 0.5
-            zr = ~zu & (rng.random(m) < 0.3)
-            rows = pattern_rows(p, m, zu, zr)
-            if zr.all() or rows.Z is None:
-                continue
-            want = _cold_mu_c(rows)
-            if want is None:
-                continue
-            warm, hi, x, steps = PatternLp(rows), 50.0, None, 0
-            while steps < 30:
-                steps += 1
-                got = warm.margin(hi, x)
-                if got is None or got[0] <= 0:
-                    break
-                mu = ratio(rows, got[1])
-                assert mu <= hi * (1 + 1e-12) and lp_violation(rows, mu, got[1]) <= 1e-9
-                if not mu < hi or not point_holds(rows, mu, got[1]):
-                    break
-                hi, x = mu, got[1]
-            assert abs(hi - want) <= 1e-6 * want + 1e-8, (seed, zu, zr, hi, want)   # mu^c 0: 1e-8
-            checked += 1
+    for rows, want in _random_patterns():
+        warm, hi, x, steps = PatternLp(rows), 50.0, None, 0
+        while steps < 30:
+            steps += 1
+            got = warm.margin(hi, x)
+            if got is None or got[0] <= 0:
+                break
+            mu = ratio(rows, got[1])
+            assert mu <= hi * (1 + 1e-12) and lp_violation(rows, mu, got[1]) <= 1e-9
+            if not mu < hi or not point_holds(rows, mu, got[1]):
+                break
+            hi, x = mu, got[1]
+        assert abs(hi - want) <= 1e-6 * want + 1e-8, (hi, want)   # mu^c 0: 1e-8
+        checked += 1
     assert checked >= 15
 
 
@@ -126,32 +132,22 @@ def test_ray_proves_empty_below_the_cold_mu_c_and_never_above():
     the ray with its last entry's sign flipped."""
     accepted = rejected = 0
     rng_y = np.random.default_rng(7)
-    for seed in range(8):
-        rng = np.random.default_rng(300 + seed)
-        m = 4
-        p = parametrize(random_problem(rng, m, bool(seed % 2)))
-        for _ in range(6):
-            zu = rng.random(m) < 0.5
-            zr = ~zu & (rng.random(m) < 0.3)
-            rows = pattern_rows(p, m, zu, zr)
-            if zr.all() or rows.Z is None:
-                continue
-            want = _cold_mu_c(rows)
-            if want is None or want < 1e-6:
-                continue
-            warm = PatternLp(rows)
-            status, _ = warm.solve(want * (1 - 1e-6))
-            _, has, y = warm._h.getDualRay()
-            if status == Status.INFEASIBLE and has:
-                assert warm.ray_proves_empty(y)
-                accepted += 1
-            above = want * (1 + 1e-6)
-            cold, x = lp_feasible(rows, above)
-            assert cold == Status.FEASIBLE and point_holds(rows, above, x)
-            warm.solve(above)
-            for z in ([y] if has else []) + [rng_y.standard_normal(len(y)) for _ in range(20)]:
-                flipped = np.array(z, float)
-                flipped[-1] = -flipped[-1]
-                assert not warm.ray_proves_empty(z) and not warm.ray_proves_empty(flipped)
-                rejected += 2
+    for rows, want in _random_patterns():
+        if want < 1e-6:
+            continue
+        warm = PatternLp(rows)
+        status, _ = warm.solve(want * (1 - 1e-6))
+        _, has, y = warm._h.getDualRay()
+        if status == Status.INFEASIBLE and has:
+            assert warm.ray_proves_empty(y)
+            accepted += 1
+        above = want * (1 + 1e-6)
+        cold, x = lp_feasible(rows, above)
+        assert cold == Status.FEASIBLE and point_holds(rows, above, x)
+        warm.solve(above)
+        for z in ([y] if has else []) + [rng_y.standard_normal(len(y)) for _ in range(20)]:
+            flipped = np.array(z, float)
+            flipped[-1] = -flipped[-1]
+            assert not warm.ray_proves_empty(z) and not warm.ray_proves_empty(flipped)
+            rejected += 2
     assert accepted >= 10 and rejected >= 200, (accepted, rejected)
