@@ -145,7 +145,7 @@ class Master:
         #: a task that can hand back a Continuation does so after this long (the checkpoint period)
         self.pause_every_s = math.inf
         self._ctx_sent: dict = {}        # worker -> job id whose context it holds
-        self._sends: list = []           # isend requests not known complete
+        self._sends = mpi.Sends(len(self.workers))
         for w in self.workers:           # small: an eager send, returns at once
             comm.send((socket.gethostname(), os.getpid()), dest=w, tag=mpi.HELLO)
 
@@ -156,9 +156,7 @@ class Master:
         self._ctx_sent[w] = (job_id, batched)
         handler, ctx = (run_batch, (job.handler, job.context)) if batched else (job.handler, job.context)
         msg = (job_id, payload, (job.kind, handler, ctx) if fresh else None, self.pause_every_s)
-        self._sends.append(self.comm.isend(msg, dest=w, tag=mpi.TASK))
-        if len(self._sends) >= 2 * len(self.workers):
-            self._sends = mpi.pending(self._sends)
+        self._sends.add(self.comm.isend(msg, dest=w, tag=mpi.TASK))
 
     def stop(self, waiting, timeout: float, on_answer) -> None:
         """Once: stop every worker, hand the answers of `waiting` to on_answer (mpi.stop_workers)."""
@@ -166,7 +164,7 @@ class Master:
             return
         self.stopped = True
         mpi.stop_workers(self.comm, self.workers, waiting, timeout, on_answer)
-        self._sends = mpi.pending(self._sends, timeout=1.0)      # a dead worker's stay pending
+        self._sends.complete(timeout=1.0)      # a dead worker's stay pending
 
 
 class Engine:

@@ -117,6 +117,25 @@ def pending(requests: list, timeout: float = 0.0) -> list:
         time.sleep(0.001)
 
 
+class Sends:
+    """The master's isend requests not yet known complete: add() keeps one, and tests them
+    all (pending) once they reach a mark of 2 x max(workers, those left at the last test),
+    so that each send costs O(1) tests amortised; complete(timeout) tests them for up to
+    timeout seconds."""
+
+    def __init__(self, workers: int):
+        self.workers, self.requests, self.mark = workers, [], 2 * workers
+
+    def add(self, request) -> None:
+        self.requests.append(request)
+        if len(self.requests) >= self.mark:
+            self.complete()
+
+    def complete(self, timeout: float = 0.0) -> None:
+        self.requests = pending(self.requests, timeout)
+        self.mark = 2 * max(self.workers, len(self.requests))
+
+
 def wait_any(comm, deadline: float, interrupted) -> tuple | None:
     """The next message from any rank as (source, tag, message), or None at the
     deadline (time.monotonic) or as soon as interrupted() is true."""

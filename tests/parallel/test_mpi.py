@@ -57,3 +57,34 @@ def test_a_large_task_message_does_not_wait_for_its_worker():
     assert got["answer"] == [2, 4 << 20], got          # mpi.RESULT, the context's length
     assert got["send_s"] < 0.5, got
     assert got["answer_s"] >= 1.5, got                  # the worker did start late
+
+
+def test_sends_keep_the_incomplete_requests_at_amortised_cost():
+    """mpi.Sends: a request is dropped only once its Test() is true; with every request
+    incomplete (workers not yet receiving) the tests per add stay bounded (the mark doubles),
+    and complete() drops those finished since."""
+    from hpcwedge.parallel.mpi import Sends
+
+    class Request:                      # the one method Sends uses of an mpi4py Request
+        tests = 0
+
+        def __init__(self):
+            self.done = False
+
+        def Test(self):
+            Request.tests += 1
+            return self.done
+
+    sends = Sends(workers=4)
+    made = [Request() for _ in range(1000)]
+    for r in made:
+        sends.add(r)
+    assert sends.requests == made and Request.tests <= 4 * len(made), Request.tests
+    for r in made[::2]:
+        r.done = True
+    sends.complete()
+    assert sends.requests == made[1::2]
+    for r in made:
+        r.done = True
+    sends.complete(timeout=1.0)
+    assert sends.requests == []
