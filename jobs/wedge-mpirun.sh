@@ -106,6 +106,9 @@ if [ "$RANKS" -gt "$CPUS" ]; then
   EXTRA=(--oversubscribe "${EXTRA[@]}")
 fi
 [ "$(id -u)" = 0 ] && export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+# The ranks exit by themselves after a stop (the master first, with its checkpoint on disk);
+# Open MPI 4's mpirun then waits its kill timeout twice before it exits (2 s measured)
+export OMPI_MCA_odls_base_sigkill_timeout=${OMPI_MCA_odls_base_sigkill_timeout:-0}
 SETSID=()
 command -v setsid >/dev/null && SETSID=(setsid)
 
@@ -125,12 +128,13 @@ while kill -0 "$child" 2>/dev/null; do
       log "${LAUNCH[0]} still running ${KILL_AFTER} s after SIGTERM: SIGKILL"
       kill -KILL "$child" 2>/dev/null
     fi
-    sleep 1 & wait $!
+    sleep 0.2 & wait $!
   fi
 done
 wait "$child"; rc=$?
 
-complete=$("$PY" - "$SCENE" "$RESULT" <<'PYEOF' 2>/dev/null
+complete=0
+[ $rc = 0 ] && complete=$("$PY" - "$SCENE" "$RESULT" <<'PYEOF' 2>/dev/null
 import sys
 from hpcwedge.results.hdf5 import result_state
 from hpcwedge.scene.parse import load_scene
