@@ -503,6 +503,11 @@ def faults() -> str:
     failed = [r for r in d.get("rows") or [] if r.get("verdict") == "FAIL"]
     out = table(["category", "pass", "fail", "skipped"], rows) + \
         f"\n\n{d['cases']} cases in {d['seconds']:.0f} s (`{d['command']}`)."
+    reruns = [r for r in d.get("rows") or [] if r.get("rerun")]
+    if reruns:
+        out += (f" {len(reruns)} of them were run again alone after a fix or because they had failed under load "
+                "(the counts above hold their last verdict): " +
+                "; ".join(f"{r['case']} ({r['verdict']}, `{r['rerun']}`)" for r in reruns) + ".")
     if failed:
         out += "\n\nFailed in this run:\n\n" + table(
             ["case", "category", "expected", "observed", "seconds"],
