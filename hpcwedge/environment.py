@@ -9,10 +9,13 @@ by up to 5.6e-17 between a serial run and mpirun on an EPYC without AVX-512, iss
 differs between a serial run (every core), a rank Open MPI binds to one core, and
 oversubscribed unbound ranks. So:
 
-- importing hpcwedge (`hpcwedge/__init__.py`, first in every process of the command line
-  and of mpirun) sets THREAD_VARIABLES to "1" in os.environ, *overriding* the caller's
+- the command line (`cli.main`, first in every process of a run and of mpirun, before numpy
+  loads) sets THREAD_VARIABLES to "1" in os.environ, *overriding* the caller's
   values; the libraries read them when they load (numpy's and scipy's OpenBLAS, PETSc's
   OpenMP), and child processes inherit them;
+- Clarabel's settings ask for one thread (`solvers/conic.settings`: its faer LDL, chosen
+  for larger KKT systems, otherwise starts a thread per core, and Rust's rayon pools read
+  RAYON_NUM_THREADS, set here too);
 - `single_threaded()` limits the libraries that are loaded already (a notebook that
   imported numpy before hpcwedge) with threadpoolctl, for the duration of a block;
   pipeline.run_scene runs inside it.
@@ -42,7 +45,7 @@ from collections.abc import Iterator
 
 #: thread-count variables of the BLAS / OpenMP runtimes, all set to "1" (see module doc)
 THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
-                    "BLIS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+                    "BLIS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "RAYON_NUM_THREADS")
 
 #: the distributions whose versions the record lists (besides hpcwedge and python)
 PACKAGES = ("numpy", "scipy", "clarabel", "h5py", "mpi4py", "petsc4py", "threadpoolctl")

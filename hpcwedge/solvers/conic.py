@@ -82,6 +82,10 @@ def settings(attempt: int, tight: bool = False, feasibility: bool = False, long_
     # updates (_KeptSolvers)
     s.presolve_enable = False
     s.time_limit = TIME_LIMIT_S
+    # the thread policy (environment.py): "auto" picks faer's LDL for larger KKT systems,
+    # which by default runs a thread per core (the bits then depend on the cores a rank
+    # may use, and on 2 busy cores the threads spun: plug3d 8 x 16, 12.3 s instead of 7)
+    s.max_threads = 1
     if attempt < 3:
         s.equilibrate_enable = False
     if attempt == 0 and feasibility:

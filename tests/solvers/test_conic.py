@@ -189,3 +189,42 @@ def test_a_solve_is_bounded_in_time_and_stops_with_its_task():
         assert len(asked) == 3
         asked.clear()
     assert solve(problem, 1, False).status != Status.UNDECIDED
+
+
+def test_a_large_solve_runs_on_one_thread_with_the_bits_of_one_core(tmp_path):
+    """The thread policy holds for Clarabel: a pattern SOCP of plug3d 8 x 16 (m = 128, whose
+    KKT system Clarabel's "auto" hands to faer's LDL) solved in a fresh process leaves no
+    solver threads behind, and gives the same bits as in a process confined to one core (a
+    rank Open MPI binds). With faer's default, one thread per core, the process had 2 more
+    threads on 2 cores and another x (the BLAS on one thread, as the command line has it)."""
+    import os
+    import subprocess
+    import sys
+
+    from mpi_helpers import ROOT
+    if len(os.sched_getaffinity(0)) < 2:
+        import pytest
+        pytest.skip("needs 2 cores: on one, one thread per core is one thread")
+    code = ("import os, sys, hashlib, numpy as np\n"
+            "sys.path.insert(0, 'tests')\n"
+            "from instances import plug3d_param\n"
+            "from hpcwedge.solvers.conic import solve\n"
+            "from hpcwedge.solvers.rows import pattern_rows\n"
+            "from hpcwedge.solvers.socp import pattern_socp\n"
+            "p, m = plug3d_param(8, 16)\n"
+            "problem = pattern_socp(pattern_rows(p, m, np.ones(m, bool), np.zeros(m, bool)), 0.5)\n"
+            "before = len(os.listdir('/proc/self/task'))\n"
+            "sol = solve(problem, 1, False)\n"
+            "print(sol.name, len(os.listdir('/proc/self/task')) - before,"
+            " hashlib.sha256(sol.x.tobytes()).hexdigest())\n")
+    from hpcwedge.environment import THREAD_VARIABLES
+    # BLAS on one thread, as the command line sets it; Clarabel's own setting is under test
+    env = {**os.environ, **{k: "1" for k in THREAD_VARIABLES}, "PYTHONPATH": ROOT}
+    env.pop("RAYON_NUM_THREADS")
+    runs = [subprocess.run(prefix + [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
+                           text=True, timeout=300) for prefix in ([], ["taskset", "-c", "0"])]
+    for r in runs:
+        assert r.returncode == 0, r.stderr
+    (name, extra, bits), (_, _, one_core) = (r.stdout.split() for r in runs)
+    assert name == "Solved" and extra == "0"
+    assert bits == one_core
