@@ -32,6 +32,12 @@ DINKELBACH_STEPS = 30
 POLISH_TOL = 1e-9
 #: slack thresholds of the active sets tried after those scaled to the bracket width
 POLISH_WIDE_TAUS = (1e-5, 1e-3, 1e-2)
+#: pencils of more columns than this get their roots near the bracket by shift-invert
+#: Arnoldi (`near_roots`) instead of all of them by the QZ algorithm (plug2d m = 640, 1,283
+#: columns: 9.7 s for QZ)
+POLISH_DENSE_MAX = 400
+#: near_roots: eigenvalues asked first, and at most (then QZ)
+NEAR_ROOTS_K = (6, 48)
 
 
 class Probe:
@@ -80,27 +86,45 @@ def bisect(ok, lo: float, hi: float, rtol: float) -> tuple[float, float]:
 
 
 def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: float = 100.0,
-               method: str = "accurate", tol: float = 1e-6, mu_lo: float | None = None) -> tuple[float | None, bool]:
+               method: str = "accurate", tol: float = 1e-6, mu_lo: float | None = None,
+               mu_floor: float | None = None, mu_try: tuple[float, ...] = ()) -> tuple[float | None, bool]:
     """(mu^c, polished) of an LP pattern problem given by its rows (module doc; mu^c None:
     infeasible at mu_max). mu_lo: a guess of an infeasible mu below mu^c; the bisection
-    starts from it when an LP confirms it (else from 0). Route "accurate" first lowers the
-    upper end by Dinkelbach steps (`dinkelbach_hi`) and asks just below it: infeasible there,
-    the bracket is done. Every LP is first the rows' one warm model (pattern_lp.PatternLp,
+    starts from it when an LP confirms it (else from 0). mu_floor: a mu proven infeasible
+    another way (a certificate: lower_bound.py), taken as the lower end unchecked. mu_try:
+    guesses of a feasible mu just above mu^c, asked first in ascending order (below mu_hi):
+    the first feasible is the upper end; one proven infeasible, the lower end. Route
+    "accurate" first lowers the upper end by Dinkelbach steps (`dinkelbach_hi`; none when the
+    bracket is already within BRACKET_RTOL) and asks just below it: infeasible there, the
+    bracket is done. Every LP is first the rows' one warm model (pattern_lp.PatternLp,
     when the equalities do not depend on mu), feasibility.decide where it proves nothing."""
     warm = PatternLp(rows) if rows.Z is not None else None
+    last = {"x": None}                   # the point of the latest mu taken as feasible
+    lo = 0.0
+    for guess in sorted(mu_try):
+        if not 0.0 < guess < (mu_max if mu_hi is None else mu_hi):
+            continue
+        d = probe.decide(rows, guess, warm=warm)
+        if d.status == Status.FEASIBLE:
+            mu_hi, last["x"] = guess, d.x
+            break
+        if d.status == Status.INFEASIBLE:
+            lo = guess
     if mu_hi is None:
         if not probe.feasible(rows, mu_max, warm):
             return None, False
         mu_hi = mu_max
-    lo, hi = 0.0, float(mu_hi)
-    if mu_lo is not None and not probe.feasible(rows, mu_lo, warm):
+    hi = float(mu_hi)
+    if mu_floor is not None and lo < mu_floor < hi:
+        lo = float(mu_floor)
+    if mu_lo is not None and lo < mu_lo < hi and not probe.feasible(rows, mu_lo, warm):
         lo = mu_lo
-    if warm is not None and method == "accurate":
+    if warm is not None and method == "accurate" and hi - lo > BRACKET_RTOL * hi:
+        last["x"] = None
         hi = dinkelbach_hi(rows, warm, probe, hi)
         below = hi * (1 - 0.5 * BRACKET_RTOL)
         if lo < below and probe.decide(rows, below, warm=warm).status == Status.INFEASIBLE:
             lo = below
-    last = {"x": None}                   # the point of the latest mid taken as feasible
 
     def ok(mu: float, _spread: float) -> bool:
         d = probe.decide(rows, mu, warm=warm)
@@ -174,8 +198,10 @@ def polish(rows: Rows, x: np.ndarray, lo: float, hi: float, seed: int = 0) -> fl
         if M0.shape[0] < M0.shape[1]:
             continue             # fewer than d rows always have a null vector: no root to find
         G = rng.standard_normal((M0.shape[1], M0.shape[0]))
+        A, B = G @ M0, -(G @ M1)
         try:
-            lam = sla.eigvals(G @ M0, -(G @ M1))
+            lam = None if A.shape[0] <= POLISH_DENSE_MAX else near_roots(A, B, lo - pad, hi + pad, rng)
+            lam = sla.eigvals(A, B) if lam is None else lam
         except (np.linalg.LinAlgError, ValueError):
             continue
         lam = lam[np.isfinite(lam)]
@@ -183,6 +209,35 @@ def polish(rows: Rows, x: np.ndarray, lo: float, hi: float, seed: int = 0) -> fl
         for mu in lam[(lam >= lo - pad) & (lam <= hi + pad)]:
             if _verified(rows, act, float(mu)):
                 return float(mu)
+    return None
+
+
+def near_roots(A: np.ndarray, B: np.ndarray, a: float, b: float, rng: np.random.Generator) -> np.ndarray | None:
+    """Eigenvalues lam of the square pencil A v = lam B v, among them every one in the disc
+    |lam - c| <= rho, c = (a + b) / 2, rho = (b - a) / 2 (complex ones too; the caller keeps
+    the real ones in [a, b]): the largest theta = 1 / (lam - c) of (A - c B)^-1 B by ARPACK
+    (one LU of A - c B; the start vector from rng), k = NEAR_ROOTS_K[0] doubled until the
+    least |theta| found lies below 1 / rho, so that no eigenvalue of the disc is left out.
+    None when that takes more than NEAR_ROOTS_K[1] or ARPACK fails (the caller runs QZ)."""
+    from scipy.sparse.linalg import ArpackError, LinearOperator, eigs
+    n = A.shape[0]
+    c, rho = 0.5 * (a + b), 0.5 * (b - a)
+    lu = sla.lu_factor(A - c * B, check_finite=False)
+    if not np.all(np.isfinite(lu[0])) or np.any(np.diag(lu[0]) == 0):
+        return None
+    op = LinearOperator((n, n), matvec=lambda v: sla.lu_solve(lu, B @ v, check_finite=False), dtype=float)
+    v0 = rng.standard_normal(n)
+    k = NEAR_ROOTS_K[0]
+    while k <= NEAR_ROOTS_K[1] and k < n - 1:
+        task_tick()
+        try:
+            theta = eigs(op, k=k, which="LM", v0=v0, return_eigenvectors=False)
+        except ArpackError:
+            return None
+        if np.abs(theta).min() * rho < 1.0:
+            theta = theta[theta != 0]
+            return c + 1.0 / theta
+        k *= 2
     return None
 
 

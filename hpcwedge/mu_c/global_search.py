@@ -13,7 +13,8 @@ import numpy as np
 
 from hpcwedge.contact.problem import Parametrization
 from hpcwedge.mu_c.critical import MuC, add_counts, mu_critical, run_mu_c
-from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at
+from hpcwedge.mu_c.bracket import BRACKET_RTOL
+from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at, rigid_bound
 from hpcwedge.parallel.cancel import Continuation, TaskCancelled, task_pausing, task_tick
 from hpcwedge.parallel.engine import Engine, run_tasks
 from hpcwedge.patterns.job import DEFAULT_BUDGET, run_patterns
@@ -49,6 +50,10 @@ STEP_DIVE_FACTOR = 4
 TREE_BRANCH = "reaction"
 #: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
 DIVE_NODES = 2
+#: 2D MILP route: a pattern is first asked at floor (1 + t) for t in FLOOR_STEPS, floor the
+#: certified lower bound (_PatternValues; bracket_2d's mu_try): half the 2D bracket's
+#: tolerance, so that a yes brackets its mu^c (plug2d m = 640: no Dinkelbach step, no bisection)
+FLOOR_STEPS = (0.5 * BRACKET_RTOL,)
 #: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
 #: which sees every pattern within 1e-9 of the answer (the MILP route can miss one within
 #: ~1e-6 below it, HiGHS's tolerance) and finishes in seconds there (m = 20: ~6 s)
@@ -330,11 +335,14 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     free), whose mu^c, when finite, saves the MILP at mu_max (the slowest). Before each
     MILP the tree dives for dive * m + 1 nodes (0: no dive), see `_wedge_at`. The steps
     end where the certified lower bound meets best (`bound_meets`; bound=False: not asked):
-    then no pattern lies below best, by a certificate, at 1e-9."""
+    then no pattern lies below best, by a certificate, at 1e-9. A free body's certified lower
+    bound (lower_bound.rigid_bound, to 1e-10; bound=False: not asked) is each pattern's
+    floor (`_PatternValues`): a pattern feasible just above it has its mu^c bracketed at once."""
     s = 1.0 if scale is None else float(scale)
     stats.extra["route"] = "milp"
     wedge = partial(_wedge_at, param, m, stats, s, dive)
-    certified = _PatternValues(param, m, solve, stats)
+    floor = _floor(param, m, mu_max, stats) if bound else None
+    certified = _PatternValues(param, m, solve, stats, floor)
     best = None
     for mu in (np.inf, mu_max):
         ans = wedge(mu)
@@ -389,6 +397,15 @@ def bound_meets(param: Parametrization, m: int, best: float, stats: BnBStats) ->
     return b.certified
 
 
+def _floor(param: Parametrization, m: int, mu_max: float, stats: BnBStats) -> float | None:
+    """The certified lower bound on the global mu^c (lower_bound.rigid_bound up to mu_max,
+    to 1e-10), None when there is none above 0 (a supported body); its conic programs counted
+    into stats.extra["bound_solves"]."""
+    value, solves = rigid_bound(param, m, mu_max)
+    stats.extra["bound_solves"] = stats.extra.get("bound_solves", 0) + solves
+    return value if value else None
+
+
 def _wedge_at(param: Parametrization, m: int, stats: BnBStats, scale: float, dive: int, mu: float) -> WedgeMilp:
     """Is there a wedged configuration at mu (inf: r_t free)? A short dive of the tree first
     (dive * m + 1 nodes; 0: none): it settles most steps with a few LPs (a relaxed vertex
@@ -436,10 +453,14 @@ class _PatternValues:
     """The certified mu^c of the patterns the MILP route meets (`solve`: mu_critical), each
     computed once and counted into stats. Called with a FEASIBLE WedgeMilp found at mu =
     bound: its pattern's value, the computation started below bound when our LP finds the
-    pattern feasible there. A pattern met again (blurred) gives its known value."""
+    pattern feasible there. A pattern met again (blurred) gives its known value. With a
+    `floor` (a mu below which no wedge exists, by a certificate) the computation asks
+    floor (1 + FLOOR_STEPS) first (mu_critical's mu_try): feasible at the first, the bracket
+    [floor, floor (1 + FLOOR_STEPS[0])] is within the 2D bracket's tolerance (no Dinkelbach step,
+    no bisection; a free plug's all-contact pattern, whose mu^c the rigid bound meets)."""
 
-    def __init__(self, param: Parametrization, m: int, solve, stats: BnBStats):
-        self.param, self.m, self.solve, self.stats = param, m, solve, stats
+    def __init__(self, param: Parametrization, m: int, solve, stats: BnBStats, floor: float | None = None):
+        self.param, self.m, self.solve, self.stats, self.floor = param, m, solve, stats, floor
         self.seen: dict = {}
 
     def __call__(self, ans: WedgeMilp, bound: float) -> float | None:
@@ -450,7 +471,9 @@ class _PatternValues:
         rows = pattern_rows(self.param, self.m, ans.zero_u, ans.zero_r)
         self.stats.lps += 1
         ok = np.isfinite(bound) and decide(rows, bound, counts=self.stats.statuses).status == Status.FEASIBLE
-        r = self.solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None)
+        floor = self.floor
+        guess = () if floor is None else tuple(floor * (1 + t) for t in FLOOR_STEPS if floor * (1 + t) < bound)
+        r = self.solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None, mu_floor=floor, mu_try=guess)
         _absorb(self.stats, r)
         self.seen[key] = r.mu_c
         return r.mu_c
