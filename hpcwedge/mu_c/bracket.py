@@ -87,13 +87,13 @@ def bisect(ok, lo: float, hi: float, rtol: float) -> tuple[float, float]:
 
 def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: float = 100.0,
                method: str = "accurate", tol: float = 1e-6, mu_lo: float | None = None,
-               mu_floor: float | None = None, mu_try: tuple[float, ...] = ()) -> tuple[float | None, bool]:
+               mu_floor: float | None = None, mu_try: float | None = None) -> tuple[float | None, bool]:
     """(mu^c, polished) of an LP pattern problem given by its rows (module doc; mu^c None:
     infeasible at mu_max). mu_lo: a guess of an infeasible mu below mu^c; the bisection
     starts from it when an LP confirms it (else from 0). mu_floor: a mu proven infeasible
-    another way (a certificate: lower_bound.py), taken as the lower end unchecked. mu_try:
-    guesses of a feasible mu just above mu^c, asked first in ascending order (below mu_hi):
-    the first feasible is the upper end; one proven infeasible, the lower end. Route
+    another way (a certificate: lower_bound.py), taken as the lower end unchecked. mu_try: a
+    guess of a feasible mu just above mu^c, asked first (below mu_hi): feasible, it is the
+    upper end; proven infeasible, the lower end. Route
     "accurate" first lowers the upper end by Dinkelbach steps (`dinkelbach_hi`; none when the
     bracket is already within BRACKET_RTOL) and asks just below it: infeasible there, the
     bracket is done. Every LP is first the rows' one warm model (pattern_lp.PatternLp,
@@ -101,15 +101,12 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
     warm = PatternLp(rows) if rows.Z is not None else None
     last = {"x": None}                   # the point of the latest mu taken as feasible
     lo = 0.0
-    for guess in sorted(mu_try):
-        if not 0.0 < guess < (mu_max if mu_hi is None else mu_hi):
-            continue
-        d = probe.decide(rows, guess, warm=warm)
+    if mu_try is not None and 0.0 < mu_try < (mu_max if mu_hi is None else mu_hi):
+        d = probe.decide(rows, mu_try, warm=warm)
         if d.status == Status.FEASIBLE:
-            mu_hi, last["x"] = guess, d.x
-            break
-        if d.status == Status.INFEASIBLE:
-            lo = guess
+            mu_hi, last["x"] = mu_try, d.x
+        elif d.status == Status.INFEASIBLE:
+            lo = mu_try
     if mu_hi is None:
         if not probe.feasible(rows, mu_max, warm):
             return None, False

@@ -50,10 +50,10 @@ STEP_DIVE_FACTOR = 4
 TREE_BRANCH = "reaction"
 #: 2D MILP route: the tree's dive before each MILP gets DIVE_NODES * m + 1 tree nodes
 DIVE_NODES = 2
-#: 2D MILP route: a pattern is first asked at floor (1 + t) for t in FLOOR_STEPS, floor the
-#: certified lower bound (_PatternValues; bracket_2d's mu_try): half the 2D bracket's
-#: tolerance, so that a yes brackets its mu^c (plug2d m = 640: no Dinkelbach step, no bisection)
-FLOOR_STEPS = (0.5 * BRACKET_RTOL,)
+#: 2D MILP route: a pattern is first asked at floor (1 + FLOOR_STEP), floor the certified
+#: lower bound (_PatternValues; bracket_2d's mu_try): half the 2D bracket's tolerance, so that
+#: a yes brackets its mu^c (plug2d m = 640: no Dinkelbach step, no bisection)
+FLOOR_STEP = 0.5 * BRACKET_RTOL
 #: route "auto" takes the 2D MILP route from this many contact nodes on; below it the tree,
 #: which sees every pattern within 1e-9 of the answer (the MILP route can miss one within
 #: ~1e-6 below it, HiGHS's tolerance) and finishes in seconds there (m = 20: ~6 s)
@@ -455,8 +455,8 @@ class _PatternValues:
     bound: its pattern's value, the computation started below bound when our LP finds the
     pattern feasible there. A pattern met again (blurred) gives its known value. With a
     `floor` (a mu below which no wedge exists, by a certificate) the computation asks
-    floor (1 + FLOOR_STEPS) first (mu_critical's mu_try): feasible at the first, the bracket
-    [floor, floor (1 + FLOOR_STEPS[0])] is within the 2D bracket's tolerance (no Dinkelbach step,
+    floor (1 + FLOOR_STEP) first (mu_critical's mu_try): feasible there, the bracket
+    [floor, floor (1 + FLOOR_STEP)] is within the 2D bracket's tolerance (no Dinkelbach step,
     no bisection; a free plug's all-contact pattern, whose mu^c the rigid bound meets)."""
 
     def __init__(self, param: Parametrization, m: int, solve, stats: BnBStats, floor: float | None = None):
@@ -472,7 +472,7 @@ class _PatternValues:
         self.stats.lps += 1
         ok = np.isfinite(bound) and decide(rows, bound, counts=self.stats.statuses).status == Status.FEASIBLE
         floor = self.floor
-        guess = () if floor is None else tuple(floor * (1 + t) for t in FLOOR_STEPS if floor * (1 + t) < bound)
+        guess = None if floor is None or floor * (1 + FLOOR_STEP) >= bound else floor * (1 + FLOOR_STEP)
         r = self.solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None, mu_floor=floor, mu_try=guess)
         _absorb(self.stats, r)
         self.seen[key] = r.mu_c

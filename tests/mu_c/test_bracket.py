@@ -64,8 +64,8 @@ def test_floor_and_guess_give_the_plain_bracket_value():
     floor, _ = rigid_bound(p, m, 100.0)
     plain, short, wrong = Probe(), Probe(), Probe()
     mu0, pol0 = bracket_2d(rows, plain)
-    mu1, pol1 = bracket_2d(rows, short, mu_floor=floor, mu_try=(floor * (1 + 0.5 * BRACKET_RTOL),))
-    mu2, pol2 = bracket_2d(rows, wrong, mu_try=(0.9 * want,))
+    mu1, pol1 = bracket_2d(rows, short, mu_floor=floor, mu_try=floor * (1 + 0.5 * BRACKET_RTOL))
+    mu2, pol2 = bracket_2d(rows, wrong, mu_try=0.9 * want)
     assert pol0 and pol1 and pol2
     assert abs(mu0 - want) <= 1e-12 and abs(mu1 - mu0) <= 1e-12 and abs(mu2 - mu0) <= 1e-12
     assert short.solves == 1 < plain.solves
