@@ -97,11 +97,11 @@ def write_rays_scene(tmp_path, rows: int, mus=(0.65,), every: float = 60.0, name
     return str(p)
 
 
-def scene_text(every: float = 0.1, raw: bool = True) -> str:
+def scene_text(every: float = 0.02, raw: bool = True) -> str:
     return PATTERN_SCENE.format(every=every, model=RAW_MODEL if raw else PLUG_MODEL)
 
 
-def write_scene(tmp_path, every: float = 0.1, name: str = "scene.toml", text: str | None = None,
+def write_scene(tmp_path, every: float = 0.02, name: str = "scene.toml", text: str | None = None,
                 raw: bool = True, rows: int = 4) -> str:
     """The pattern scene in tmp_path (with plug{2 rows}.npz, the condensed K and rigid modes;
     the default scene names plug8.npz)."""
@@ -288,18 +288,23 @@ def all_gone(pids, timeout: float = 10.0) -> bool:
     return not any(alive(pid) for pid in pids)
 
 
-def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float = 0.4):
+def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float = 0.4,
+                     max_runs: int = 60):
     """Run the scene with --resume again and again; in each run, once the engine
     has written a checkpoint, wait a random moment and interrupt it with
     how(proc) (which returns the pids that must be gone afterwards). A run that
     finishes first is simply restarted from scratch: its result is removed (--resume on a
-    complete result does nothing) and its checkpoint is gone.
+    complete result does nothing), its checkpoint is gone, and the next delay is drawn
+    from half the range (the scene's work after its first checkpoint is a fraction of a
+    second, less on a fast machine: without the halving the loop could go on forever).
     Returns (interruptions, exit statuses of the interrupted runs)."""
     scene = write_scene(tmp_path)
     out = str(tmp_path / "r.h5")
     ckpt = out + ".ckpt"
     done, codes = 0, []
-    while done < n_cycles:
+    for _ in range(max_runs):
+        if done == n_cycles:
+            break
         since = time.time()
         p = launch(ranks, "run", scene, "-o", out, "-q", "--resume")
         if not wait_for_checkpoint(ckpt, since, p):
@@ -310,6 +315,7 @@ def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float 
         if p.poll() is not None:
             assert p.returncode == 0, p.stderr.read()
             os.remove(out)
+            max_delay /= 2
             continue
         gone = how(p) or []
         code = p.wait(timeout=60)
@@ -317,16 +323,16 @@ def interrupt_cycles(tmp_path, ranks, n_cycles: int, how, rng, max_delay: float 
         p.stdout.close()
         p.stderr.close()
         assert all_gone(gone), "ranks left behind"
-        if code == 0:                 # it had finished: a signal after the result changes nothing
+        if code == 0 or not os.path.exists(ckpt):
+            # it had finished (a signal after the result changes nothing), or it was killed
+            # after the result was written and the checkpoint removed, before it exited
             assert os.path.exists(out) and not os.path.exists(ckpt), err
             os.remove(out)
-            continue
-        if not os.path.exists(ckpt):  # killed after the result was written and the checkpoint
-            assert os.path.exists(out), err   # removed, before the process exited: finished
-            os.remove(out)
+            max_delay /= 2
             continue
         codes.append(code)
         done += 1
+    assert done == n_cycles, f"{done} of {n_cycles} interruptions landed in {max_runs} runs"
     return scene, out, done, codes
 
 

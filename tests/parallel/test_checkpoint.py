@@ -252,7 +252,9 @@ def test_sigusr1_checkpoints_and_goes_on(tmp_path, reference):
     scene = write_scene(tmp_path, every=1000)        # no timer checkpoints: only the signal's
     out = str(tmp_path / "r.h5")
     ckpt = checkpoint_path(out)
-    for attempt in range(3):                         # a run may end before a signal lands: start again
+    for attempt in range(5):                         # a run may end before a signal lands: start again
+        if os.path.exists(out):
+            os.remove(out)
         p = launch(3, "run", scene, "-o", out, "-q")
         pids = rank_pids(p.pid, 3, proc=p)
         # a rank that has not yet reached hpcwedge's first line dies of SIGUSR1, as any program would
@@ -271,8 +273,11 @@ def test_sigusr1_checkpoints_and_goes_on(tmp_path, reference):
                 break
             except (OSError, KeyError):              # not there yet, or being replaced
                 continue
-        assert p.wait(timeout=120) == 0, p.stderr.read()
+        code = p.wait(timeout=120)
         assert all_gone(pids.values())
+        if code == -signal.SIGUSR1 and os.path.exists(out) and not os.path.exists(ckpt):
+            continue                                 # mpirun itself, tearing down a finished run
+        assert code == 0, p.stderr.read()
         got = show_json(out)
         if reason is not None:                       # caught before the finished run removed it
             assert reason == "SIGUSR1" and written >= since - 1
@@ -457,8 +462,8 @@ def test_resume_with_other_run_settings_goes_on(tmp_path, reference):
     checkpoint belongs to another scene', exit 2). Any other change is still refused."""
     scene, out = _some_checkpoint(tmp_path)
     text = open(scene).read()
-    assert "checkpoint_every_s = 0.1" in text
-    changed = text.replace("checkpoint_every_s = 0.1", "checkpoint_every_s = 30.0\nmax_memory_gb = 64")
+    assert "checkpoint_every_s = 0.02" in text
+    changed = text.replace("checkpoint_every_s = 0.02", "checkpoint_every_s = 30.0\nmax_memory_gb = 64")
     other = write_scene(tmp_path, name="other.toml", text=changed.replace("1.0]", "1.5]"))
     _refused(other, out, "another scene")
     same = write_scene(tmp_path, name="same.toml", text=changed)
@@ -481,8 +486,9 @@ def test_a_comment_or_a_setting_is_the_same_scene_for_checkpoints_and_results(tm
     assert "resuming from" in p.stderr and not os.path.exists(checkpoint_path(out))
     got, want = show(out), dict(reference)
     assert got.pop("scene_hash") != want.pop("scene_hash") and got == want
+    assert "checkpoint_every_s = 0.02" in text
     interval = write_scene(tmp_path, name="interval.toml",
-                           text=text.replace("checkpoint_every_s = 0.1", "checkpoint_every_s = 30.0"))
+                           text=text.replace("checkpoint_every_s = 0.02", "checkpoint_every_s = 30.0"))
     p = run(None, "run", interval, "-o", out, "--resume")
     assert "is already complete for this scene" in p.stderr, p.stderr
     other = write_scene(tmp_path, name="other.toml", text=text.replace("1.0]", "1.5]"))
