@@ -360,6 +360,7 @@ def _lowered(best: float, wedge, certified: _PatternValues, met=None) -> float |
     """global_bracket_milp's steps down from `best`: at best (1 - delta), delta = MILP_STEPS
     in turn, wedge(mu) (`_wedge_at`) asked again while it returns a pattern of lower
     certified mu^c; none once met(best) (the certified lower bound meets it: `bound_meets`).
+    A step below certified.floor is no wedge without a solve (block2d m = 320: a MILP > 300 s).
     The last best, or None on doubt (an undecided answer, a pattern with no value)."""
     if met is not None and met(best):
         return best
@@ -367,6 +368,9 @@ def _lowered(best: float, wedge, certified: _PatternValues, met=None) -> float |
         while True:
             task_tick()
             bound = best * (1 - delta)
+            if certified.floor is not None and bound < certified.floor:
+                count(certified.stats.statuses, "milp_step_below_floor")
+                break                     # no wedge below the floor, by its certificate
             ans = wedge(bound)
             if ans.status == Status.UNDECIDED:
                 return None

@@ -44,6 +44,11 @@ X_SPACE_TOL = LP_OPTIONS["primal_feasibility_tolerance"]
 #: under OpenBLAS's Haswell kernels: ||x|| 1.2e6 against 16 for the solution, share x
 #: sqrt(d) 3e-5; the least of plug2d's solutions, m = 20 and 160: 1.5e-3 and 4e-3)
 NORM_SHARE_MIN = 1e-2
+#: a point whose unit rows all hold to this, relative to |x|, is taken whatever its
+#: normalisation share (pattern_lp.point_holds, TreeLp): rounding, not a near-recession
+#: direction met to tolerance (a random free body's margin point: |x| 1.2e3, share 7e-3,
+#: rows to 1e-16; block2d m = 160, tree nodes near mu^c: |x| ~ 750, share 2e-3, rows to 1e-15)
+ROUNDING_RTOL = 1e-13
 
 
 #: HiGHS's model statuses (HighsModelStatus names) in the package's vocabulary: kOptimal a
@@ -252,7 +257,8 @@ class TreeLp:
     finds the same points, counts and patterns.
 
     An answer is taken only with its proof checked here: a point meeting every row to
-    X_SPACE_TOL with a normalisation share (lp_feasible) of at least NORM_SHARE_MIN; an
+    X_SPACE_TOL with a normalisation share (lp_feasible) of at least NORM_SHARE_MIN (or every
+    row met to ROUNDING_RTOL |x|, as pattern_lp.point_holds); an
     infeasibility by HiGHS's dual ray y (a Farkas certificate: y >= 0 on the inequality
     rows, y_norm > 0 (y . bounds), |A^T y|_1 <= FARKAS_RTOL y_norm: no x with
     |x|_inf < 1 / FARKAS_RTOL meets the rows). Anything else is UNDECIDED:
@@ -315,7 +321,8 @@ class TreeLp:
         eq = self.upper == 0.0
         share = 1.0 / max(np.linalg.norm(self.norm) * np.linalg.norm(x), 1e-300)
         worst = max(np.abs(v[eq]).max(initial=0.0), (-v[:-1][~eq[:-1]]).max(initial=0.0), abs(v[-1] - 1.0))
-        return worst <= X_SPACE_TOL and share * np.sqrt(x.size) >= NORM_SHARE_MIN
+        size = np.linalg.norm(x)
+        return worst <= X_SPACE_TOL and (share * np.sqrt(x.size) >= NORM_SHARE_MIN or worst <= ROUNDING_RTOL * size)
 
     def _ray_holds(self, h) -> bool:
         """HiGHS's dual ray, either sign, proves {rows} empty (class doc)."""

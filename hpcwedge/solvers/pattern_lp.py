@@ -16,6 +16,7 @@ from hpcwedge.solvers.lp import (
     LP_OPTIONS,
     LP_TIME_LIMIT_S,
     NORM_SHARE_MIN,
+    ROUNDING_RTOL,
     X_SPACE_TOL,
     farkas_holds,
     highs_instance,
@@ -180,12 +181,6 @@ def _null_projection(A: np.ndarray, y: np.ndarray) -> np.ndarray | None:
     z = np.zeros_like(y)
     z[S] = N @ (N.T @ y[S])
     return z
-
-
-#: a point whose unit rows all hold to this, relative to |x|, is taken whatever its
-#: normalisation share (`point_holds`): rounding, not a near-recession direction met to
-#: tolerance (a random free body's margin point: |x| 1.2e3, share 7e-3, rows to 1e-16)
-ROUNDING_RTOL = 1e-13
 
 
 def point_holds(rows: Rows, mu: float, x: np.ndarray) -> bool:

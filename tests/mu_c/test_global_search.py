@@ -100,6 +100,20 @@ def test_milp_route_equals_tree_route_on_random_bodies(seed):
         assert alone is not None and abs(alone - tree[0]) <= 1e-9 * tree[0]
 
 
+@pytest.mark.parametrize("seed,m", [(2, 6), (14, 5)])
+def test_milp_steps_below_the_rigid_floor_are_skipped_and_the_answer_stands(seed, m):
+    """Free random bodies whose global mu^c lies less than 1e-2 above the certified rigid
+    floor: the MILP route's step at best (1 - 1e-2) is below the floor and is not solved
+    (counted milp_step_below_floor), and its answer is the tree route's."""
+    prob = random_problem(np.random.default_rng(seed), m, free=True)
+    p = parametrize(prob)
+    s_tree, s_milp = BnBStats(), BnBStats()
+    tree, _ = global_mu_critical(p, prob.m, 50.0, stats=s_tree, route="tree")
+    milp, _ = global_mu_critical(p, prob.m, 50.0, stats=s_milp, route="milp")
+    assert s_milp.extra["route"] == "milp" and s_milp.statuses["milp_step_below_floor"] >= 1
+    assert abs(milp - tree) <= 1e-9 * tree
+
+
 @pytest.mark.skipif(not os.path.isdir(SCENES), reason="../shared/scenes not beside the checkout")
 @pytest.mark.parametrize("name", ["vgroove_free.toml", "vgroove_springs.toml", "node2d.toml",
                                   "uncoupled2d.toml", "plug2d_r2.toml", "plug2d_r3.toml"])

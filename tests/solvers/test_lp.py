@@ -165,6 +165,32 @@ def test_tree_lp_agrees_with_the_cold_lp_and_its_points_meet_the_rows():
     assert min(decided.values()) >= 100 and unsure <= 0.1 * sum(decided.values()), (decided, unsure)
 
 
+def test_tree_lp_takes_a_long_point_met_to_rounding_on_a_meshed_block():
+    """block2d rows 39 (m = 80) just above its all-contact mu^c: the dive's nodes (contact
+    first) have feasible points of |x| ~ 10^2-10^3 whose normalisation share is below
+    NORM_SHARE_MIN, their rows met to ~1e-15. TreeLp takes them (ROUNDING_RTOL: before, every
+    one was "warm_unsure" and went to a cold lp_feasible, 1.3 s a node at m = 160), and each
+    answer is lp_feasible's."""
+    import math
+
+    from instances import global_run
+
+    from hpcwedge.solvers.lp import NORM_SHARE_MIN, ROUNDING_RTOL, TreeLp
+    res = global_run({"kind": "block2d", "rows": 39, "taper_deg": 10.0}, mu_c="none")
+    p, m = parametrize(res.problem), res.m
+    mu = math.tan(math.radians(10)) * (1 + 4.6e-3)
+    warm, counts, low_share = TreeLp(p, m, mu), {}, 0
+    for j in range(0, m + 1, 8):
+        zu = np.arange(m) < j
+        status, x = warm.solve(zu, np.zeros(m, bool), counts)
+        assert status == Status.FEASIBLE, (j, counts)
+        rows = pattern_rows(p, m, zu, np.zeros(m, bool))
+        assert lp_feasible(rows, mu)[0] == Status.FEASIBLE
+        assert lp_violation(rows, mu, x) <= ROUNDING_RTOL * np.linalg.norm(x)
+        low_share += np.sqrt(x.size) / (np.linalg.norm(rows.norm) * np.linalg.norm(x)) < NORM_SHARE_MIN
+    assert counts == {"warm_feasible": m // 8 + 1} and low_share >= 3, (counts, low_share)
+
+
 def test_a_highs_call_at_its_time_limit_decides_nothing(monkeypatch):
     """LP_TIME_LIMIT_S bounds every LP: at 0 s HiGHS stops at once (kTimeLimit), and
     lp_feasible (both forms) and TreeLp leave feasible and infeasible patterns UNDECIDED."""
