@@ -45,7 +45,7 @@ X_SPACE_TOL = LP_OPTIONS["primal_feasibility_tolerance"]
 #: sqrt(d) 3e-5; the least of plug2d's solutions, m = 20 and 160: 1.5e-3 and 4e-3)
 NORM_SHARE_MIN = 1e-2
 #: a point whose unit rows all hold to this, relative to |x|, is taken whatever its
-#: normalisation share (pattern_lp.point_holds, TreeLp): rounding, not a near-recession
+#: normalisation share (lp_feasible, pattern_lp.point_holds, TreeLp): rounding, not a near-recession
 #: direction met to tolerance (a random free body's margin point: |x| 1.2e3, share 7e-3,
 #: rows to 1e-16; block2d m = 160, tree nodes near mu^c: |x| ~ 750, share 2e-3, rows to 1e-15)
 ROUNDING_RTOL = 1e-13
@@ -191,7 +191,8 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     computed once per rows): HiGHS solves an LP of half the size without equality rows
     (plug2d m = 80, 240 x 160: 25 ms a solve against 257 ms, most of which was HiGHS's
     presolve of the equality rows). A point it returns must meet the unit x-space rows
-    to X_SPACE_TOL absolutely, as the x-space LP's tolerance guarantees; one that does
+    to X_SPACE_TOL absolutely, as the x-space LP's tolerance guarantees, with a normalisation
+    share of at least NORM_SHARE_MIN or every row met to ROUNDING_RTOL |x|; one that does
     not (a huge y along a near-recession direction on which sum r_n is a tiny share of
     |y|, within tolerance of the reduced rows only) is decided by the x-space LP instead, and so
     is a problem HiGHS leaves undecided in the eliminated form (counted as "lp_x_space"; the
@@ -222,9 +223,10 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     if status == Status.FEASIBLE:
         x = Z @ y
         # sum r_n = 1 over ||norm|| ||x||: the share of x the normalisation sees
-        share = 1.0 / max(np.linalg.norm(rows.norm) * np.linalg.norm(x), 1e-300)
-        if share * np.sqrt(x.size) >= NORM_SHARE_MIN and \
-                max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0)) <= X_SPACE_TOL:
+        size = np.linalg.norm(x)
+        share = 1.0 / max(np.linalg.norm(rows.norm) * size, 1e-300)
+        worst = max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0))
+        if worst <= X_SPACE_TOL and (share * np.sqrt(x.size) >= NORM_SHARE_MIN or worst <= ROUNDING_RTOL * size):
             return status, x
     count(counts, "lp_x_space")
     status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method)
