@@ -170,12 +170,11 @@ class Master:
 class Engine:
     """Runs jobs serially (comm None) or as the master of a world of workers.
 
-    checkpoint: set with use_checkpoint(); signals: install_signals() (master,
-    command line only). summary(): how the work was split (depends on the rank
-    count and on resumes, unlike every answer). tick_every_s: how often a task
-    run in-process looks at signals and the checkpoint timer (tasks.run_cancellable).
-    progress: called with a line every `progress_every_s` seconds while a job runs (its
-    task counts and what the job says of itself: job.progress())."""
+    checkpoint: set with use_checkpoint(); signals: install_signals() (master, command line
+    only). summary(): how the work was split (depends on the rank count and on resumes, unlike
+    every answer). tick_every_s: how often a task run in-process looks at signals and the
+    checkpoint timer (tasks.run_cancellable). progress: called with a line every
+    `progress_every_s` seconds while a job runs (its task counts and job.progress())."""
 
     def __init__(self, comm=None, progress=None, tick_every_s: float = TICK_EVERY_S,
                  progress_every_s: float = 10.0):
@@ -292,12 +291,15 @@ class Engine:
             self.write_checkpoint("timer")
 
     def _in_task(self) -> bool:
-        """In-process engine, polled inside a task (task_stopping): serves SIGUSR1 and
-        the checkpoint timer there (the running task is saved as open), and says
-        whether a SIGTERM/SIGINT asks the task to stop."""
+        """In-process engine, polled inside a task (task_stopping): serves SIGUSR1, the checkpoint
+        timer (the running task is saved as open) and a progress line every progress_every_s (> 0)
+        of a long task, and says whether a SIGTERM/SIGINT asks the task to stop."""
         if self.signals.stop_reason():
             return True
         self._serve_checkpoint()
+        if self.progress is not None and 0 < self.progress_every_s <= time.monotonic() - self._last_note:
+            self._last_note = time.monotonic()
+            self.progress.note(f"{self._current.name}: a task running (1 rank, {self.elapsed():.0f} s)")
         return False
 
     # ---- running jobs
@@ -337,7 +339,7 @@ class Engine:
 
     def _run_serial(self, job) -> None:
         handler = job.handler
-        last_note = time.monotonic()
+        self._last_note = time.monotonic()
         while True:
             self._safe_point()
             taken = job.take(1)
@@ -353,7 +355,7 @@ class Engine:
             self._merge(job, token, result)    # done (or stopped, the rest handed back as open)
             del self._inflight[0]
             self.tasks_per_rank[0] += 1
-            last_note = self._note(job, last_note)
+            self._last_note = self._note(job, self._last_note)
 
     def _run_master(self, job) -> None:
         idle = [w for w in self.master.workers if w not in self._inflight][::-1]

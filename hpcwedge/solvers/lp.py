@@ -229,21 +229,23 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
         if worst <= X_SPACE_TOL and (share * np.sqrt(x.size) >= NORM_SHARE_MIN or worst <= ROUNDING_RTOL * size):
             return status, x
     count(counts, "lp_x_space")
-    status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method)
+    status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method, watched=True)
     return status, x
 
 
 def _highs(A_ge: np.ndarray, A_eq: np.ndarray, d: int, options: dict | None,
-           method: str) -> tuple[Status, np.ndarray | None]:
-    """{A_ge v >= 0, A_eq v = e_last (the last row is the normalisation)}, v free in R^d."""
+           method: str, watched: bool = False) -> tuple[Status, np.ndarray | None]:
+    """{A_ge v >= 0, A_eq v = e_last (the last row is the normalisation)}, v free in R^d.
+    watched: run by highs_run_watched (the x-space LP: at m = 320 a dense cold solve of ~30 s
+    whose presolve has no interrupt point; a SIGTERM waited 18 s for it)."""
     b_eq = np.zeros(A_eq.shape[0])
     b_eq[-1] = 1.0
     k = A_ge.shape[0]
     lower = np.concatenate([np.zeros(k), b_eq])
     upper = np.concatenate([np.full(k, np.inf), b_eq])
-    h = highs_instance({**LP_METHODS[method], **(options or {})}, LP_TIME_LIMIT_S)
+    h = highs_instance({**LP_METHODS[method], **(options or {})}, LP_TIME_LIMIT_S, polled=not watched)
     h.passModel(highs_lp(np.vstack([A_ge, A_eq]), lower, upper, np.full(d, -np.inf), np.full(d, np.inf)))
-    status = highs_run(h)
+    status = highs_run_watched(h) if watched else highs_run(h)
     return status, np.array(h.getSolution().col_value) if status == Status.FEASIBLE else None
 
 

@@ -169,6 +169,22 @@ def test_task_job_keeps_a_continuation_in_its_checkpoint_state():
     assert again.counters["tasks"] == 1 and json.loads(again.save([])["attrs"]["continued"]) == {}
 
 
+@pytest.mark.parametrize("every", [0.02, 0.0])
+def test_a_long_task_prints_progress_lines_while_it_runs(every):
+    """In-process engine: a task of ~0.12 s, progress every 0.02 s, writes lines while it
+    runs (before: only after each merge, so a single bracket task of minutes said nothing);
+    progress_every_s = 0 (a line after every merge) writes none from inside. The answers stand."""
+    import io
+
+    from hpcwedge.progress import Progress
+    buf = io.StringIO()
+    eng = Engine(progress=Progress(stream=buf), progress_every_s=every, tick_every_s=0.0)
+    got = [r["sum"] for r in run_tasks(_long_sum, {"starts": []}, [None, None], engine=eng, kind="sums")]
+    inside = [line for line in buf.getvalue().splitlines() if "sums: a task running (1 rank, " in line]
+    assert got == _sums(2)
+    assert len(inside) >= 2 if every else inside == []
+
+
 def test_long_tasks_pause_for_the_timer_checkpoint_and_resume_after_a_sigterm(tmp_path):
     """In-process engine, checkpoint every 0.03 s: each long task pauses several times (the
     timer checkpoint holds its state, a continued payload), the answers are the closed

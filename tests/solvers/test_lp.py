@@ -252,6 +252,37 @@ def test_a_stop_interrupts_an_lp_past_its_grace_time(monkeypatch):
 
 
 
+def test_a_stop_ends_the_cold_x_space_lp_of_a_meshed_block_within_a_second():
+    """The slowest LP call here: lp_feasible's x-space LP of block2d rows 159 (m = 320), the
+    all-contact pattern at tan 10 deg (1 + 4.5e-3) (a dense cold solve of ~30 s; HiGHS's
+    presolve has no interrupt point, so a SIGTERM there waited 18 s). Run watched, a stop
+    1 s in raises TaskCancelled within 1 s."""
+    import math
+    import time
+
+    import pytest
+
+    import hpcwedge.solvers.lp as lp
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.parallel.cancel import TaskCancelled, run_cancellable
+    from hpcwedge.scene.parse import parse_scene
+    prob = contact_problem(parse_scene({"name": "b", "dim": 2, "model": {"kind": "block2d", "rows": 159},
+                                        "friction": {"mu": 0.1}}))
+    p, m = parametrize(prob), prob.m
+    rows = pattern_rows(p, m, np.ones(m, bool), np.zeros(m, bool))
+    A = rows.a0 + math.tan(math.radians(10)) * (1 + 4.5e-3) * rows.a1
+    A, E = A / np.linalg.norm(A, axis=1, keepdims=True), rows.eq
+
+    def x_space(ctx, payload):
+        return lp._highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], None, "simplex", watched=True)
+    start = time.monotonic()
+    with pytest.raises(TaskCancelled):
+        run_cancellable(x_space, None, None, lambda: time.monotonic() - start > 1.0, tick_every_s=0.0)
+    assert time.monotonic() - start < 2.0
+    lp._join_left_running()    # HiGHS's thread, asked to stop, ends at its next interrupt point: one
+    #                            solve at a time in a process (highspy), and the tests go on in this one
+
+
 def test_image_point_agrees_with_the_lp_in_x_on_the_all_contact_pattern():
     """image_point (an LP in b = R_n x >= 0 with the left null space of [U_n; R_n] as its
     only rows) against lp_feasible (the LP in x) on the all-contact pattern without friction
