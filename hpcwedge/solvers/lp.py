@@ -51,6 +51,17 @@ NORM_SHARE_MIN = 1e-2
 ROUNDING_RTOL = 1e-13
 
 
+def point_accepted(worst: float, x: np.ndarray, norm: np.ndarray) -> bool:
+    """The one rule by which every LP route takes a point x (lp_feasible, TreeLp,
+    pattern_lp.point_holds): `worst`, its largest violation of the unit x-space rows and of
+    sum r_n = 1 (`norm` . x = 1), is at most X_SPACE_TOL, and either its normalisation
+    share 1 / (||norm|| ||x||) times sqrt(d) is at least NORM_SHARE_MIN or worst is at most
+    ROUNDING_RTOL ||x|| (rounding, not a near-recession direction met to tolerance)."""
+    size = float(np.linalg.norm(x))
+    share = 1.0 / max(float(np.linalg.norm(norm)) * size, 1e-300)
+    return bool(worst <= X_SPACE_TOL and (share * np.sqrt(x.size) >= NORM_SHARE_MIN or worst <= ROUNDING_RTOL * size))
+
+
 #: HiGHS's model statuses (HighsModelStatus names) in the package's vocabulary: kOptimal a
 #: point (a feasibility LP has no objective, the MILP's is bounded), kInfeasible none; every
 #: other one (time or iteration limit, interrupt, unbounded or infeasible, unknown, errors):
@@ -222,11 +233,8 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
         return status, None
     if status == Status.FEASIBLE:
         x = Z @ y
-        # sum r_n = 1 over ||norm|| ||x||: the share of x the normalisation sees
-        size = np.linalg.norm(x)
-        share = 1.0 / max(np.linalg.norm(rows.norm) * size, 1e-300)
-        worst = max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0))
-        if worst <= X_SPACE_TOL and (share * np.sqrt(x.size) >= NORM_SHARE_MIN or worst <= ROUNDING_RTOL * size):
+        worst = max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0), abs(rows.norm @ x - 1.0))
+        if point_accepted(worst, x, rows.norm):
             return status, x
     count(counts, "lp_x_space")
     status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method, watched=True)
@@ -323,10 +331,8 @@ class TreeLp:
     def _point_holds(self, x: np.ndarray) -> bool:
         v = self.A @ x
         eq = self.upper == 0.0
-        share = 1.0 / max(np.linalg.norm(self.norm) * np.linalg.norm(x), 1e-300)
         worst = max(np.abs(v[eq]).max(initial=0.0), (-v[:-1][~eq[:-1]]).max(initial=0.0), abs(v[-1] - 1.0))
-        size = np.linalg.norm(x)
-        return worst <= X_SPACE_TOL and (share * np.sqrt(x.size) >= NORM_SHARE_MIN or worst <= ROUNDING_RTOL * size)
+        return point_accepted(worst, x, self.norm)
 
     def _ray_holds(self, h) -> bool:
         """HiGHS's dual ray, either sign, proves {rows} empty (class doc)."""

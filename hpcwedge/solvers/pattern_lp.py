@@ -16,12 +16,11 @@ from hpcwedge.solvers.lp import (
     LP_OPTIONS,
     LP_TIME_LIMIT_S,
     NORM_SHARE_MIN,
-    ROUNDING_RTOL,
-    X_SPACE_TOL,
     farkas_holds,
     highs_instance,
     highs_lp,
     highs_run,
+    point_accepted,
 )
 from hpcwedge.solvers.rows import ZERO_ROW_RTOL, Rows, Status, count
 
@@ -184,19 +183,14 @@ def _null_projection(A: np.ndarray, y: np.ndarray) -> np.ndarray | None:
 
 
 def point_holds(rows: Rows, mu: float, x: np.ndarray) -> bool:
-    """lp_feasible's acceptance of a point x of the eliminated LP, sum r_n = 1 to X_SPACE_TOL
-    and either its normalisation share times sqrt(d) at least NORM_SHARE_MIN with every unit
-    row at mu met to X_SPACE_TOL absolutely, or every unit row met to ROUNDING_RTOL |x|."""
+    """Whether x meets `rows` at mu (its unit rows and sum r_n = 1) by lp.point_accepted,
+    the rule of every LP route."""
     A = rows.a0 + mu * rows.a1
     scale = np.linalg.norm(A, axis=1)
     live = scale > 0
     v, eq = (A[live] @ x) / scale[live], rows.eq[live]
-    size = np.linalg.norm(x)
-    share = 1.0 / max(np.linalg.norm(rows.norm) * size, 1e-300)
-    worst = max(np.abs(v[eq]).max(initial=0.0), (-v[~eq]).max(initial=0.0))
-    if abs(rows.norm @ x - 1.0) > X_SPACE_TOL:
-        return False
-    return bool((share * np.sqrt(x.size) >= NORM_SHARE_MIN and worst <= X_SPACE_TOL) or worst <= ROUNDING_RTOL * size)
+    worst = max(np.abs(v[eq]).max(initial=0.0), (-v[~eq]).max(initial=0.0), abs(rows.norm @ x - 1.0))
+    return point_accepted(worst, x, rows.norm)
 
 
 def ratio(rows: Rows, x: np.ndarray) -> float:
