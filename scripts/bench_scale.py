@@ -30,7 +30,8 @@ then 256, 1,024 and 4,096 ranks with MODEL_SECONDS_PER_WORKER[ranks] x workers w
 ("sized": "job": a job of two minutes at 256 and 1,024 ranks, 30 s at 4,096, where the model
 runs the tree's nodes for minutes; --quick a quarter of it), and 1,024 ranks with the issue's
 floor of MIN_WORKER_SECONDS ("sized": "floor": 2 s per worker). The predictions set the
-idle-probe delay to 0 (a rank with a core of its own). "floor": per workload at 1,024 ranks,
+idle-probe delay to 0 and an idle worker's sleep cap to mpi.POLL_MAX_OWN_CORE (a rank with a
+core of its own: mpi.worker_poll_max). "floor": per workload at 1,024 ranks,
 the smallest of FLOOR_SEARCH's job sizes modelled at >= 0.9, the longest task and a worker's
 share of the floor, and why the floor is missed where it is.
 
@@ -58,6 +59,9 @@ sys.path.insert(0, HERE)
 
 from harness import RESULTS, mpirun_command, python_command, write_json  # noqa: E402
 from scale_workload import load_durations, make_job, task_seconds  # noqa: E402
+
+from hpcwedge.parallel import mpi  # noqa: E402
+from hpcwedge.parallel.mpi import POLL_MAX  # noqa: E402
 
 WORKLOADS = ("subtree", "mu_c", "face")
 RANKS, QUICK_RANKS, MODEL_RANKS = (3, 9, 17, 33, 65, 129), (3, 9, 17, 33, 65), (256, 1024, 4096)
@@ -173,14 +177,17 @@ def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 
     tried, smallest, longest = [], None, 0.0
     for ws in FLOOR_SEARCH:
         sim = model_run(workload, durations, ranks, ws, seed, costs)
-        tried.append({"worker_seconds": sim.task_s, "efficiency": sim.efficiency})
+        tried.append({"worker_seconds": sim.task_s, "efficiency": sim.efficiency, "master_busy": sim.master_busy})
         longest = longest or sim.longest_s     # at the floor's size
         if sim.efficiency >= 0.9:
             smallest = sim.task_s
             break
     share = MIN_WORKER_SECONDS / (ranks - 1)
     met = tried[0]["efficiency"] >= 0.9
+    busy = tried[0]["master_busy"]
     why = ("met" if met else
+           f"the master is busy {busy:.0%} of the time: tasks short enough for the tail are more than "
+           "one master serves" if busy >= 0.9 else
            f"its longest task ({longest:.2f} s) is {longest / share:.0%} of a worker's share of the floor "
            f"({share:.2f} s): the schedule's tail alone leaves workers idle" if longest > 0.25 * share else
            "the ramp-up and tail of the schedule, not the task lengths")
@@ -214,15 +221,15 @@ def master_costs(measured: list[dict], durations: dict) -> tuple[dict, dict]:
         _worst(runs[w], durations, _costs(wall, i, latency[w], k)) for i, w in enumerate(workloads)))
     latency = fit_latencies(idle_probe)
     validated = {w: _costs(wall, i, latency[w], idle_probe) for i, w in enumerate(workloads)}
-    predicting = {w: _costs(cpu, i, latency[w], 0.0) for i, w in enumerate(workloads)}
+    predicting = {w: _costs(cpu, i, latency[w], 0.0, mpi.POLL_MAX_OWN_CORE) for i, w in enumerate(workloads)}
     return validated, predicting
 
 
-def _costs(fitted, i: int, latency: float, idle_probe: float):
+def _costs(fitted, i: int, latency: float, idle_probe: float, worker_poll_max: float = POLL_MAX):
     """Workload i's MasterCosts from an nnls fit [per-message costs..., probe]: half to send, half to merge."""
     from hpcwedge.parallel.model import MasterCosts
     return MasterCosts(float(fitted[i]) / 2, float(fitted[i]) / 2, latency, probe_s=float(fitted[-1]),
-                       idle_probe_s=idle_probe)
+                       idle_probe_s=idle_probe, worker_poll_max_s=worker_poll_max)
 
 
 def _worst(runs: list[dict], durations: dict, costs) -> float:

@@ -2,8 +2,11 @@
 sleep for durations recorded from real runs (results/task_durations.json, written by
 scripts/record_durations.py) instead of computing.
 
-  task workloads ("mu_c", "face"): a parallel.jobs.TaskJob whose payloads are durations
-      drawn from the recorded tasks (a seeded generator), each task sleeping its duration;
+  task workloads ("mu_c", "face"): a parallel.jobs.TaskJob of tasks sleeping recorded
+      durations: "mu_c" draws them from the recorded tasks (a seeded generator); "face"
+      repeats the recorded run's faces (one mu) for as many mu as make the job, in the
+      order rays.faces.face_payloads hands them out (face by face over every mu: the
+      largest face, every split node in contact, first);
   tree workload ("subtree"): a parallel.jobs.TreeJob over a seeded random tree whose
       nodes cost the recorded seconds per visited node of the plug3d 4 x 6 subtree tasks.
       A synthetic node stands for GRAIN real nodes (its cost the sum of GRAIN draws'
@@ -50,6 +53,14 @@ def sleep_task(ctx: dict, seconds: float) -> dict:
     if ctx["sleep"]:
         time.sleep(seconds)
     return {"seconds": float(seconds)}
+
+
+def face_job(durations: np.ndarray, worker_seconds: float, sleep: bool, name: str = "face") -> TaskJob:
+    """A TaskJob of the recorded faces (`durations`, in the recorded run's task order, one mu)
+    for n_mu = ceil(worker_seconds / their sum) mu, face by face over every mu."""
+    n_mu = max(1, int(np.ceil(worker_seconds / durations.sum())))
+    return TaskJob(name, sleep_task, {"sleep": sleep}, [float(d) for d in durations for _ in range(n_mu)],
+                   kind="sleep")
 
 
 def task_job(durations: np.ndarray, worker_seconds: float, seed: int, sleep: bool, name: str = "tasks") -> TaskJob:
@@ -147,4 +158,6 @@ def make_job(workload: str, durations: dict, worker_seconds: float, seed: int, s
     """The synthetic job of a workload ("subtree", "mu_c" or "face")."""
     if workload == "subtree":
         return tree_job(durations["subtree"], worker_seconds, seed, sleep, budget, name=workload)
+    if workload == "face":
+        return face_job(durations[workload], worker_seconds, sleep, name=workload)
     return task_job(durations[workload], worker_seconds, seed, sleep, name=workload)

@@ -7,10 +7,11 @@ results. Importing this package loads nothing; each module is imported by name:
   task hands back its progress (Continuation); no MPI, no HDF5.
 - jobs.py: the job protocol; TaskJob (a fixed list of independent tasks) and TreeJob (a
   budgeted tree search whose open nodes go back to the pool).
+- schedule.py: how much work one message to a worker carries (batches, budget scales).
 - engine.py: Engine.run(job), in-process or as the master under mpirun; run_tasks.
 - worker.py: serve(comm), the loop of ranks >= 1.
 - mpi.py: world(), probing without spinning, the wire's tags.
 - checkpoint.py: the checkpoint file and the Checkpointer of a run.
 """
 
-__all__ = ["cancel", "jobs", "engine", "worker", "mpi", "checkpoint"]
+__all__ = ["cancel", "jobs", "schedule", "engine", "worker", "mpi", "checkpoint"]

@@ -37,27 +37,12 @@ from hpcwedge.parallel import mpi
 from hpcwedge.parallel.cancel import TICK_EVERY_S, Continuation, TaskCancelled, in_task_scopes, run_cancellable
 from hpcwedge.parallel.checkpoint import Checkpointer, CheckpointError
 from hpcwedge.parallel.jobs import TaskJob
+from hpcwedge.parallel.schedule import MasterClock, cut
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
 EXIT_INTERRUPTED = 75
 #: the master checks the memory guard (Engine.guard) at most this often (seconds)
 GUARD_EVERY_S = 1.0
-#: tasks go to a worker in batches that last about workers x MESSAGE_S / MAX_BUSY seconds (by
-#: the mean task seconds so far): the master, whose every message costs it up to ~MESSAGE_S
-#: (up to 1.2 ms of wall on 2 oversubscribed cores, 0.26 ms of CPU: bench_scale), stays ~MAX_BUSY busy
-MESSAGE_S, MAX_BUSY = 2e-3, 0.8
-
-
-def batch_size(workers: int, mean_task_s: float | None, pending: int) -> int:
-    """Tasks in the next message to a worker (>= 1), with `pending` in the pool: enough for
-    the batch to last workers x MESSAGE_S / MAX_BUSY seconds at `mean_task_s` (None, no task
-    done yet: 1), at most pending / (2 x workers) (guided self-scheduling: the pool is
-    shared out while it is short, the last batches are short). Answers do not depend on it."""
-    if not mean_task_s:
-        return 1
-    return max(1, min(math.ceil(workers * MESSAGE_S / MAX_BUSY / mean_task_s), pending // (2 * workers)))
-
-
 def run_batch(ctx, payloads: list) -> tuple[list, float]:
     """The handler of a batch of tasks: ctx = (handler, context); their results in order
     and the seconds they took. Each task runs in task scopes of its own (cancel.task_scope),
@@ -198,8 +183,10 @@ class Engine:
         self._inflight: dict = {}        # rank -> token of its task in flight
         self._job_id = 0
         self._job_start = (time.monotonic(), 0)    # (when, tasks done) as the current job started
-        self._batched = [0.0, 0]         # the current job's tasks: seconds, count (batch_size)
+        self._batched = [0.0, 0]         # the current job's tasks: seconds, units of work (schedule.py)
         self._sent_at: dict = {}         # rank -> when its unbatched task was sent (its seconds)
+        self._scale: dict = {}           # rank -> the budget scale of its tasks in flight
+        self.clock = MasterClock()       # the master's busy seconds per message (schedule.py)
         self._guarded = 0.0
 
     @property
@@ -342,7 +329,7 @@ class Engine:
         self._last_note = time.monotonic()
         while True:
             self._safe_point()
-            taken = job.take(1)
+            taken = job.take(1, getattr(job, "max_scale", 1))
             if taken is None:
                 return
             token, payload = taken
@@ -360,11 +347,12 @@ class Engine:
     def _run_master(self, job) -> None:
         idle = [w for w in self.master.workers if w not in self._inflight][::-1]
         last_note = time.monotonic()
+        self.clock.start()
         while True:
             self._hand_out(job, idle)
             if not self._inflight:
                 return                         # pool empty, nothing in flight: done
-            got = mpi.wait_any(self.comm, self.checkpoints.next_at, lambda: bool(self.signals.flags))
+            got = mpi.wait_any(self.comm, self.checkpoints.next_at, lambda: bool(self.signals.flags), self.clock)
             if got is not None:
                 w, tag, msg = got
                 idle.append(w)
@@ -381,16 +369,20 @@ class Engine:
             last_note = self._note(job, last_note)
 
     def _hand_out(self, job, idle: list) -> None:
-        """A batch of tasks (batch_size; a TreeJob's task alone while that is 1) to each idle
-        worker while the pool lasts."""
+        """To each idle worker while the pool lasts, a message of schedule.batch_size units of
+        work: a batch of tasks, or tasks of a scaled budget (schedule.cut); a task alone goes
+        unbatched unless it is a TaskJob's."""
         n_workers = len(self.master.workers)
         while idle:
-            secs, done = self._batched
-            k = batch_size(n_workers, secs / done if done else None, job.pending())
-            taken = [t for t in (job.take(n_workers) for _ in range(k)) if t is not None]
+            secs, units = self._batched
+            k, scale = cut(n_workers, secs / units if units else None, job.pending(), self.clock.message_s(),
+                           getattr(job, "max_scale", 1))
+            taken = [t for t in (job.take(n_workers, scale) for _ in range(k)) if t is not None]
             if not taken:
                 return
             w = idle.pop()
+            self._scale[w] = scale
+            self.clock.messages += 1
             if isinstance(job, TaskJob) or len(taken) > 1:
                 self._inflight[w] = Batch(t for t, _ in taken)
                 self.master.send_task(w, self._job_id, job, [p for _, p in taken], batched=True)
@@ -415,7 +407,7 @@ class Engine:
         # a batch's seconds as its worker measured them; a task alone's from send to answer
         msg, seconds = msg if isinstance(token, Batch) else (msg, time.monotonic() - self._sent_at[w])
         self._batched[0] += seconds
-        self._batched[1] += len(token) if isinstance(token, Batch) else 1
+        self._batched[1] += (len(token) if isinstance(token, Batch) else 1) * self._scale.get(w, 1)
         for t, result in zip(token, msg, strict=True) if isinstance(token, Batch) else [(token, msg)]:
             self._merge(job, t, result)
             self.tasks_per_rank[w] += 1

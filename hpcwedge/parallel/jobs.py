@@ -4,7 +4,8 @@ A *job* is a pool of tasks and the merge of their results: ``name``, ``kind`` (a
 its checkpoint keeps), ``handler`` (a module-level callable ``handler(context, payload) ->
 result``, sent to the workers by reference, as mpi4py.futures does), ``context`` (the
 job's shared read-only data, sent once to each worker), ``counters``, and pending(),
-take(n_workers) -> (token, payload) | None, merge(token, result), save(in_flight) /
+take(n_workers, scale) -> (token, payload) | None (scale: how many times its usual work
+the task may do, at most the job's ``max_scale``, 1 if it has none), merge(token, result), save(in_flight) /
 load(state) to and from plain arrays and attributes (checkpoint.py writes them),
 progress() and output(). The engine knows nothing else of a job. Two generic jobs:
 `TaskJob`, a fixed list of independent tasks, and `TreeJob`, a budgeted tree search whose
@@ -58,7 +59,7 @@ class TaskJob:
         """Nothing beyond the task counts (the engine adds the time left)."""
         return ""
 
-    def take(self, n_workers: int):
+    def take(self, n_workers: int, scale: int = 1):
         if not self._todo:
             return None
         k = self._todo.pop()
@@ -131,7 +132,7 @@ def _json_value(v):
     return json.loads(json.dumps(v))
 
 
-#: a TreeJob's budget multiplier when its pool holds enough tasks for every worker
+#: the largest multiple of its budget a TreeJob task gets (the engine's scale, schedule.cut)
 BUDGET_SCALE = 16
 
 
@@ -143,13 +144,16 @@ class TreeJob:
     nodes it left open with one witness each (data the node's exploration may reuse, or
     None), its counters (summed into the job's), and the found leaves it doubts. A node
     has a `depth`; the pool hands out the shallowest first, in push order among equals. A
-    task gets `budget` nodes while the pool is short (fewer than 2 tasks per worker), so the
-    work is split and handed back open, and budget * BUDGET_SCALE when it is long. Tasks
-    are always bounded, so a checkpoint never waits long and loses little.
+    task explores one node while the pool holds fewer nodes than there are workers (more
+    than one: the ramp-up and the tail, where a node handed back at once feeds an idle
+    worker soonest), `budget` nodes while it holds fewer than two per worker, and budget x
+    scale (the engine's, at most max_scale) when it is long. Tasks are always bounded, so a
+    checkpoint never waits long and loses little.
 
     A subclass gives save() / load() from `saved_nodes` / `restore` and output()."""
 
     kind = "tree"
+    max_scale = BUDGET_SCALE
 
     def __init__(self, name: str, handler, context, roots: list, budget: int, counters: dict):
         self.name, self.handler, self.context, self.budget = name, handler, context, int(budget)
@@ -168,11 +172,13 @@ class TreeJob:
     def pending(self) -> int:
         return len(self._pool)
 
-    def take(self, n_workers: int):
+    def take(self, n_workers: int, scale: int = 1):
         if not self._pool:
             return None
         _, _, group, node, witness = heapq.heappop(self._pool)
-        budget = self.budget if len(self._pool) < 2 * n_workers else self.budget * BUDGET_SCALE
+        left = len(self._pool)
+        budget = (1 if n_workers > 1 and left < n_workers else self.budget if left < 2 * n_workers
+                  else self.budget * max(1, min(int(scale), self.max_scale)))
         return (group, node, witness), (group, node, budget, witness)
 
     def merge(self, token, result) -> None:

@@ -3,8 +3,9 @@ its efficiency at rank counts a machine cannot run.
 
 The job is real (its take() and merge() run, and so does its handler, which must
 not sleep: `seconds(result)` says how long the task would have run); only time is
-simulated. Tasks travel in batches (engine.batch_size), one message each, as
-the engine sends them. The master is one server: each message costs it `send_s` (take and
+simulated. Work travels in messages of schedule.batch_size units (batches of tasks, or
+tasks of a scaled budget: schedule.cut), as the engine sends them; the master's cost per
+message that sizes them is its own busy time per message so far, as the engine measures it. The master is one server: each message costs it `send_s` (take and
 send) and each answer `merge_s` (receive and merge); between answers it waits as mpi.wait_any
 does (probes, then sleeps that grow by POLL_FRACTION of the wait up to `poll_max_s`),
 so it notices a result at its next wake-up; each wake-up probes, at `probe_s` of its busy
@@ -24,8 +25,8 @@ from __future__ import annotations
 import heapq
 from dataclasses import dataclass
 
-from hpcwedge.parallel.engine import batch_size
 from hpcwedge.parallel.mpi import POLL_FRACTION, POLL_MAX, POLL_MAX_MASTER
+from hpcwedge.parallel.schedule import MEASURED_AFTER, MESSAGE_S, cut
 
 
 @dataclass(frozen=True)
@@ -108,10 +109,13 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
     t = busy = task_s = 0.0
     seq = tasks = probes = 0
     merged_s = longest = 0.0           # the merged tasks' seconds (the engine's batch sizes); the longest task
+    units = 0                          # the merged tasks' units of work (schedule.py)
+    max_scale = getattr(job, "max_scale", 1)
     while True:
         while idle:
-            k = batch_size(workers, merged_s / tasks if tasks else None, job.pending())
-            taken = [x for x in (job.take(workers) for _ in range(k)) if x is not None]
+            message_s = busy / seq if seq >= MEASURED_AFTER else MESSAGE_S
+            k, scale = cut(workers, merged_s / units if units else None, job.pending(), message_s, max_scale)
+            taken = [x for x in (job.take(workers, scale) for _ in range(k)) if x is not None]
             if not taken:
                 break
             t += costs.send_s
@@ -124,12 +128,13 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
             delay = costs.latency_s + costs.idle_probe_s * len(idle) * workers
             start = noticed_at(idle_since[w], t + delay, costs.worker_poll_max_s)
             idle_since[w] = start + d
-            heapq.heappush(events, (start + d, seq, w, done, d))
+            heapq.heappush(events, (start + d, seq, w, done, d, len(done) * scale))
             seq += 1
         if not events:
             return Simulated(workers, t, task_s, tasks, busy, seq, probes, longest)
-        arrival, _, w, done, d = heapq.heappop(events)
+        arrival, _, w, done, d, u = heapq.heappop(events)
         merged_s += d
+        units += u
         t, wakes = waited(t, arrival, costs.poll_max_s)
         t += costs.merge_s
         probes += wakes

@@ -25,6 +25,10 @@ from hpcwedge.errors import UserError
 POLL_MAX = 0.05
 POLL_MAX_MASTER = 0.01
 POLL_FRACTION = 0.1
+#: an idle worker's longest sleep where every rank of its host has a core of its own: its
+#: probes then take no one's core, and a task handed out in a tree's ramp-up or tail starts
+#: within ~2 ms, not up to POLL_MAX late (bench_scale's model at 1,024 ranks)
+POLL_MAX_OWN_CORE = 0.002
 #: probes per wake-up: Open MPI's Iprobe reports a message that has arrived only
 #: after several progress calls (~10 measured here), so each wake-up probes in a burst
 PROBE_BURST = 32
@@ -92,6 +96,28 @@ def pid_alive(pid: int) -> bool:
         return True
 
 
+def local_ranks() -> int | None:
+    """The ranks of this job on this host, as the launcher says (Open MPI, MPICH, SLURM's
+    srun); None when it does not say."""
+    for key in ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "SLURM_NTASKS_PER_NODE"):
+        v = os.environ.get(key, "")
+        if v.isdigit() and int(v) > 0:
+            return int(v)
+    return None
+
+
+def worker_poll_max() -> float:
+    """An idle worker's longest sleep: POLL_MAX_OWN_CORE when the host has a core for each of
+    its ranks (its cores: os.cpu_count(), or SLURM_CPUS_ON_NODE when fewer), else POLL_MAX
+    (also when the launcher does not say how many ranks share the host)."""
+    ranks = local_ranks()
+    cores = os.cpu_count() or 1
+    slurm = os.environ.get("SLURM_CPUS_ON_NODE", "")
+    if slurm.isdigit() and int(slurm) > 0:
+        cores = min(cores, int(slurm))
+    return POLL_MAX_OWN_CORE if ranks is not None and ranks <= cores else POLL_MAX
+
+
 def backoff(waited: float, cap: float) -> float:
     """The sleep of a rank that has waited `waited` seconds: POLL_FRACTION of it, in [1e-4, cap]."""
     return min(cap, max(1e-4, POLL_FRACTION * waited))
@@ -136,9 +162,10 @@ class Sends:
         self.mark = 2 * max(self.workers, len(self.requests))
 
 
-def wait_any(comm, deadline: float, interrupted) -> tuple | None:
+def wait_any(comm, deadline: float, interrupted, clock=None) -> tuple | None:
     """The next message from any rank as (source, tag, message), or None at the
-    deadline (time.monotonic) or as soon as interrupted() is true."""
+    deadline (time.monotonic) or as soon as interrupted() is true; its sleeps are added
+    to clock.slept_s (a schedule.MasterClock) when given."""
     from mpi4py import MPI
     status = MPI.Status()
     t0 = time.monotonic()
@@ -149,7 +176,10 @@ def wait_any(comm, deadline: float, interrupted) -> tuple | None:
         now = time.monotonic()
         if interrupted() or now >= deadline:
             return None
-        time.sleep(backoff(now - t0, POLL_MAX_MASTER))
+        nap = backoff(now - t0, POLL_MAX_MASTER)
+        time.sleep(nap)
+        if clock is not None:
+            clock.slept_s += nap
 
 
 def stop_workers(comm, workers, waiting, timeout: float, on_answer) -> None:

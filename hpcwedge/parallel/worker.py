@@ -37,6 +37,7 @@ def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_
     ctx_id, kind, handler, ctx = None, None, None, None
     status = MPI.Status()
     master_pid, host = None, socket.gethostname()
+    poll_max = mpi.worker_poll_max()
     while True:
         t0 = checked = time.monotonic()
         while not mpi.probe(comm, 0, MPI.ANY_TAG, status):
@@ -45,7 +46,7 @@ def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_
                 checked = now
                 if os.getppid() != ppid or (master_pid is not None and not mpi.pid_alive(master_pid)):
                     os._exit(3)
-            time.sleep(mpi.backoff(now - t0, mpi.POLL_MAX))
+            time.sleep(mpi.backoff(now - t0, poll_max))
         tag = status.Get_tag()
         msg = comm.recv(source=0, tag=tag)
         if tag == mpi.STOP:

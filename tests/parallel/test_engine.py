@@ -196,7 +196,7 @@ def test_same_result_for_1_to_4_ranks(tmp_path, reference, ranks):
 #: MESSAGE_S 50 ms: batches of its tasks, however long a round trip takes on a loaded machine
 TREE_UNDER_MPIRUN = """
 import json
-from hpcwedge.parallel import engine as engine_module, mpi
+from hpcwedge.parallel import schedule, mpi
 from hpcwedge.parallel.engine import Engine
 from hpcwedge.parallel.jobs import TreeJob
 from hpcwedge.parallel.worker import serve
@@ -216,7 +216,7 @@ def explore(depth, payload):
             stack += [Node(n + (1,)), Node(n + (0,))]
     return found, stack, {"nodes": visited}, [], [None] * len(stack)
 
-engine_module.MESSAGE_S = 0.05
+schedule.MESSAGE_S = 0.05
 comm = mpi.world()
 if comm.rank:
     serve(comm)

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from hpcwedge.parallel import engine, mpi
+from hpcwedge.parallel import mpi, schedule
 from hpcwedge.parallel.jobs import TaskJob, TreeJob
 from hpcwedge.parallel.model import MasterCosts, noticed_at, simulate, waited
 
@@ -76,10 +76,10 @@ def test_a_tree_job_costs_its_tree_for_any_worker_count():
 
 
 def test_batch_size_lasts_the_masters_target_and_shares_out_a_short_pool():
-    target = math.ceil(100 * engine.MESSAGE_S / engine.MAX_BUSY / 0.01)         # 25 tasks of 10 ms
-    assert engine.batch_size(100, 0.01, 10 ** 6) == target == 25
-    assert engine.batch_size(100, 0.01, 1000) == 5                               # 1000 / (2 x 100)
-    assert engine.batch_size(100, 0.01, 150) == engine.batch_size(100, None, 10 ** 6) == 1
+    target = math.ceil(100 * schedule.MESSAGE_S / schedule.MAX_BUSY / 0.01)         # 25 tasks of 10 ms
+    assert schedule.batch_size(100, 0.01, 10 ** 6) == target == 25
+    assert schedule.batch_size(100, 0.01, 1000) == 5                               # 1000 / (2 x 100)
+    assert schedule.batch_size(100, 0.01, 150) == schedule.batch_size(100, None, 10 ** 6) == 1
 
 
 def test_the_master_notices_a_result_at_its_next_wake_up():
@@ -98,14 +98,17 @@ def test_the_master_notices_a_result_at_its_next_wake_up():
 
 
 def test_a_task_job_travels_in_batches_of_the_masters_target_length():
-    """4,000 tasks of 0.3 ms on 8 workers: a first round of single tasks, then batches that
-    last 8 x MESSAGE_S / MAX_BUSY (20 ms: 67 tasks) while the pool holds 16 x 67 tasks,
-    then pending / 16 down to 1 (guided self-scheduling); every task merged once, in its slot."""
+    """4,000 tasks of 0.3 ms on 8 workers, a master whose messages cost it MESSAGE_S: a first
+    round of single tasks, then batches that last 8 x MESSAGE_S / MAX_BUSY (20 ms: 67 tasks)
+    while the pool holds 16 x 67 tasks, then pending / 16 down to 1 (guided self-scheduling);
+    every task merged once, in its slot. A master whose messages cost it nothing (as measured
+    after schedule.MEASURED_AFTER messages) sends single tasks from then on."""
     durations = [0.0003 + 1e-9 * k for k in range(4000)]
+    half = schedule.MESSAGE_S / 2
     job = TaskJob("t", _seconds_task, None, durations)
-    sim = simulate(job, 8, ZERO, _result_seconds)
+    sim = simulate(job, 8, MasterCosts(half, half, poll_max_s=0.0, worker_poll_max_s=0.0), _result_seconds)
     assert [r["seconds"] for r in job.results] == durations and sim.tasks == 4000
-    k = math.ceil(8 * engine.MESSAGE_S / engine.MAX_BUSY / 0.0003)
+    k = math.ceil(8 * schedule.MESSAGE_S / schedule.MAX_BUSY / 0.0003)
     sizes, pending = [], 4000 - 8
     while pending:                        # one worker free at a time: one batch per answer
         sizes.append(max(1, min(k, pending // 16)))
@@ -113,6 +116,12 @@ def test_a_task_job_travels_in_batches_of_the_masters_target_length():
     assert k == 67 and sizes[:3] == [67] * 3 and sizes[-3:] == [1, 1, 1]
     assert sim.messages == 8 + len(sizes)
     assert sim.task_s == pytest.approx(sum(durations))
+    free = simulate(TaskJob("t", _seconds_task, None, durations), 8, ZERO, _result_seconds)
+    sent, pending = 8, 4000 - 8
+    while pending:
+        pending -= max(1, min(k if sent < schedule.MEASURED_AFTER else 1, pending // 16))
+        sent += 1
+    assert free.tasks == 4000 and free.messages == sent > sim.messages
 
 
 def test_a_worker_left_idle_starts_at_its_own_capped_wake_up():
