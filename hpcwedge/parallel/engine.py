@@ -352,7 +352,10 @@ class Engine:
             self._hand_out(job, idle)
             if not self._inflight:
                 return                         # pool empty, nothing in flight: done
-            got = mpi.wait_any(self.comm, self.checkpoints.next_at, lambda: bool(self.signals.flags), self.clock)
+            # the wait ends for the timer checkpoint and for the next progress line (a long task)
+            deadline = min(self.checkpoints.next_at, last_note + self.progress_every_s
+                           if self.progress is not None and self.progress_every_s > 0 else math.inf)
+            got = mpi.wait_any(self.comm, deadline, lambda: bool(self.signals.flags), self.clock)
             if got is not None:
                 w, tag, msg = got
                 idle.append(w)

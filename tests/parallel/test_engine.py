@@ -310,3 +310,46 @@ def test_progress_lines_count_patterns_and_tree_nodes():
     assert len(counts) == out.counters["tasks"] > 5
     assert all(a <= c and b <= d for (a, b), (c, d) in zip(counts, counts[1:]))
     assert counts[-1] == (sum(map(len, out.found)), out.counters["nodes"])
+
+
+#: rank 0 runs one task of 1.5 s on its worker with progress lines every 0.2 s (to stdout)
+LONG_TASK_UNDER_MPIRUN = """
+import sys, time
+from hpcwedge.parallel import mpi
+from hpcwedge.parallel.engine import Engine, run_tasks
+from hpcwedge.parallel.worker import serve
+from hpcwedge.progress import Progress
+
+def nap(ctx, seconds):
+    time.sleep(seconds)
+    return {"slept": seconds}
+
+comm = mpi.world()
+if comm.rank:
+    serve(comm)
+else:
+    engine = Engine(comm, progress=Progress(stream=sys.stdout), progress_every_s=0.2)
+    got = run_tasks(nap, None, [1.5], engine=engine, kind="naps")
+    engine.close()
+    print("answer", got[0]["slept"])
+"""
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_the_master_prints_progress_lines_while_a_long_task_runs():
+    """mpirun -n 2, one task of 1.5 s, progress every 0.2 s: the master prints lines while it
+    waits for the answer (before: only after a result was merged, so a job of one long task
+    said nothing until its end), and the answer stands."""
+    import subprocess
+    import sys
+
+    from mpi_helpers import MPIRUN, env
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", "-x", "PYTHONPATH",
+                        sys.executable, "-c", LONG_TASK_UNDER_MPIRUN], env=env(), capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    waiting = [line for line in lines if "naps: 0 tasks done, 0 pending, 1 running" in line]
+    assert len(waiting) >= 3, p.stdout
+    assert lines[-1] == "answer 1.5"
