@@ -26,7 +26,7 @@ import heapq
 from dataclasses import dataclass
 
 from hpcwedge.parallel.mpi import POLL_FRACTION, POLL_MAX, POLL_MAX_MASTER
-from hpcwedge.parallel.schedule import MEASURED_AFTER, MESSAGE_S, cut
+from hpcwedge.parallel.schedule import cut, message_cost
 
 
 @dataclass(frozen=True)
@@ -113,8 +113,8 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
     max_scale = getattr(job, "max_scale", 1)
     while True:
         while idle:
-            message_s = busy / seq if seq >= MEASURED_AFTER else MESSAGE_S
-            k, scale = cut(workers, merged_s / units if units else None, job.pending(), message_s, max_scale)
+            k, scale = cut(workers, merged_s / units if units else None, job.pending(), message_cost(busy, seq),
+                           max_scale)
             taken = [x for x in (job.take(workers, scale) for _ in range(k)) if x is not None]
             if not taken:
                 break

@@ -20,6 +20,12 @@ MESSAGE_S, MAX_BUSY = 2e-3, 0.8
 MEASURED_AFTER = 64
 
 
+def message_cost(busy_s: float, messages: int) -> float:
+    """The master's cost per message that sizes the next one: busy_s / messages once
+    MEASURED_AFTER messages are out, MESSAGE_S before (the engine's clock and its model)."""
+    return max(0.0, busy_s) / messages if messages >= MEASURED_AFTER else MESSAGE_S
+
+
 def batch_size(workers: int, mean_task_s: float | None, pending: int, message_s: float = MESSAGE_S) -> int:
     """Units of work in the next message to a worker (>= 1), with `pending` in the pool:
     enough for the message to last workers x message_s / MAX_BUSY seconds at `mean_task_s`
@@ -58,6 +64,4 @@ class MasterClock:
         self.slept_s, self.messages, self._t0 = 0.0, 0, time.perf_counter()
 
     def message_s(self) -> float:
-        if self.messages < MEASURED_AFTER:
-            return MESSAGE_S
-        return max(0.0, time.perf_counter() - self._t0 - self.slept_s) / self.messages
+        return message_cost(time.perf_counter() - self._t0 - self.slept_s, self.messages)
