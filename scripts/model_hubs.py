@@ -2,8 +2,8 @@
 """A design study for issue 42, not the engine: would a second level of hubs carry the tree
 search to the floor of 2,000 worker-seconds at 1,024 ranks, where one master does not?
 
-Three schedules of the same synthetic tree (scripts/scale_workload.py, the subtree workload,
-seed 0), with the master costs bench_scale fitted (results/bench_scale.json,
+Three schedules of the same synthetic trees (scripts/scale_workload.py, the subtree workload,
+seeds SEEDS), with the master costs bench_scale fitted (results/bench_scale.json,
 "costs_predicting" "subtree": CPU seconds per message, a rank with a core of its own):
 
   "flat": the engine as it is (parallel.model.simulate, one master and 1,023 workers);
@@ -55,6 +55,8 @@ NODE_S = 5e-6
 RANKS, FLOOR_WORKER_SECONDS = 1024, 2000.0
 #: (workers per hub, task budget in real nodes, low, chunk) tried
 HUB_PLANS = ((32, 32, 4.0, 2.0), (64, 64, 4.0, 2.0), (32, 64, 4.0, 2.0), (64, 32, 2.0, 4.0))
+#: the synthetic trees (scale_workload's seeds)
+SEEDS = (0, 1, 2)
 #: task budgets (real nodes) of the free one-level schedule
 FREE_BUDGETS = (8, 64)
 
@@ -201,8 +203,8 @@ def hub_layout(ranks: int, per_hub_max: int) -> tuple[int, int]:
 
 
 def study(durations: dict, costs: MasterCosts, grain: int, ranks: int = RANKS,
-          worker_seconds: float = FLOOR_WORKER_SECONDS, plans=HUB_PLANS) -> list[dict]:
-    """The three schedules at one grain (rows of results/model_hubs.json)."""
+          worker_seconds: float = FLOOR_WORKER_SECONDS, plans=HUB_PLANS, seed: int = 0) -> list[dict]:
+    """The three schedules at one grain, on the tree of `seed` (rows of results/model_hubs.json)."""
     old = scale_workload.GRAIN
     scale_workload.GRAIN = grain
     try:
@@ -211,11 +213,11 @@ def study(durations: dict, costs: MasterCosts, grain: int, ranks: int = RANKS,
                                    worker_poll_max_s=0.0, idle_probe_s=0.0)
         for name, c, budget in (("flat", costs, 64), *(("flat, free", free, b) for b in FREE_BUDGETS)):
             t0 = time.perf_counter()
-            job = make_job("subtree", durations, worker_seconds, 0, sleep=False, budget=budget)
+            job = make_job("subtree", durations, worker_seconds, seed, sleep=False, budget=budget)
             if c is free:
                 job.max_scale = 1            # tasks of the budget: growing ones only save messages
             s = simulate(job, ranks - 1, c, task_seconds)
-            rows.append({"schedule": name, "grain": grain, "ranks": ranks, "workers": ranks - 1,
+            rows.append({"schedule": name, "seed": seed, "grain": grain, "ranks": ranks, "workers": ranks - 1,
                          "budget": job.budget * grain, "task_s": s.task_s, "wall_s": s.wall_s,
                          "efficiency": s.efficiency, "efficiency_all_ranks": s.efficiency,
                          "master_busy": s.master_busy, "tasks": s.tasks, "nodes": job.counters["nodes"],
@@ -223,9 +225,9 @@ def study(durations: dict, costs: MasterCosts, grain: int, ranks: int = RANKS,
         for per_hub_max, budget, low, chunk in plans:
             hubs, per_hub = hub_layout(ranks, per_hub_max)
             t0 = time.perf_counter()
-            job = make_job("subtree", durations, worker_seconds, 0, sleep=False, budget=budget)
+            job = make_job("subtree", durations, worker_seconds, seed, sleep=False, budget=budget)
             r = simulate_hubs(job, hubs, per_hub, costs, low, chunk)
-            rows.append({"schedule": "hubs", "grain": grain, "ranks": ranks, "hubs": hubs, "per_hub": per_hub,
+            rows.append({"schedule": "hubs", "seed": seed, "grain": grain, "ranks": ranks, "hubs": hubs, "per_hub": per_hub,
                          "workers": hubs * per_hub, "budget": budget, "low": low, "chunk": chunk, **r,
                          "efficiency_all_ranks": r["task_s"] / ((ranks - 1) * r["wall_s"]),
                          "model_seconds": time.perf_counter() - t0})
@@ -239,10 +241,10 @@ def main() -> None:
         costs = MasterCosts(**json.load(f)["costs_predicting"]["subtree"])
     durations = load_durations(os.path.join(RESULTS, "task_durations.json"))
     rows = []
-    for grain in (scale_workload.GRAIN, 1):
-        for row in study(durations, costs, grain):
+    for seed, grain in ((seed, grain) for seed in SEEDS for grain in (scale_workload.GRAIN, 1)):
+        for row in study(durations, costs, grain, seed=seed):
             rows.append(row)
-            print(f"grain {row['grain']} {row['schedule']:10} {row.get('hubs', '-')!s:>3} x {row.get('per_hub', '-')!s:>3} "
+            print(f"seed {seed} grain {row['grain']} {row['schedule']:10} {row.get('hubs', '-')!s:>3} x {row.get('per_hub', '-')!s:>3} "
                   f"budget {row['budget']:3}: efficiency {row['efficiency']:.3f} (all ranks "
                   f"{row['efficiency_all_ranks']:.3f}), wall {row['wall_s']:.2f} s, master busy "
                   f"{row['master_busy']:.2f}", flush=True)
