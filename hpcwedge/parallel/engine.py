@@ -34,25 +34,16 @@ import time
 
 from hpcwedge.errors import Interrupted, UserError
 from hpcwedge.parallel import mpi
-from hpcwedge.parallel.cancel import TICK_EVERY_S, Continuation, TaskCancelled, in_task_scopes, run_cancellable
+from hpcwedge.parallel.cancel import TICK_EVERY_S, Continuation, TaskCancelled, run_cancellable
 from hpcwedge.parallel.checkpoint import Checkpointer, CheckpointError
 from hpcwedge.parallel.jobs import TaskJob
-from hpcwedge.parallel.schedule import MasterClock, cut
+from hpcwedge.parallel.schedule import MasterClock, cut, utilisation
+from hpcwedge.parallel.worker import run_batch
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
 EXIT_INTERRUPTED = 75
 #: the master checks the memory guard (Engine.guard) at most this often (seconds)
 GUARD_EVERY_S = 1.0
-def run_batch(ctx, payloads: list) -> tuple[list, float]:
-    """The handler of a batch of tasks: ctx = (handler, context); their results in order
-    and the seconds they took. Each task runs in task scopes of its own (cancel.task_scope),
-    as an unbatched one does."""
-    handler, context = ctx
-    t0 = time.perf_counter()
-    results = [in_task_scopes(handler, context, p) for p in payloads]
-    return results, time.perf_counter() - t0
-
-
 class Batch(list):
     """The tokens of the tasks in one batch (a worker's task in flight)."""
 
@@ -187,6 +178,7 @@ class Engine:
         self._sent_at: dict = {}         # rank -> when its unbatched task was sent (its seconds)
         self._scale: dict = {}           # rank -> the budget scale of its tasks in flight
         self.clock = MasterClock()       # the master's busy seconds per message (schedule.py)
+        self._use: dict = {}             # job name -> schedule.utilisation (under mpirun, this session)
         self._guarded = 0.0
 
     @property
@@ -316,6 +308,8 @@ class Engine:
                 self._run_serial(job)
             else:
                 self._run_master(job)
+                self._use[job.name] = utilisation(self._batched[0], len(self.master.workers), self.clock)
+                self._note_use(job.name)
             self._jobs[job.name] = job
             self._current, self._inflight = None, {}
         finally:
@@ -457,9 +451,18 @@ class Engine:
                            f"{self.elapsed():.0f} s{left})")
         return now
 
+    def _note_use(self, name: str) -> None:
+        """After a job that ran progress_every_s or longer under mpirun: how busy its workers were."""
+        u = self._use[name]
+        if self.progress is not None and 0 < self.progress_every_s <= u["wall_s"]:
+            self.progress.note(f"{name}: {u['wall_s']:.0f} s on {u['workers']} workers, busy "
+                               f"{u['workers_busy']:.0%} of it (the master {u['master_busy']:.0%})")
+
     def summary(self) -> dict:
-        """How the work was split: depends on ranks and resumes (answers do not)."""
+        """How the work was split: depends on ranks and resumes (answers do not); utilisation:
+        per job run under mpirun in this session, schedule.utilisation."""
         return {"ranks": self.size, "resumes": self.resumes, "tasks_per_rank": list(self.tasks_per_rank),
+                "utilisation": dict(self._use),
                 "checkpoints_written": self.checkpoints_written,
                 "last_checkpoint_reason": self.checkpoint_reason or "",
                 "elapsed_s_all_sessions": self.elapsed(),

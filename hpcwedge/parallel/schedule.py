@@ -63,5 +63,21 @@ class MasterClock:
     def start(self) -> None:
         self.slept_s, self.messages, self._t0 = 0.0, 0, time.perf_counter()
 
+    def busy_s(self) -> float:
+        """The master's busy seconds since start()."""
+        return time.perf_counter() - self._t0 - self.slept_s
+
+    def wall_s(self) -> float:
+        return time.perf_counter() - self._t0
+
     def message_s(self) -> float:
-        return message_cost(time.perf_counter() - self._t0 - self.slept_s, self.messages)
+        return message_cost(self.busy_s(), self.messages)
+
+
+def utilisation(task_s: float, workers: int, clock: MasterClock) -> dict:
+    """A job's use of the ranks, from its master's clock (started with the job): wall_s,
+    workers, workers_busy = task_s / (workers x wall_s) (task_s: the tasks' seconds as the
+    engine measures them, a task alone from send to answer), master_busy = busy / wall."""
+    wall = clock.wall_s()
+    return {"wall_s": wall, "workers": workers, "workers_busy": min(1.0, task_s / (workers * wall)) if wall > 0 else 0.0,
+            "master_busy": min(1.0, clock.busy_s() / wall) if wall > 0 else 0.0}

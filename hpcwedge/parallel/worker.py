@@ -11,7 +11,7 @@ import traceback
 
 from hpcwedge.errors import UserError
 from hpcwedge.parallel import mpi
-from hpcwedge.parallel.cancel import TICK_EVERY_S, TaskCancelled, run_cancellable
+from hpcwedge.parallel.cancel import TICK_EVERY_S, TaskCancelled, in_task_scopes, run_cancellable
 
 
 def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_S) -> None:
@@ -73,3 +73,13 @@ def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_
                       dest=0, tag=mpi.ERROR)
         else:
             comm.send(result, dest=0, tag=mpi.RESULT)
+
+
+def run_batch(ctx, payloads: list) -> tuple[list, float]:
+    """The handler of a batch of tasks (the engine sends it by reference): ctx = (handler,
+    context); their results in order and the seconds they took. Each task runs in task
+    scopes of its own (cancel.task_scope), as an unbatched one does."""
+    handler, context = ctx
+    t0 = time.perf_counter()
+    results = [in_task_scopes(handler, context, p) for p in payloads]
+    return results, time.perf_counter() - t0

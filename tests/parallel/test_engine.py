@@ -239,6 +239,7 @@ def test_a_tree_job_of_short_tasks_travels_in_batches_with_the_same_answer(tmp_p
     counts the tree's 8,191 nodes; every node handed back became one task (tasks and
     handed_back depend on the split: the budget grows while the pool is long)."""
     import json
+    import re
     import subprocess
     import sys
 
@@ -353,3 +354,52 @@ def test_the_master_prints_progress_lines_while_a_long_task_runs():
     waiting = [line for line in lines if "naps: 0 tasks done, 0 pending, 1 running" in line]
     assert len(waiting) >= 3, p.stdout
     assert lines[-1] == "answer 1.5"
+
+
+#: two jobs on 2 workers: one task of 1 s (one worker idle), then four of 0.5 s (both busy)
+USE_UNDER_MPIRUN = """
+import json, sys, time
+from hpcwedge.parallel import mpi
+from hpcwedge.parallel.engine import Engine, run_tasks
+from hpcwedge.parallel.worker import serve
+from hpcwedge.progress import Progress
+
+def nap(ctx, seconds):
+    time.sleep(seconds)
+    return {"slept": seconds}
+
+comm = mpi.world()
+if comm.rank:
+    serve(comm)
+else:
+    engine = Engine(comm, progress=Progress(stream=sys.stdout), progress_every_s=0.5)
+    run_tasks(nap, None, [1.0], engine=engine, name="one")
+    run_tasks(nap, None, [0.5] * 4, engine=engine, name="four")
+    engine.close()
+    print(json.dumps(engine.summary()["utilisation"]))
+"""
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_stats_say_how_busy_each_jobs_workers_were():
+    """mpirun -n 3: a job of one task of 1 s keeps one of its 2 workers busy (about half), one
+    of four tasks of 0.5 s both; each job's end prints the line."""
+    import json
+    import re
+    import subprocess
+    import sys
+
+    from mpi_helpers import MPIRUN, env
+    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
+                        sys.executable, "-c", USE_UNDER_MPIRUN], env=env(), capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr
+    use = json.loads(p.stdout.splitlines()[-1])
+    assert use["one"]["workers"] == use["four"]["workers"] == 2
+    assert 0.99 <= use["one"]["wall_s"] < 1.5 and 0.99 <= use["four"]["wall_s"] < 1.5
+    assert 0.35 <= use["one"]["workers_busy"] <= 0.51, use
+    assert 0.7 <= use["four"]["workers_busy"] <= 1.0, use
+    assert all(0 <= u["master_busy"] < 0.5 for u in use.values()), use
+    said = re.findall(r"(one|four): 1 s on 2 workers, busy (\d+)% of it \(the master \d+%\)", p.stdout)
+    assert [name for name, _ in said] == ["one", "four"] and 35 <= int(said[0][1]) <= 51, p.stdout
