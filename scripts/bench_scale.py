@@ -33,7 +33,8 @@ floor of MIN_WORKER_SECONDS ("sized": "floor": 2 s per worker). The predictions 
 idle-probe delay to 0 and an idle worker's sleep cap to mpi.POLL_MAX_OWN_CORE (a rank with a
 core of its own: mpi.worker_poll_max). "floor": per workload at 1,024 ranks,
 the smallest of FLOOR_SEARCH's job sizes modelled at >= 0.9, the longest task and a worker's
-share of the floor, and why the floor is missed where it is.
+share of the floor, what a free one-level schedule could reach on the floor's job
+(free_schedule), and why the floor is missed where it is.
 
 Writes results/bench_scale.json ("measured", "modelled", the costs, the load) and
 results/bench_scale.png (efficiency against ranks).
@@ -58,7 +59,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 from harness import RESULTS, mpirun_command, python_command, write_json  # noqa: E402
-from scale_workload import load_durations, make_job, task_seconds  # noqa: E402
+from scale_workload import GRAIN, load_durations, make_job, task_seconds  # noqa: E402
 
 from hpcwedge.parallel import mpi  # noqa: E402
 from hpcwedge.parallel.mpi import POLL_MAX  # noqa: E402
@@ -168,6 +169,18 @@ def model_run(workload: str, durations: dict, ranks: int, worker_seconds: float,
     return simulate(job, ranks - 1, costs, task_seconds)
 
 
+def free_schedule(workload: str, durations: dict, seed: int, ranks: int = 1024,
+                  worker_seconds: float = MIN_WORKER_SECONDS) -> float:
+    """The efficiency a one-level schedule could reach at most on a job (the floor's): the model
+    with every master cost, latency and wake-up 0 and the finest tasks the workload has (a
+    tree: one synthetic node a task); the ramp-up and tail of the job itself."""
+    from hpcwedge.parallel.model import MasterCosts, simulate
+    job = make_job(workload, durations, worker_seconds, seed, sleep=False, budget=GRAIN)
+    job.max_scale = 1
+    return simulate(job, ranks - 1, MasterCosts(0.0, 0.0, poll_max_s=0.0, worker_poll_max_s=0.0),
+                    task_seconds).efficiency
+
+
 def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 1024) -> dict:
     """At `ranks`: the smallest of FLOOR_SEARCH's job sizes modelled at efficiency >= 0.9 (None:
     none of them), each size's efficiency, the workload's longest task (the largest of the
@@ -185,14 +198,18 @@ def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 
     share = MIN_WORKER_SECONDS / (ranks - 1)
     met = tried[0]["efficiency"] >= 0.9
     busy = tried[0]["master_busy"]
-    why = ("met" if met else
+    free = free_schedule(workload, durations, seed, ranks)
+    cap = ("" if met or free >= 0.9 else
+           f"no one-level schedule reaches 0.9 on this job ({free:.3f} with a free master and one node "
+           "a task: its ramp-up and tail); ")
+    why = ("met" if met else cap + (
            f"the master is busy {busy:.0%} of the time: tasks short enough for the tail are more than "
            "one master serves" if busy >= 0.9 else
            f"its longest task ({longest:.2f} s) is {longest / share:.0%} of a worker's share of the floor "
            f"({share:.2f} s): the schedule's tail alone leaves workers idle" if longest > 0.25 * share else
-           "the ramp-up and tail of the schedule, not the task lengths")
+           "the ramp-up and tail of the schedule, not the task lengths"))
     return {"workload": workload, "ranks": ranks, "floor_worker_seconds": MIN_WORKER_SECONDS,
-            "meets_floor": met, "smallest_worker_seconds_at_0.9": smallest, "tried": tried,
+            "meets_floor": met, "free_schedule_efficiency": free, "smallest_worker_seconds_at_0.9": smallest, "tried": tried,
             "longest_task_s": longest, "share_at_floor_s": share, "why": why}
 
 
