@@ -313,51 +313,8 @@ def test_progress_lines_count_patterns_and_tree_nodes():
     assert counts[-1] == (sum(map(len, out.found)), out.counters["nodes"])
 
 
-#: rank 0 runs one task of 1.5 s on its worker with progress lines every 0.2 s (to stdout)
-LONG_TASK_UNDER_MPIRUN = """
-import sys, time
-from hpcwedge.parallel import mpi
-from hpcwedge.parallel.engine import Engine, run_tasks
-from hpcwedge.parallel.worker import serve
-from hpcwedge.progress import Progress
-
-def nap(ctx, seconds):
-    time.sleep(seconds)
-    return {"slept": seconds}
-
-comm = mpi.world()
-if comm.rank:
-    serve(comm)
-else:
-    engine = Engine(comm, progress=Progress(stream=sys.stdout), progress_every_s=0.2)
-    got = run_tasks(nap, None, [1.5], engine=engine, kind="naps")
-    engine.close()
-    print("answer", got[0]["slept"])
-"""
-
-
-@pytest.mark.mpi
-@needs_mpirun
-def test_the_master_prints_progress_lines_while_a_long_task_runs():
-    """mpirun -n 2, one task of 1.5 s, progress every 0.2 s: the master prints lines while it
-    waits for the answer (before: only after a result was merged, so a job of one long task
-    said nothing until its end), and the answer stands."""
-    import subprocess
-    import sys
-
-    from mpi_helpers import MPIRUN, env
-    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "2", "-x", "PYTHONPATH",
-                        sys.executable, "-c", LONG_TASK_UNDER_MPIRUN], env=env(), capture_output=True, text=True,
-                       timeout=120)
-    assert p.returncode == 0, p.stderr
-    lines = p.stdout.splitlines()
-    waiting = [line for line in lines if "naps: 0 tasks done, 0 pending, 1 running" in line]
-    assert len(waiting) >= 3, p.stdout
-    assert lines[-1] == "answer 1.5"
-
-
-#: two jobs on 2 workers: one task of 1 s (one worker idle), then four of 0.5 s (both busy)
-USE_UNDER_MPIRUN = """
+#: an mpirun script's start: the workers serve, rank 0 goes on with tasks of nap()
+NAP_SCRIPT = """
 import json, sys, time
 from hpcwedge.parallel import mpi
 from hpcwedge.parallel.engine import Engine, run_tasks
@@ -371,12 +328,49 @@ def nap(ctx, seconds):
 comm = mpi.world()
 if comm.rank:
     serve(comm)
-else:
-    engine = Engine(comm, progress=Progress(stream=sys.stdout), progress_every_s=0.5)
-    run_tasks(nap, None, [1.0], engine=engine, name="one")
-    run_tasks(nap, None, [0.5] * 4, engine=engine, name="four")
-    engine.close()
-    print(json.dumps(engine.summary()["utilisation"]))
+    sys.exit()
+"""
+
+#: rank 0 runs one task of 1.5 s on its worker with progress lines every 0.2 s (to stdout)
+LONG_TASK_UNDER_MPIRUN = NAP_SCRIPT + """
+engine = Engine(comm, progress=Progress(stream=sys.stdout), progress_every_s=0.2)
+got = run_tasks(nap, None, [1.5], engine=engine, kind="naps")
+engine.close()
+print("answer", got[0]["slept"])
+"""
+
+
+def run_under_mpirun(n: int, script: str):
+    """`script` under mpirun -n n (stdout and stderr captured); the finished process."""
+    import subprocess
+    import sys
+
+    from mpi_helpers import MPIRUN, env
+    return subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", str(n), "-x", "PYTHONPATH",
+                           sys.executable, "-c", script], env=env(), capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_the_master_prints_progress_lines_while_a_long_task_runs():
+    """mpirun -n 2, one task of 1.5 s, progress every 0.2 s: the master prints lines while it
+    waits for the answer (before: only after a result was merged, so a job of one long task
+    said nothing until its end), and the answer stands."""
+    p = run_under_mpirun(2, LONG_TASK_UNDER_MPIRUN)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    waiting = [line for line in lines if "naps: 0 tasks done, 0 pending, 1 running" in line]
+    assert len(waiting) >= 3, p.stdout
+    assert lines[-1] == "answer 1.5"
+
+
+#: two jobs on 2 workers: one task of 1 s (one worker idle), then four of 0.5 s (both busy)
+USE_UNDER_MPIRUN = NAP_SCRIPT + """
+engine = Engine(comm, progress=Progress(stream=sys.stdout), progress_every_s=0.5)
+run_tasks(nap, None, [1.0], engine=engine, name="one")
+run_tasks(nap, None, [0.5] * 4, engine=engine, name="four")
+engine.close()
+print(json.dumps(engine.summary()["utilisation"]))
 """
 
 
@@ -387,13 +381,7 @@ def test_stats_say_how_busy_each_jobs_workers_were():
     of four tasks of 0.5 s both; each job's end prints the line."""
     import json
     import re
-    import subprocess
-    import sys
-
-    from mpi_helpers import MPIRUN, env
-    p = subprocess.run([MPIRUN, "--allow-run-as-root", "--oversubscribe", "-n", "3", "-x", "PYTHONPATH",
-                        sys.executable, "-c", USE_UNDER_MPIRUN], env=env(), capture_output=True, text=True,
-                       timeout=120)
+    p = run_under_mpirun(3, USE_UNDER_MPIRUN)
     assert p.returncode == 0, p.stderr
     use = json.loads(p.stdout.splitlines()[-1])
     assert use["one"]["workers"] == use["four"]["workers"] == 2
