@@ -44,6 +44,8 @@ from hpcwedge.parallel.worker import run_batch
 EXIT_INTERRUPTED = 75
 #: the master checks the memory guard (Engine.guard) at most this often (seconds)
 GUARD_EVERY_S = 1.0
+
+
 class Batch(list):
     """The tokens of the tasks in one batch (a worker's task in flight)."""
 
