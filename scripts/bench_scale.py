@@ -174,11 +174,10 @@ def free_schedule(workload: str, durations: dict, seed: int, ranks: int = 1024,
     """The efficiency a one-level schedule could reach at most on a job (the floor's): the model
     with every master cost, latency and wake-up 0 and the finest tasks the workload has (a
     tree: one synthetic node a task); the ramp-up and tail of the job itself."""
-    from hpcwedge.parallel.model import MasterCosts, simulate
+    from hpcwedge.parallel.model import FREE, simulate
     job = make_job(workload, durations, worker_seconds, seed, sleep=False, budget=GRAIN)
     job.max_scale = 1
-    return simulate(job, ranks - 1, MasterCosts(0.0, 0.0, poll_max_s=0.0, worker_poll_max_s=0.0),
-                    task_seconds).efficiency
+    return simulate(job, ranks - 1, FREE, task_seconds).efficiency
 
 
 def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 1024) -> dict:

@@ -47,7 +47,7 @@ from harness import RESULTS, write_json  # noqa: E402
 from scale_workload import load_durations, make_job, task_seconds  # noqa: E402
 
 from hpcwedge.parallel.jobs import TreeJob  # noqa: E402
-from hpcwedge.parallel.model import MasterCosts, simulate  # noqa: E402
+from hpcwedge.parallel.model import FREE, MasterCosts, simulate  # noqa: E402
 from hpcwedge.parallel.schedule import cut, message_cost  # noqa: E402
 
 #: a node moved between the master and a hub: its pickling and a heap push, at each end (s)
@@ -209,8 +209,7 @@ def study(durations: dict, costs: MasterCosts, grain: int, ranks: int = RANKS,
     scale_workload.GRAIN = grain
     try:
         rows = []
-        free = dataclasses.replace(costs, send_s=0.0, merge_s=0.0, latency_s=0.0, probe_s=0.0, poll_max_s=0.0,
-                                   worker_poll_max_s=0.0, idle_probe_s=0.0)
+        free = FREE
         for name, c, budget in (("flat", costs, 64), *(("flat, free", free, b) for b in FREE_BUDGETS)):
             t0 = time.perf_counter()
             job = make_job("subtree", durations, worker_seconds, seed, sleep=False, budget=budget)

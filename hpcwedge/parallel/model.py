@@ -46,6 +46,11 @@ class MasterCosts:
     idle_probe_s: float = 0.0
 
 
+#: a master that costs nothing, waits for nothing and wakes its workers at once: what a
+#: schedule alone reaches (its ramp-up and tail), the bound for every real master
+FREE = MasterCosts(send_s=0.0, merge_s=0.0, poll_max_s=0.0, worker_poll_max_s=0.0)
+
+
 @dataclass(frozen=True)
 class Simulated:
     """One simulated run: workers, wall seconds (first send to the last merge), the sum of

@@ -8,7 +8,7 @@ import pytest
 
 from hpcwedge.parallel import mpi, schedule
 from hpcwedge.parallel.jobs import TaskJob, TreeJob
-from hpcwedge.parallel.model import MasterCosts, noticed_at, simulate, waited
+from hpcwedge.parallel.model import FREE, MasterCosts, noticed_at, simulate, waited
 
 
 def _seconds_task(ctx, payload):
@@ -40,16 +40,13 @@ def _result_seconds(r):
     return r["seconds"] if isinstance(r, dict) else r[2]["seconds"]
 
 
-ZERO = MasterCosts(send_s=0.0, merge_s=0.0, poll_max_s=0.0, worker_poll_max_s=0.0)
-
-
 def test_one_worker_is_the_serial_sum_and_equal_tasks_take_rounds():
     durations = [0.3, 1.7, 0.25, 2.0, 0.5, 0.125]
-    sim = simulate(TaskJob("t", _seconds_task, None, durations), 1, ZERO, _result_seconds)
+    sim = simulate(TaskJob("t", _seconds_task, None, durations), 1, FREE, _result_seconds)
     assert sim.wall_s == pytest.approx(sum(durations)) and sim.tasks == len(durations)
     assert sim.efficiency == pytest.approx(1.0)
     for n, w in [(10, 3), (12, 4), (7, 8)]:
-        sim = simulate(TaskJob("t", _seconds_task, None, [2.0] * n), w, ZERO, _result_seconds)
+        sim = simulate(TaskJob("t", _seconds_task, None, [2.0] * n), w, FREE, _result_seconds)
         assert sim.wall_s == pytest.approx(2.0 * math.ceil(n / w))
         assert sim.efficiency == pytest.approx(n / (w * math.ceil(n / w)))
 
@@ -68,7 +65,7 @@ def test_a_tree_job_costs_its_tree_for_any_worker_count():
     walls = []
     for w in (1, 2, 8):
         job = TreeJob("t", _explore, None, [_Node(())], 3, {"seconds": 0.0})
-        sim = simulate(job, w, ZERO, _result_seconds)
+        sim = simulate(job, w, FREE, _result_seconds)
         assert sim.task_s == pytest.approx(total) and len(job.found[0]) == 64
         walls.append(sim.wall_s)
     assert walls[0] == pytest.approx(total)
@@ -116,7 +113,7 @@ def test_a_task_job_travels_in_batches_of_the_masters_target_length():
     assert k == 67 and sizes[:3] == [67] * 3 and sizes[-3:] == [1, 1, 1]
     assert sim.messages == 8 + len(sizes)
     assert sim.task_s == pytest.approx(sum(durations))
-    free = simulate(TaskJob("t", _seconds_task, None, durations), 8, ZERO, _result_seconds)
+    free = simulate(TaskJob("t", _seconds_task, None, durations), 8, FREE, _result_seconds)
     sent, pending = 8, 4000 - 8
     while pending:
         pending -= max(1, min(k if sent < schedule.MEASURED_AFTER else 1, pending // 16))
