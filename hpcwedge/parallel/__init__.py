@@ -9,9 +9,11 @@ results. Importing this package loads nothing; each module is imported by name:
   budgeted tree search whose open nodes go back to the pool).
 - schedule.py: how much work one message to a worker carries (batches, budget scales).
 - engine.py: Engine.run(job), in-process or as the master under mpirun; run_tasks.
+- signals.py: the master's signals (checkpoint and go on; checkpoint and stop).
+- hub.py: hubs, a second level that serves the workers of a tree job at scale.
 - worker.py: serve(comm), the loop of ranks >= 1.
 - mpi.py: world(), probing without spinning, the wire's tags.
 - checkpoint.py: the checkpoint file and the Checkpointer of a run.
 """
 
-__all__ = ["cancel", "jobs", "schedule", "engine", "worker", "mpi", "checkpoint"]
+__all__ = ["cancel", "jobs", "schedule", "engine", "signals", "hub", "worker", "mpi", "checkpoint"]

@@ -4,7 +4,8 @@ master of a world of workers (SPEC §5), with checkpoints and signals.
 One process (no MPI launcher, or size 1): the task loop runs in-process. Under
 mpirun: rank 0 is the master — it holds the pool, hands a task to each worker
 that is free, merges results and alone writes files; ranks >= 1 run
-worker.serve(comm) and only run tasks.
+worker.serve(comm) and only run tasks. With hubs (hub.py: from hub.HUBS_FROM workers on, or
+$HPCWEDGE_HUB_WORKERS), a tree job's master serves hubs, and each hub a group of workers.
 
 Checkpoints (checkpoint.py: the file and the Checkpointer): every
 ``checkpoint_every_s`` seconds, at SIGUSR1 (then the run goes on) and at
@@ -28,16 +29,16 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
 import socket
 import time
 
 from hpcwedge.errors import Interrupted, UserError
-from hpcwedge.parallel import mpi
+from hpcwedge.parallel import hub, mpi
 from hpcwedge.parallel.cancel import TICK_EVERY_S, Continuation, TaskCancelled, run_cancellable
 from hpcwedge.parallel.checkpoint import Checkpointer, CheckpointError
-from hpcwedge.parallel.jobs import TaskJob
+from hpcwedge.parallel.jobs import TaskJob, TreeJob
 from hpcwedge.parallel.schedule import MasterClock, cut, utilisation
+from hpcwedge.parallel.signals import SignalState
 from hpcwedge.parallel.worker import run_batch
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
@@ -48,68 +49,6 @@ GUARD_EVERY_S = 1.0
 
 class Batch(list):
     """The tokens of the tasks in one batch (a worker's task in flight)."""
-
-
-class SignalState:
-    """The master's signals: SIGUSR1 = checkpoint and go on; SIGTERM/SIGINT = checkpoint
-    and stop. While `defer` (inside a job) a signal only sets a flag that the job loop
-    acts on at a safe point; otherwise SIGTERM/SIGINT raise Interrupted at once."""
-
-    def __init__(self):
-        self.flags: set = set()
-        self.defer = False
-        self.done = False
-        self._old_handlers: dict = {}
-
-    def install(self) -> None:
-        """Install the handlers (main thread only; elsewhere signals stay as they are)."""
-        import threading
-        if threading.current_thread() is not threading.main_thread():
-            return
-        for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
-            self._old_handlers[sig] = signal.signal(sig, self._on_signal)
-
-    def mark_done(self) -> None:
-        """From now on the three signals change nothing (SIG_IGN, see Engine.mark_done)."""
-        self.done = True
-        for sig in self._old_handlers:
-            signal.signal(sig, signal.SIG_IGN)
-
-    def restore(self) -> None:
-        """The handlers as they were before install()."""
-        for sig, h in self._old_handlers.items():
-            signal.signal(sig, h)
-        self._old_handlers = {}
-
-    def _on_signal(self, signum, frame):
-        name = signal.Signals(signum).name
-        if self.done:
-            return
-        if signum == signal.SIGUSR1:
-            self.flags.add(name)
-            return
-        stopping = self.stop_reason() is not None
-        self.flags.add("STOP:" + name)
-        # only the first stop raises: a second one (mpirun forwards SIGTERM to rank 0 about a
-        # second after SLURM's) must not interrupt the stop checkpoint's write
-        if not self.defer and not stopping:
-            self.defer = True
-            raise Interrupted(name)
-
-    def replay(self, signum: int) -> None:
-        """Act on a signal that arrived before install() as if it arrived now."""
-        self._on_signal(signum, None)
-
-    def stop_reason(self) -> str | None:
-        """The name of the SIGTERM/SIGINT received, if any."""
-        return next((f[5:] for f in self.flags if f.startswith("STOP:")), None)
-
-    def take_checkpoint_request(self) -> bool:
-        """True once per SIGUSR1 received."""
-        if "SIGUSR1" in self.flags:
-            self.flags.discard("SIGUSR1")
-            return True
-        return False
 
 
 class Master:
@@ -135,6 +74,10 @@ class Master:
         handler, ctx = (run_batch, (job.handler, job.context)) if batched else (job.handler, job.context)
         msg = (job_id, payload, (job.kind, handler, ctx) if fresh else None, self.pause_every_s)
         self._sends.add(self.comm.isend(msg, dest=w, tag=mpi.TASK))
+
+    def isend(self, msg, dest: int, tag: int) -> None:
+        """A message that is not a task (hub.py), sent without waiting."""
+        self._sends.add(self.comm.isend(msg, dest=dest, tag=tag))
 
     def stop(self, waiting, timeout: float, on_answer) -> None:
         """Once: stop every worker, hand the answers of `waiting` to on_answer (mpi.stop_workers)."""
@@ -174,7 +117,7 @@ class Engine:
         self._jobs: dict = {}            # finished jobs, by name, in order
         self._current = None             # the job being run
         self._inflight: dict = {}        # rank -> token of its task in flight
-        self._job_id = 0
+        self.job_id = 0                  # the current job's (workers hold one job's context)
         self._job_start = (time.monotonic(), 0)    # (when, tasks done) as the current job started
         self._batched = [0.0, 0]         # the current job's tasks: seconds, units of work (schedule.py)
         self._sent_at: dict = {}         # rank -> when its unbatched task was sent (its seconds)
@@ -257,7 +200,7 @@ class Engine:
         of interpreter shutdown would turn a finished run into a killed one."""
         self.signals.mark_done()
 
-    def _safe_point(self) -> None:
+    def safe_point(self) -> None:
         """Between merges: act on signals and the checkpoint timer."""
         stop = self.signals.stop_reason()
         if stop:
@@ -300,17 +243,22 @@ class Engine:
                                           f"this run {job.kind!r}")
                 job.load(state)
                 job.counters.update(json.loads(state["attrs"]["counters"]))
-            self._job_id += 1
+            self.job_id += 1
             self._current, self._inflight, self._batched = job, {}, [0.0, 0]
             self._job_start = (time.monotonic(), job.counters.get("tasks", 0))
             self.checkpoints.restored.pop(job.name, None)
             if self.signals.stop_reason():
                 raise Interrupted(self.signals.stop_reason())
+            groups = hub.layout(self.size) if self.size > 1 and isinstance(job, TreeJob) else None
             if self.size == 1:
                 self._run_serial(job)
             else:
-                self._run_master(job)
-                self._use[job.name] = utilisation(self._batched[0], len(self.master.workers), self.clock)
+                if groups:
+                    hub.run_master(self, job, groups)
+                else:
+                    self._run_master(job)
+                workers = sum(len(ws) for _, ws in groups) if groups else len(self.master.workers)
+                self._use[job.name] = utilisation(self._batched[0], workers, self.clock)
                 self._note_use(job.name)
             self._jobs[job.name] = job
             self._current, self._inflight = None, {}
@@ -324,7 +272,7 @@ class Engine:
         handler = job.handler
         self._last_note = time.monotonic()
         while True:
-            self._safe_point()
+            self.safe_point()
             taken = job.take(1, getattr(job, "max_scale", 1))
             if taken is None:
                 return
@@ -338,7 +286,7 @@ class Engine:
             self._merge(job, token, result)    # done (or stopped, the rest handed back as open)
             del self._inflight[0]
             self.tasks_per_rank[0] += 1
-            self._last_note = self._note(job, self._last_note)
+            self._last_note = self.note(job, self._last_note)
 
     def _run_master(self, job) -> None:
         idle = [w for w in self.master.workers if w not in self._inflight][::-1]
@@ -355,9 +303,9 @@ class Engine:
             if got is not None:
                 w, tag, msg = got
                 idle.append(w)
-                self._take_result(job, w, tag, msg)
+                self.take_result(job, w, tag, msg)
             try:
-                self._safe_point()
+                self.safe_point()
             except Interrupted as e:
                 # the state as of the signal first (tasks in flight as open): a task that does
                 # not tick keeps its worker up to _stop_workers' timeout, and mpirun's SIGKILL
@@ -365,7 +313,7 @@ class Engine:
                 self.write_checkpoint(str(e))
                 self._stop_workers(job)
                 raise
-            last_note = self._note(job, last_note)
+            last_note = self.note(job, last_note)
 
     def _hand_out(self, job, idle: list) -> None:
         """To each idle worker while the pool lasts, a message of schedule.batch_size units of
@@ -384,12 +332,12 @@ class Engine:
             self.clock.messages += 1
             if isinstance(job, TaskJob) or len(taken) > 1:
                 self._inflight[w] = Batch(t for t, _ in taken)
-                self.master.send_task(w, self._job_id, job, [p for _, p in taken], batched=True)
+                self.master.send_task(w, self.job_id, job, [p for _, p in taken], batched=True)
             else:
                 (self._inflight[w], payload), self._sent_at[w] = taken[0], time.monotonic()
-                self.master.send_task(w, self._job_id, job, payload)
+                self.master.send_task(w, self.job_id, job, payload)
 
-    def _take_result(self, job, w: int, tag: int, msg) -> None:
+    def take_result(self, job, w: int, tag: int, msg) -> None:
         """Merge worker w's answer to its task in flight (done: in the master's state);
         a cancelled task stays open (not in flight any more: the caller keeps it)."""
         token = self._inflight.pop(w)
@@ -411,6 +359,20 @@ class Engine:
             self._merge(job, t, result)
             self.tasks_per_rank[w] += 1
 
+    def hold(self, rank: int, tokens: list | None) -> None:
+        """hub.py: rank's tasks in flight are `tokens` (a checkpoint saves them as open; None: none)."""
+        if tokens is None:
+            self._inflight.pop(rank, None)
+        else:
+            self._inflight[rank] = Batch(tokens)
+
+    def count_tasks(self, seconds: float, tasks: dict) -> None:
+        """hub.py: tasks that ran elsewhere ({rank: tasks}) and their seconds, for utilisation."""
+        self._batched[0] += seconds
+        self._batched[1] += sum(tasks.values())
+        for w, k in tasks.items():
+            self.tasks_per_rank[w] += k
+
     def _merge(self, job, token, result) -> None:
         """job.merge; a Continuation (a long task paused) makes the checkpoint due, so that
         the next safe point saves its progress."""
@@ -428,10 +390,10 @@ class Engine:
         nothing to do."""
         def answer(src, tag, msg):
             if tag != mpi.ERROR:
-                self._take_result(job, src, tag, msg)
+                self.take_result(job, src, tag, msg)
         self.master.stop(set(self._inflight), timeout, answer)
 
-    def _note(self, job, last: float) -> float:
+    def note(self, job, last: float) -> float:
         """After a merge: the memory guard (at most every GUARD_EVERY_S), and every
         progress_every_s a progress line."""
         now = time.monotonic()

@@ -155,10 +155,12 @@ class TreeJob:
     kind = "tree"
     max_scale = BUDGET_SCALE
 
-    def __init__(self, name: str, handler, context, roots: list, budget: int, counters: dict):
+    def __init__(self, name: str, handler, context, roots: list, budget: int, counters: dict,
+                 groups: int | None = None):
         self.name, self.handler, self.context, self.budget = name, handler, context, int(budget)
-        self.found: list[list] = [[] for _ in roots]
-        self.flagged: list[list] = [[] for _ in roots]
+        groups = len(roots) if groups is None else groups
+        self.found: list[list] = [[] for _ in range(groups)]
+        self.flagged: list[list] = [[] for _ in range(groups)]
         self.counters = {"tasks": 0, "handed_back": 0, **counters}
         self._pool: list = []
         self._seq = 0
@@ -193,12 +195,34 @@ class TreeJob:
         for k, v in counters.items():
             self.counters[k] = self.counters.get(k, 0) + v
 
+    def put(self, tokens: list) -> None:
+        """Open nodes, as take()'s tokens (group, node, witness), into the pool (hub.py)."""
+        for group, node, witness in tokens:
+            self._push(group, node, witness)
+
+    def give(self, n: int) -> list:
+        """The n shallowest open nodes out of the pool, as tokens (hub.py)."""
+        return [heapq.heappop(self._pool)[2:] for _ in range(min(n, len(self._pool)))]
+
+    def absorb(self, found: list, flagged: list, counters: dict) -> None:
+        """Leaves found (a list per group), those doubted, and counters summed in: what a hub
+        reports of the tasks it merged (hub.py)."""
+        for group, (leaves, doubt) in enumerate(zip(found, flagged, strict=True)):
+            self.found[group].extend(leaves)
+            self.flagged[group].extend(doubt)
+        for k, v in counters.items():
+            self.counters[k] = self.counters.get(k, 0) + v
+
     def saved_nodes(self, in_flight) -> tuple[list, list]:
         """What a checkpoint keeps: [(group, leaf, flagged)] found, and [(group, node,
         witness)] open (the pool, then the tasks in flight, whose tokens are these)."""
         doubt = [set(f) for f in self.flagged]
         found = [(g, leaf, leaf in doubt[g]) for g, leaves in enumerate(self.found) for leaf in leaves]
-        return found, [(g, n, w) for _, _, g, n, w in self._pool] + [tuple(t) for t in in_flight]
+        return found, self.open_nodes(in_flight)
+
+    def open_nodes(self, in_flight) -> list:
+        """[(group, node, witness)]: the pool's open nodes, then those of the tasks in flight."""
+        return [(g, n, w) for _, _, g, n, w in self._pool] + [tuple(t) for t in in_flight]
 
     def restore(self, found: list, opens: list) -> None:
         """The state of saved_nodes' lists (a resumed job)."""

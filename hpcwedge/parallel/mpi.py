@@ -35,8 +35,10 @@ PROBE_BURST = 32
 #: how often an idle worker checks that its master (same host) is still alive
 MASTER_CHECK_S = 0.2
 
-#: message tags between the master (rank 0) and a worker
+#: message tags between the master (rank 0), or a hub, and a worker
 TASK, RESULT, ERROR, STOP, HELLO, CANCELLED = 1, 2, 3, 4, 5, 6
+#: between the master and a hub (hub.py): the hub's state, open nodes for it, a share asked of it
+REPORT, NODES, SHARE = 7, 8, 9
 
 #: environment variables an MPI launcher sets in every rank
 MPI_ENV = ("OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_RANK", "PMI_SIZE", "MPI_LOCALNRANKS")
@@ -183,10 +185,10 @@ def wait_any(comm, deadline: float, interrupted, clock=None) -> tuple | None:
 
 
 def stop_workers(comm, workers, waiting, timeout: float, on_answer) -> None:
-    """Master: send STOP to every worker, then hand each rank in `waiting` (those with
-    a task in flight) to on_answer(source, tag, message) as its answer arrives; other
-    messages are dropped. At most `timeout` seconds (a worker blocked in a large send
-    would never read the stop)."""
+    """Master: send STOP to every worker, then hand each message of a rank in `waiting` (those
+    with a task in flight) to on_answer(source, tag, message): it is that rank's answer unless
+    on_answer returns False (a hub's report before its answer); other messages are dropped.
+    At most `timeout` seconds (a worker blocked in a large send would never read the stop)."""
     from mpi4py import MPI
     for w in workers:
         comm.send(None, dest=w, tag=STOP)
@@ -197,8 +199,7 @@ def stop_workers(comm, workers, waiting, timeout: float, on_answer) -> None:
         if probe(comm, MPI.ANY_SOURCE, MPI.ANY_TAG, status):
             src, tag = status.Get_source(), status.Get_tag()
             msg = comm.recv(source=src, tag=tag)
-            if src in waiting:
+            if src in waiting and on_answer(src, tag, msg) is not False:
                 waiting.discard(src)
-                on_answer(src, tag, msg)
         else:
             time.sleep(0.005)

@@ -1,5 +1,6 @@
-"""The worker loop (ranks >= 1 under mpirun): run the tasks the master sends until it
-says stop, and answer each with its result, a cancellation or an error."""
+"""The worker loop (ranks >= 1 under mpirun): run the tasks the master, or its hub
+(hub.py), sends until the master says stop, and answer each to whoever sent it with its
+result, a cancellation or an error."""
 from __future__ import annotations
 
 import importlib
@@ -12,6 +13,15 @@ import traceback
 from hpcwedge.errors import UserError
 from hpcwedge.parallel import mpi
 from hpcwedge.parallel.cancel import TICK_EVERY_S, TaskCancelled, in_task_scopes, run_cancellable
+
+
+#: the communicator serve() runs on (a hub's task, hub.lead, speaks to its workers on it)
+_comm = None
+
+
+def current_comm():
+    """The communicator of this worker's serve() loop (None outside it)."""
+    return _comm
 
 
 def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_S) -> None:
@@ -29,6 +39,8 @@ def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_
     on the same host and has died (kill -9): mpirun would otherwise take
     ~2 s (SIGCONT, SIGTERM, SIGKILL) to tear the job down."""
     from mpi4py import MPI
+    global _comm
+    _comm = comm
     for sig in (signal.SIGUSR1, signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, signal.SIG_IGN)
     ppid = os.getppid()
@@ -40,20 +52,22 @@ def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_
     poll_max = mpi.worker_poll_max()
     while True:
         t0 = checked = time.monotonic()
-        while not mpi.probe(comm, 0, MPI.ANY_TAG, status):
+        while not mpi.probe(comm, MPI.ANY_SOURCE, MPI.ANY_TAG, status):
             now = time.monotonic()
             if now - checked >= mpi.MASTER_CHECK_S:
                 checked = now
                 if os.getppid() != ppid or (master_pid is not None and not mpi.pid_alive(master_pid)):
                     os._exit(3)
             time.sleep(mpi.backoff(now - t0, poll_max))
-        tag = status.Get_tag()
-        msg = comm.recv(source=0, tag=tag)
-        if tag == mpi.STOP:
+        src, tag = status.Get_source(), status.Get_tag()
+        msg = comm.recv(source=src, tag=tag)
+        if tag == mpi.STOP and src == 0:
             return
-        if tag == mpi.HELLO:
+        if tag == mpi.HELLO and src == 0:
             master_pid = msg[1] if msg[0] == host else None
             continue
+        if tag != mpi.TASK:
+            continue                # late words of a hub's task that failed (hub.py): nobody waits for them
         job_id, payload, fresh, pause_every_s = msg
         if fresh is not None:
             ctx_id, (kind, handler, ctx) = job_id, fresh
@@ -63,17 +77,16 @@ def serve(comm, warm_up: tuple[str, ...] = (), tick_every_s: float = TICK_EVERY_
             result = run_cancellable(handler, ctx, payload,
                                      lambda: mpi.probe(comm, 0, mpi.STOP, status), tick_every_s, pause_every_s)
         except TaskCancelled:
-            comm.send(None, dest=0, tag=mpi.CANCELLED)     # the stop is read next
+            comm.send(None, dest=src, tag=mpi.CANCELLED)     # the stop is read next
         except MemoryError:
             from hpcwedge.progress import out_of_memory
             comm.send(mpi.UserFailure(str(out_of_memory(f"a {kind!r} task on rank {comm.rank}"))),
-                      dest=0, tag=mpi.ERROR)
+                      dest=src, tag=mpi.ERROR)
         except Exception as e:          # noqa: BLE001  (the master reports it)
             comm.send(mpi.UserFailure(str(e)) if isinstance(e, UserError) else traceback.format_exc(),
-                      dest=0, tag=mpi.ERROR)
+                      dest=src, tag=mpi.ERROR)
         else:
-            comm.send(result, dest=0, tag=mpi.RESULT)
-
+            comm.send(result, dest=src, tag=mpi.RESULT)
 
 def run_batch(ctx, payloads: list) -> tuple[list, float]:
     """The handler of a batch of tasks (the engine sends it by reference): ctx = (handler,
