@@ -59,6 +59,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 from harness import RESULTS, mpirun_command, python_command, write_json  # noqa: E402
+import scale_workload  # noqa: E402
 from scale_workload import GRAIN, load_durations, make_job, task_seconds  # noqa: E402
 
 from hpcwedge.parallel import mpi  # noqa: E402
@@ -66,6 +67,9 @@ from hpcwedge.parallel.mpi import POLL_MAX  # noqa: E402
 
 WORKLOADS = ("subtree", "mu_c", "face")
 RANKS, QUICK_RANKS, MODEL_RANKS = (3, 9, 17, 33, 65, 129), (3, 9, 17, 33, 65), (256, 1024, 4096)
+#: rank counts measured again with the tree through four hubs (workers per hub), to validate
+#: the hub model (parallel.model.simulate_hubs) where the engine would not use hubs by itself
+HUB_RUNS = {33: 7, 65: 15, 129: 31}
 #: measured runs: worker-seconds per worker; modelled runs: the same, at least MIN_WORKER_SECONDS
 SECONDS_PER_WORKER = {"subtree": 24.0, "mu_c": 8.0, "face": 24.0}
 MODEL_SECONDS_PER_WORKER = {256: 120.0, 1024: 120.0, 4096: 30.0}
@@ -82,9 +86,11 @@ IDLE_PROBE_GRID = tuple(k * 1e-5 for k in range(7))
 
 
 def rank_run(durations_path: str, out: str, specs) -> None:
-    """Under mpirun: rank 0 runs each workload's job as the engine's master, the others serve."""
+    """Under mpirun: rank 0 runs each workload's job as the engine's master, the others serve
+    (hubs where $HPCWEDGE_HUB_WORKERS asks for them: parallel/hub.py)."""
     from hpcwedge.parallel import mpi
     from hpcwedge.parallel.engine import Engine
+    from hpcwedge.parallel.hub import layout
     from hpcwedge.parallel.worker import serve
     comm = mpi.world()
     if comm.rank != 0:
@@ -110,7 +116,7 @@ def rank_run(durations_path: str, out: str, specs) -> None:
     engine.master.send_task = counted_send
     comm.Barrier()                      # every rank is up: start-up ends here
     try:
-        rows = _run_workloads(engine, comm.size - 1, durations, specs, waited, sent)
+        rows = _run_workloads(engine, comm.size - 1, durations, specs, waited, sent, layout(comm.size))
     except BaseException:
         traceback.print_exc()
         comm.Abort(1)                   # the workers would wait for a task forever
@@ -119,13 +125,15 @@ def rank_run(durations_path: str, out: str, specs) -> None:
         json.dump(rows, f)
 
 
-def _run_workloads(engine, workers: int, durations: dict, specs, waited: list, sent: list) -> list[dict]:
+def _run_workloads(engine, ranks_1: int, durations: dict, specs, waited: list, sent: list, groups) -> list[dict]:
     """The master's side of rank_run: each workload's job in turn ("workload=seconds per
-    worker"), timed."""
+    worker"), timed; a tree through hubs (`groups`, hub.layout) on the hubs' workers."""
     rows = []
     for seed, spec in enumerate(specs):
         workload, seconds = spec.split("=")
         seconds = float(seconds)
+        hubs = len(groups) if groups and workload == "subtree" else 0
+        workers = sum(len(ws) for _, ws in groups) if hubs else ranks_1
         job = make_job(workload, durations, seconds * workers, seed, sleep=True)
         waited[0] = sent[0] = 0
         t0, c0 = time.perf_counter(), time.process_time()
@@ -133,16 +141,19 @@ def _run_workloads(engine, workers: int, durations: dict, specs, waited: list, s
         wall = time.perf_counter() - t0
         task_s = (sum(r["seconds"] for r in job.output()) if workload != "subtree"
                   else job.counters["seconds"])
-        rows.append({"ranks": workers + 1, "workers": workers, "workload": workload, "seed": seed, "tasks": job.counters["tasks"], "messages": sent[0],
+        rows.append({"ranks": ranks_1 + 1, "workers": workers, "hubs": hubs, "workload": workload, "seed": seed,
+                     "tasks": job.counters["tasks"], "messages": sent[0],
                      "wall_s": wall, "task_s": task_s, "busy_s": wall - waited[0],
                      "cpu_s": time.process_time() - c0, "worker_seconds_asked": seconds * workers})
     return rows
 
 
-def measure(ranks: int, durations_path: str, seconds: dict, workloads) -> list[dict]:
-    """One mpirun launch at `ranks`: its rows, with tasks_per_s, master_busy, efficiency."""
+def measure(ranks: int, durations_path: str, seconds: dict, workloads, hub_workers: int = 0) -> list[dict]:
+    """One mpirun launch at `ranks` (hubs of hub_workers workers for the tree; 0: none): its
+    rows, with tasks_per_s, master_busy, efficiency (over the workers that run tasks)."""
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
-               OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+               OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
+               HPCWEDGE_HUB_WORKERS=str(hub_workers))
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "rows.json")
         cmd = mpirun_command(ranks, os.path.abspath(__file__), "--rank-run", durations_path, out,
@@ -157,16 +168,28 @@ def measure(ranks: int, durations_path: str, seconds: dict, workloads) -> list[d
     launch = time.perf_counter() - t0
     for r in rows:
         r.update(tasks_per_s=r["tasks"] / r["wall_s"], master_busy=r["busy_s"] / r["wall_s"],
-                 efficiency=r["task_s"] / ((ranks - 1) * r["wall_s"]), launch_s=launch, load_before=load)
+                 efficiency=r["task_s"] / (r["workers"] * r["wall_s"]), launch_s=launch, load_before=load,
+                 hub_workers=hub_workers if r["hubs"] else 0)
         print(f"{ranks:4d} ranks {r['workload']:8s} {r['tasks']:6d} tasks {r['tasks_per_s']:8.1f}/s "
               f"busy {r['master_busy']:.3f} efficiency {r['efficiency']:.3f}", flush=True)
     return rows
 
 
-def model_run(workload: str, durations: dict, ranks: int, worker_seconds: float, seed: int, costs):
-    from hpcwedge.parallel.model import simulate
+def model_run(workload: str, durations: dict, ranks: int, worker_seconds: float, seed: int, costs,
+              hub_workers: int | None = None):
+    """The engine's schedule of the workload at `ranks` in the model: one level, or for a tree
+    through hubs where the engine would use them (hub.layout, with hub_workers workers per hub
+    when given; the hubs cost what the master does). A model.Simulated (its workers: those
+    that run tasks)."""
+    from hpcwedge.parallel.hub import layout
+    from hpcwedge.parallel.model import Simulated, simulate, simulate_hubs
     job = make_job(workload, durations, worker_seconds, seed, sleep=False)
-    return simulate(job, ranks - 1, costs, task_seconds)
+    groups = layout(ranks, "" if hub_workers is None else str(hub_workers)) if workload == "subtree" else None
+    if not groups:
+        return simulate(job, ranks - 1, costs, task_seconds)
+    r = simulate_hubs(job, [len(ws) for _, ws in groups], costs, task_seconds)
+    return Simulated(r["workers"], r["wall_s"], r["task_s"], r["tasks"], r["master_busy"] * r["wall_s"],
+                     r["messages"], 0, r["longest_s"])
 
 
 def free_schedule(workload: str, durations: dict, seed: int, ranks: int = 1024,
@@ -180,27 +203,45 @@ def free_schedule(workload: str, durations: dict, seed: int, ranks: int = 1024,
     return simulate(job, ranks - 1, FREE, task_seconds).efficiency
 
 
+def at_grain(grain: int, workload: str, durations: dict, ranks: int, worker_seconds: float, seed: int, costs):
+    """model_run with the tree's synthetic nodes standing for `grain` real nodes (1: the real
+    nodes of the recorded durations, scale_workload.GRAIN) instead of GRAIN."""
+    old, scale_workload.GRAIN = scale_workload.GRAIN, grain
+    try:
+        return model_run(workload, durations, ranks, worker_seconds, seed, costs)
+    finally:
+        scale_workload.GRAIN = old
+
+
 def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 1024) -> dict:
     """At `ranks`: the smallest of FLOOR_SEARCH's job sizes modelled at efficiency >= 0.9 (None:
     none of them), each size's efficiency, the workload's longest task (the largest of the
     recorded durations drawn, or the tree's longest task under the engine's budgets, at the
     floor's size) and a worker's share of the
-    floor; the floor is met when the floor's own size reaches 0.9."""
-    tried, smallest, longest = [], None, 0.0
+    floor; the floor is met when the floor's own size reaches 0.9. The engine's schedule: a
+    tree through hubs where it uses them. real_grain_efficiency: a tree's floor with one real
+    node a synthetic node (at_grain 1)."""
+    tried, smallest, longest, workers = [], None, 0.0, 0
     for ws in FLOOR_SEARCH:
         sim = model_run(workload, durations, ranks, ws, seed, costs)
+        workers = workers or sim.workers
         tried.append({"worker_seconds": sim.task_s, "efficiency": sim.efficiency, "master_busy": sim.master_busy})
         longest = longest or sim.longest_s     # at the floor's size
         if sim.efficiency >= 0.9:
             smallest = sim.task_s
             break
-    share = MIN_WORKER_SECONDS / (ranks - 1)
+    share = MIN_WORKER_SECONDS / workers
     met = tried[0]["efficiency"] >= 0.9
     busy = tried[0]["master_busy"]
     free = free_schedule(workload, durations, seed, ranks)
     cap = ("" if met or free >= 0.9 else
            f"no one-level schedule reaches 0.9 on this job ({free:.3f} with a free master and one node "
            "a task: its ramp-up and tail); ")
+    real = (at_grain(1, workload, durations, ranks, MIN_WORKER_SECONDS, seed, costs).efficiency
+            if workload == "subtree" else None)
+    cap += ("" if met or real is None else
+            f"the same tree at its real grain (a synthetic node one real node, not {GRAIN}) reaches "
+            f"{real:.3f} on the engine's schedule; ")
     why = ("met" if met else cap + (
            f"the master is busy {busy:.0%} of the time: tasks short enough for the tail are more than "
            "one master serves" if busy >= 0.9 else
@@ -208,7 +249,7 @@ def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 
            f"({share:.2f} s): the schedule's tail alone leaves workers idle" if longest > 0.25 * share else
            "the ramp-up and tail of the schedule, not the task lengths"))
     return {"workload": workload, "ranks": ranks, "floor_worker_seconds": MIN_WORKER_SECONDS,
-            "meets_floor": met, "free_schedule_efficiency": free, "smallest_worker_seconds_at_0.9": smallest, "tried": tried,
+            "meets_floor": met, "real_grain_efficiency": real, "free_schedule_efficiency": free, "smallest_worker_seconds_at_0.9": smallest, "tried": tried,
             "longest_task_s": longest, "share_at_floor_s": share, "why": why}
 
 
@@ -219,6 +260,7 @@ def master_costs(measured: list[dict], durations: dict) -> tuple[dict, dict]:
     from scipy.optimize import nnls
 
     from hpcwedge.parallel.model import MasterCosts
+    measured = [r for r in measured if not r.get("hubs")]     # runs through hubs validate, not fit
     workloads = sorted({r["workload"] for r in measured})
     rows = []                           # messages by workload, and the model's probes, per run
     for r in measured:
@@ -306,11 +348,13 @@ def main() -> None:
         with open(a.refit) as f:
             measured = [r for r in json.load(f)["measured_detail"] if r["workload"] in a.workloads]
     else:
-        measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)]
+        measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)
+                    + (measure(n, a.durations, seconds, ["subtree"], HUB_RUNS[n])
+                       if n in HUB_RUNS and "subtree" in a.workloads else [])]
     costs, predicting = master_costs(measured, durations)
     for r in measured:
         sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
-                        costs[r["workload"]])
+                        costs[r["workload"]], r.get("hub_workers", 0))
         r["model_error"] = sim.efficiency - r["efficiency"]
     per_worker = {n: v / (QUICK_MODEL_DIVISOR if a.quick else 1) for n, v in MODEL_SECONDS_PER_WORKER.items()}
     specs = [(w, n, ws, seed, sized) for n in MODEL_RANKS for seed, w in enumerate(a.workloads)
@@ -323,7 +367,8 @@ def main() -> None:
     modelled = []
     for (w, n, _, _, sized), sim in zip(specs, sims):
         modelled.append({"workload": w, "ranks": n, "worker_seconds": sim.task_s, "efficiency": sim.efficiency,
-                         "sized": sized, "seconds_per_worker": sim.task_s / (n - 1), "tasks": sim.tasks,
+                         "sized": sized, "workers": sim.workers, "hubs": n - 1 - sim.workers,
+                         "seconds_per_worker": sim.task_s / sim.workers, "tasks": sim.tasks,
                          "messages": sim.messages, "master_busy": sim.master_busy, "wall_s": sim.wall_s})
         print(f"model {n:5d} ranks {w:8s} {sim.task_s:9.0f} worker-s efficiency {sim.efficiency:.3f} "
               f"busy {sim.master_busy:.3f}", flush=True)
@@ -332,7 +377,7 @@ def main() -> None:
               f"{f['smallest_worker_seconds_at_0.9']} worker-s; longest task {f['longest_task_s']:.2f} s", flush=True)
     keys = ("ranks", "workload", "tasks", "tasks_per_s", "master_busy", "efficiency", "model_error")
     write_json(a.out + ".json", {
-        "measured": [{k: r[k] for k in keys} for r in measured], "modelled": modelled,
+        "measured": [{**{k: r[k] for k in keys}, "hubs": r.get("hubs", 0)} for r in measured], "modelled": modelled,
         "floor": floors, "measured_detail": measured, "costs": {w: vars(c) for w, c in costs.items()},
         "costs_predicting": {w: vars(c) for w, c in predicting.items()}, "seconds_per_worker": seconds,
         "model_seconds_per_worker": per_worker,

@@ -7,17 +7,21 @@ TaskJob's tasks go from the master to every rank >= 1, hubs included, as without
 
 For a tree job the master keeps the job's pool and runs `run_master`; each hub runs `lead`
 as its one task of the job. A hub keeps a pool of its own, serves its workers from it (one
-task of the job's budget per message, as TreeJob.take cuts it) and keeps their open nodes.
-It reports to the master (REPORT) when its pool holds fewer than LOW x its workers (then
-asking for CHUNK x its workers), when it runs dry, when the master asks it to share (half of
-its pool back) and every REPORT_EVERY_S while its state changes: the leaves found and the
-counters since its last report, and its frontier (its pool and its tasks in flight) as of
-the last NODES message it merged (`seq`). The master's view of a hub is that frontier plus
-the nodes sent to it since: each report is a consistent cut of the hub's part of the tree,
-so a checkpoint (the master's pool and views as open) loses at most REPORT_EVERY_S of a
-hub's work and never counts a node twice. The job is done when the master's pool is empty
-and every hub last reported nothing open, with nothing sent since; the master then ends
-each hub's task (NODES with None) and the hub answers with its final report.
+task of the job's budget // BUDGET_DIVISOR per message, as TreeJob.take cuts it) and keeps
+their open nodes, up to SURPLUS x its workers: beyond that it hands the shallowest back to
+the master, down to LOW x its workers. It asks the master for nodes (CHUNK x its workers) when its pool holds
+fewer than LOW x its workers. While a hub is dry (idle workers, nothing for them) and the
+master's pool is empty, the master asks the hubs with the largest pools to share: such a hub
+hands half of its pool back as soon as it holds two nodes. Every message from a hub is a
+REPORT: the leaves found and the counters since its last one, and its frontier (its pool
+and its tasks in flight) as of the last NODES message it merged (`seq`); it also reports
+when it turns dry or stops being dry, and every REPORT_EVERY_S while its state changes. The
+master's view of a hub is that frontier plus the nodes sent to it since: each report is a
+consistent cut of the hub's part of the tree, so a checkpoint (the master's pool and views
+as open) loses at most REPORT_EVERY_S of a hub's work and never counts a node twice. The job
+is done when the master's pool is empty and every hub last reported nothing open, with
+nothing sent since; the master then ends each hub's task (NODES with None) and the hub
+answers with its final report. parallel.model.simulate_hubs models this schedule.
 
 A stop (SIGTERM on the master) reaches every rank with the master's STOP: workers stop their
 tasks and answer their hub (a subtree task hands back what it found and its open nodes),
@@ -38,8 +42,13 @@ from hpcwedge.parallel.jobs import TreeJob
 #: workers per hub (0: no hubs); unset: HUB_WORKERS per hub from HUBS_FROM workers on
 HUB_WORKERS_ENV = "HPCWEDGE_HUB_WORKERS"
 HUBS_FROM, HUB_WORKERS = 256, 32
-#: a hub asks for nodes when its pool holds fewer than LOW x its workers, CHUNK x its workers
-LOW, CHUNK = 4, 2
+#: a hub asks for nodes when its pool holds fewer than LOW x its workers, CHUNK x its workers;
+#: it hands back the shallowest above LOW x its workers once it holds more than SURPLUS x them
+LOW, CHUNK, SURPLUS = 4, 2, 8
+#: a hub's tasks explore the job's budget // BUDGET_DIVISOR nodes: its messages are cheap (it
+#: serves a few dozen workers), and shorter tasks shorten the tail (parallel.model.simulate_hubs
+#: at 1,024 ranks and 2,000 worker-seconds: 0.945-0.954 against 0.874-0.947 with the whole budget)
+BUDGET_DIVISOR = 2
 #: a hub whose state changed reports at least this often (seconds)
 REPORT_EVERY_S = 1.0
 #: a stopped hub waits this long for its workers' answers (the master waits 60 s for its hubs)
@@ -88,12 +97,13 @@ class Hub:
                  job_id: int):
         self.comm, self.workers, self.kind, self.job_id = comm, list(workers), kind, job_id
         self.handler, self.context = handler, context
-        self.pool = TreeJob("hub", handler, context, [], budget, {}, groups=groups)
+        self.pool = TreeJob("hub", handler, context, [], max(1, budget // BUDGET_DIVISOR), {}, groups=groups)
         self.pool.max_scale = 1
         self.idle = self.workers[::-1]
         self.inflight: dict = {}         # worker -> token of its task
         self.fresh = set(self.workers)   # workers not yet sent this job's context
         self.seq, self.asked, self.dirty, self.open_reported = 0, False, False, 0
+        self.share, self.dry = False, True  # a share asked of it; dry (idle workers, nothing for them) as last reported
         self.last_report = time.monotonic()
         self.task_s, self.tasks = 0.0, {w: 0 for w in self.workers}
         self.sends = mpi.Sends(len(self.workers) + 1)
@@ -108,11 +118,18 @@ class Hub:
         n = len(self.workers)
         while True:
             self._hand_out()
-            if self.pool.pending() < LOW * n and not self.asked:
-                self.asked = True
+            pending = self.pool.pending()
+            dry = not pending and bool(self.idle)
+            if self.share and pending >= 2:          # half of the pool to the master, for a hub that is dry
+                self.share = False
+                self._report(returned=self.pool.give(pending // 2), shared=True)
+            elif pending > SURPLUS * n:              # the surplus back: a hub holds, and reports, little
+                self._report(returned=self.pool.give(pending - LOW * n))
+            elif (pending < LOW * n and not self.asked) or dry != self.dry:
+                self.asked = self.asked or pending < LOW * n
                 self._report()
-            elif not self.inflight and not self.pool.pending() and self.open_reported:
-                self._report()               # dry: the master may be waiting for it to end the job
+            elif not self.inflight and not pending and self.open_reported:
+                self._report()               # done with all it had: the master may be waiting to end the job
             elif self.dirty and time.monotonic() - self.last_report >= REPORT_EVERY_S:
                 self._report()
             got = self._wait(self.last_report + REPORT_EVERY_S)
@@ -130,8 +147,7 @@ class Hub:
                 self.pool.put(tokens)
                 self.seq, self.asked, self.dirty = seq, False, True
             elif tag == mpi.SHARE:
-                pending = self.pool.pending()
-                self._report(returned=self.pool.give(pending // 2) if pending >= 2 else [], shared=True)
+                self.share = True
 
     def _hand_out(self) -> None:
         from hpcwedge.parallel.worker import run_batch
@@ -168,10 +184,11 @@ class Hub:
         p = self.pool
         rep = {"seq": self.seq, "found": p.found, "flagged": p.flagged, "counters": p.counters,
                "open": p.open_nodes(list(self.inflight.values())), "pool": p.pending(),
-               "returned": list(returned), "shared": shared,
+               "returned": list(returned), "shared": shared, "dry": not p.pending() and bool(self.idle),
                "want": CHUNK * len(self.workers) if self.asked else 0}
         self._reset()
         self.last_report, self.dirty, self.open_reported = time.monotonic(), False, len(rep["open"])
+        self.dry = rep["dry"]
         if final:
             self.sends.complete(timeout=1.0)
             rep.update(task_s=self.task_s, tasks=self.tasks)
@@ -231,7 +248,7 @@ class _View:
 
     def __init__(self, workers: list):
         self.workers, self.open, self.sent = workers, [], []
-        self.pool, self.want, self.asked_at, self.sharing = 0, 0, 0.0, False
+        self.pool, self.want, self.asked_at, self.sharing, self.dry = 0, 0, 0.0, False, True
 
     def tokens(self) -> list:
         return self.open + [t for _, ts in self.sent for t in ts]
@@ -253,6 +270,7 @@ def run_master(engine, job: TreeJob, groups: list) -> None:
         if rep["want"] and not v.sent and not v.want:
             v.want, v.asked_at = rep["want"], time.monotonic()
         v.sharing = v.sharing and not rep["shared"]
+        v.dry = rep["dry"]
         engine.hold(h, v.tokens())
         if "task_s" in rep:
             engine.count_tasks(rep["task_s"], rep["tasks"])
@@ -309,14 +327,13 @@ def _feed(engine, job: TreeJob, views: dict, state: dict) -> None:
         tokens = [job.take(1, 1)[0] for _ in range(min(n, job.pending()))]
         state["seq"] += 1
         v.sent.append((state["seq"], tokens))
-        v.want = 0
+        v.want, v.dry = 0, False
         engine.master.isend((state["seq"], tokens), h, mpi.NODES)
         engine.hold(h, v.tokens())
         engine.clock.messages += 1
-    still = sum(1 for v in views.values() if v.want)
-    if still and not job.pending():
-        rich = sorted((h for h, v in views.items() if not v.sharing and v.pool >= 2), key=lambda h: -views[h].pool)
-        for h in rich[:still]:
+    dry = sum(1 for v in views.values() if v.dry)
+    if dry and not job.pending():
+        for h in sorted((h for h, v in views.items() if not v.sharing), key=lambda h: -views[h].pool)[:dry]:
             views[h].sharing = True
             engine.master.isend(None, h, mpi.SHARE)
             engine.clock.messages += 1

@@ -148,3 +148,171 @@ def simulate(job, workers: int, costs: MasterCosts, seconds) -> Simulated:
             job.merge(token, result)
         tasks += len(done)
         idle.append(w)
+
+
+#: a node moved between the master and a hub: its pickling and a heap push, at each end (s)
+NODE_S = 5e-6
+
+
+def simulate_hubs(job, groups: list[int], costs: MasterCosts, seconds, low: float | None = None,
+                  chunk: float | None = None, node_s: float = NODE_S, max_events: int = 50_000_000) -> dict:
+    """hub.py's schedule of a TreeJob `job` over hubs of groups[i] workers (the job's pool is
+    the master's; a hub's pool serves its workers one task of the job's budget // hub.BUDGET_DIVISOR
+    per message, as TreeJob.take cuts it, and hands back the shallowest above low x its workers once it holds
+    more than hub.SURPLUS x them). A hub asks for nodes below low x its workers (hub.LOW) and
+    is given at most chunk x its workers (hub.CHUNK; an even share of the master's pool among
+    the hubs waiting); while hubs are dry (idle workers, an empty pool) and the master's pool is
+    empty, the master asks as many hubs, those that reported the largest pools, to share half
+    of theirs once they hold two nodes. Every message costs its sender `send_s` and its
+    receiver `merge_s` (hubs pay what the master pays), a node moved costs node_s at each end,
+    and a hub reports its frontier every hub.REPORT_EVERY_S (node_s a node, to the master).
+    Hubs run no tasks. Returns efficiency (over the workers), wall_s, task_s, nodes, found,
+    tasks, moved (nodes between master and hubs), messages (the master's NODES), longest_s
+    (the longest task), workers, master_busy and the busiest hub's hub_busy."""
+    return _HubSchedule(job, groups, costs, seconds, low, chunk, node_s).run(max_events)
+
+
+class _HubSchedule:
+    """simulate_hubs' state: the master (the job's pool), each hub's pool, workers and flags,
+    and the events (time, seq, kind, hub, data...) in time order."""
+
+    def __init__(self, job, groups, costs, seconds, low, chunk, node_s):
+        from hpcwedge.parallel.hub import BUDGET_DIVISOR, CHUNK, LOW, REPORT_EVERY_S, SURPLUS
+        from hpcwedge.parallel.jobs import TreeJob
+        self.job, self.groups, self.costs, self.seconds, self.node_s = job, groups, costs, seconds, node_s
+        self.low = LOW if low is None else low
+        self.chunk = CHUNK if chunk is None else chunk
+        self.surplus, self.report_every_s = max(SURPLUS, 2 * self.low), REPORT_EVERY_S
+        hubs = len(groups)
+        budget = max(1, job.budget // BUDGET_DIVISOR)
+        self.pools = [TreeJob("hub", job.handler, job.context, [], budget, {}, groups=len(job.found))
+                      for _ in groups]
+        for p in self.pools:
+            p.max_scale = 1
+        self.free, self.busy, self.reported = [0.0] * hubs, [0.0] * hubs, [0.0] * hubs
+        self.idle = [list(range(n)) for n in groups]
+        self.asked, self.share, self.dry = [True] * hubs, [False] * hubs, [True] * hubs
+        self.known = [0] * hubs                      # each hub's pool as its last message said
+        self.waiting, self.sharing, self.starving = list(range(hubs)), set(), set(range(hubs))
+        self.events: list = []
+        self.seq = self.moved = self.messages = self.tasks = 0
+        self.m_free = self.m_busy = self.task_s = self.last = self.longest = 0.0
+
+    def post(self, t: float, *event) -> None:
+        heapq.heappush(self.events, (t, self.seq, *event))
+        self.seq += 1
+
+    def run(self, max_events: int) -> dict:
+        self.m_free = self.m_busy = self.serve_master(0.0)
+        handled = 0
+        while self.events:
+            handled += 1
+            if handled > max_events:
+                raise RuntimeError("simulate_hubs: no end in sight (max_events)")
+            t, _, kind, h, *data = heapq.heappop(self.events)
+            self.last = max(self.last, t)
+            if kind.startswith("master_"):
+                self.at_master(t, kind, h, data)
+            else:
+                self.at_hub(t, kind, h, data)
+        workers, last = sum(self.groups), self.last
+        return {"efficiency": self.task_s / (workers * last) if last > 0 else 1.0, "wall_s": last,
+                "task_s": self.task_s, "nodes": sum(p.counters.get("nodes", 0) for p in self.pools),
+                "found": sum(len(f) for p in self.pools for f in p.found), "tasks": self.tasks,
+                "moved": self.moved, "messages": self.messages, "longest_s": self.longest, "workers": workers,
+                "master_busy": self.m_busy / last if last > 0 else 0.0,
+                "hub_busy": max(self.busy) / last if last > 0 else 0.0}
+
+    def serve_master(self, t: float) -> float:
+        """The master feeds the waiting hubs from its pool, else asks shares for the dry; its cost."""
+        c, job = 0.0, self.job
+        while self.waiting and job.pending():
+            h = self.waiting.pop(0)
+            self.starving.discard(h)
+            n = min(max(1, int(self.chunk * self.groups[h])), max(1, -(-job.pending() // (len(self.waiting) + 1))))
+            nodes = job.give(n)
+            c += self.costs.send_s + self.node_s * len(nodes)
+            self.moved += len(nodes)
+            self.messages += 1
+            self.post(t + c + self.costs.latency_s, "hub_nodes", h, nodes)
+        if self.starving and not job.pending():
+            rich = sorted((h for h in range(len(self.groups)) if h not in self.sharing), key=lambda h: -self.known[h])
+            for h in rich[:len(self.starving)]:
+                self.sharing.add(h)
+                c += self.costs.send_s
+                self.post(t + c + self.costs.latency_s, "hub_share", h)
+        return c
+
+    def at_master(self, t: float, kind: str, h: int, data: list) -> None:
+        tm, c = max(t, self.m_free), self.costs.merge_s
+        if kind == "master_ask":
+            if h not in self.waiting:
+                self.waiting.append(h)
+            self.known[h] = data[0]
+            (self.starving.add if data[1] else self.starving.discard)(h)
+        elif kind == "master_share":
+            nodes, self.known[h], answered = data
+            if answered:
+                self.sharing.discard(h)
+            self.job.put(nodes)
+            c += self.node_s * len(nodes)
+        else:                                        # master_report: a frontier of data[0] nodes
+            c += self.node_s * data[0]
+        c += self.serve_master(tm + c)
+        self.m_free, self.m_busy = tm + c, self.m_busy + c
+
+    def at_hub(self, t: float, kind: str, h: int, data: list) -> None:
+        pool, th, costs = self.pools[h], max(t, self.free[h]), self.costs
+        c = costs.merge_s
+        if kind == "hub_done":
+            w, token, result, d = data
+            pool.merge(token, result)
+            self.idle[h].append(w)
+            self.task_s += d
+        elif kind == "hub_nodes":
+            pool.put(data[0])
+            self.asked[h] = False
+            c += self.node_s * len(data[0])
+        else:                                        # hub_share
+            self.share[h] = True
+        if self.share[h] and pool.pending() >= 2:    # half of the pool back, before its own workers
+            self.share[h] = False
+            c += self.give_back(th + c, h, pool.pending() // 2, True)
+        c += self.hand_out(th + c, h)
+        if pool.pending() > self.surplus * self.groups[h]:   # the surplus back: hubs hold little
+            c += self.give_back(th + c, h, pool.pending() - int(self.low * self.groups[h]), False)
+        now_dry = not pool.pending() and bool(self.idle[h])
+        if (pool.pending() < self.low * self.groups[h] and not self.asked[h]) or now_dry != self.dry[h]:
+            self.asked[h] = True
+            c += costs.send_s
+            self.post(th + c + costs.latency_s, "master_ask", h, pool.pending(), now_dry)
+        elif th - self.reported[h] >= self.report_every_s:
+            self.reported[h] = th
+            c += costs.send_s
+            self.post(th + c + costs.latency_s, "master_report", h,
+                      pool.pending() + self.groups[h] - len(self.idle[h]))
+        self.dry[h] = now_dry
+        self.free[h], self.busy[h] = th + c, self.busy[h] + c
+
+    def give_back(self, t: float, h: int, n: int, answered: bool) -> float:
+        nodes = self.pools[h].give(n)
+        c = self.costs.send_s + self.node_s * len(nodes)
+        self.moved += len(nodes)
+        self.post(t + c + self.costs.latency_s, "master_share", h, nodes, self.pools[h].pending(), answered)
+        return c
+
+    def hand_out(self, t: float, h: int) -> float:
+        """Hub h's idle workers get tasks from its pool; its cost."""
+        pool, c = self.pools[h], 0.0
+        while self.idle[h]:
+            taken = pool.take(self.groups[h], 1)
+            if taken is None:
+                break
+            token, payload = taken
+            c += self.costs.send_s
+            self.tasks += 1
+            result = pool.handler(pool.context, payload)
+            d = float(self.seconds(result))
+            self.longest = max(self.longest, d)
+            self.post(t + c + self.costs.latency_s + d, "hub_done", h, self.idle[h].pop(), token, result, d)
+        return c

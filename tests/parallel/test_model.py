@@ -8,7 +8,7 @@ import pytest
 
 from hpcwedge.parallel import mpi, schedule
 from hpcwedge.parallel.jobs import TaskJob, TreeJob
-from hpcwedge.parallel.model import FREE, MasterCosts, noticed_at, simulate, waited
+from hpcwedge.parallel.model import FREE, MasterCosts, noticed_at, simulate, simulate_hubs, waited
 
 
 def _seconds_task(ctx, payload):
@@ -141,3 +141,39 @@ def test_a_send_waits_for_the_idle_workers_probes():
     sim = simulate(TaskJob("t", _seconds_task, None, [1.0] * 4), 4, costs, _result_seconds)
     assert sim.wall_s == pytest.approx(1.12)
     assert sim.efficiency == pytest.approx(4 / (4 * 1.12))
+
+
+# ---------------------------------------------------------------- hubs (simulate_hubs)
+
+#: the binary tree of depth 6: every node's 1 + depth seconds, and its 64 leaves
+TREE_SECONDS, TREE_LEAVES = sum(2 ** d * (1 + d) for d in range(7)), 64
+
+
+def _tree_job(budget: int = 4) -> TreeJob:
+    return TreeJob("t", _explore, None, [_Node(())], budget, {"seconds": 0.0})
+
+
+@pytest.mark.parametrize("groups", [[1], [2, 3], [4, 4, 4], [1, 7]])
+def test_hubs_explore_every_node_once(groups):
+    """Every node once between the pools: the tree's seconds and leaves, whatever the layout (a
+    node lost or run twice changes them)."""
+    costs = MasterCosts(send_s=1e-3, merge_s=2e-3, latency_s=1e-3)
+    r = simulate_hubs(_tree_job(), groups, costs, _result_seconds)
+    assert r["task_s"] == TREE_SECONDS and r["found"] == TREE_LEAVES
+    assert 0 < r["efficiency"] <= 1 and r["wall_s"] >= TREE_SECONDS / sum(groups)
+    assert 0 < r["master_busy"] <= 1 and 0 < r["hub_busy"] <= 1 and r["moved"] >= 1
+
+
+def test_one_free_hub_of_one_worker_is_the_serial_sum():
+    r = simulate_hubs(_tree_job(), [1], FREE, _result_seconds)
+    assert r["wall_s"] == pytest.approx(TREE_SECONDS) and r["efficiency"] == pytest.approx(1.0)
+
+
+def test_more_hubs_are_faster_on_a_wide_tree():
+    one, four = (simulate_hubs(_tree_job(1), g, FREE, _result_seconds) for g in ([4], [4] * 4))
+    assert four["wall_s"] < one["wall_s"] / 2
+
+
+def test_a_hub_schedule_without_an_end_is_an_error():
+    with pytest.raises(RuntimeError, match="max_events"):
+        simulate_hubs(_tree_job(), [2, 2], FREE, _result_seconds, max_events=5)
