@@ -11,8 +11,9 @@ seeds SEEDS), with the master costs bench_scale fitted (results/bench_scale.json
       budget of FREE_BUDGETS nodes (what a one-level schedule of this tree could reach: its
       ramp-up and tail);
   "hubs": streaming hubs, the engine's second level (parallel/hub.py), modelled by
-      parallel.model.simulate_hubs: plans of workers per hub, task budget, and the hub's
-      low and chunk fractions (hub.LOW, hub.CHUNK). Hubs do not run tasks.
+      parallel.model.simulate_hubs: plans of workers per hub, the job's task budget (a hub's
+      tasks explore budget // hub.BUDGET_DIVISOR nodes), and the hub's low and chunk
+      fractions (hub.LOW, hub.CHUNK). Hubs do not run tasks.
 
 Each at the grain of bench_scale (a synthetic node = scale_workload.GRAIN = 8 real nodes of
 17.6 ms) and at the real nodes' grain (1: 2.2 ms). Efficiency = task seconds / (workers x

@@ -258,7 +258,8 @@ class Engine:
                 else:
                     self._run_master(job)
                 workers = sum(len(ws) for _, ws in groups) if groups else len(self.master.workers)
-                self._use[job.name] = utilisation(self._batched[0], workers, self.clock)
+                self._use[job.name] = {**utilisation(self._batched[0], workers, self.clock),
+                                       "hubs": len(groups) if groups else 0}
                 self._note_use(job.name)
             self._jobs[job.name] = job
             self._current, self._inflight = None, {}

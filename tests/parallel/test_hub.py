@@ -214,4 +214,5 @@ def test_a_run_through_hubs_gives_the_serial_bits(tmp_path):
     assert answers(got) == answers(want) and mu_c_bits(got) == mu_c_bits(want)
     use = got["stats"]["parallel"]["utilisation"]
     assert use["patterns"]["workers"] == 4 and use["mu_c"]["workers"] == 6
+    assert use["patterns"]["hubs"] == 2 and use["mu_c"]["hubs"] == 0
     assert sum(got["stats"]["parallel"]["tasks_per_rank"][h] for h in (1, 4)) > 0     # hubs run mu^c tasks
