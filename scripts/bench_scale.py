@@ -69,7 +69,7 @@ WORKLOADS = ("subtree", "mu_c", "face")
 RANKS, QUICK_RANKS, MODEL_RANKS = (3, 9, 17, 33, 65, 129), (3, 9, 17, 33, 65), (256, 1024, 4096)
 #: rank counts measured again with the tree through four hubs (workers per hub), to validate
 #: the hub model (parallel.model.simulate_hubs) where the engine would not use hubs by itself
-HUB_RUNS = {33: 7, 65: 15, 129: 31}
+HUB_RUNS, QUICK_HUB_RUNS = {33: 7, 65: 15, 129: 31}, {65: 15}
 #: measured runs: worker-seconds per worker; modelled runs: the same, at least MIN_WORKER_SECONDS
 SECONDS_PER_WORKER = {"subtree": 24.0, "mu_c": 8.0, "face": 24.0}
 MODEL_SECONDS_PER_WORKER = {256: 120.0, 1024: 120.0, 4096: 30.0}
@@ -348,9 +348,10 @@ def main() -> None:
         with open(a.refit) as f:
             measured = [r for r in json.load(f)["measured_detail"] if r["workload"] in a.workloads]
     else:
+        hub_runs = QUICK_HUB_RUNS if a.quick else HUB_RUNS
         measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)
-                    + (measure(n, a.durations, seconds, ["subtree"], HUB_RUNS[n])
-                       if n in HUB_RUNS and "subtree" in a.workloads else [])]
+                    + (measure(n, a.durations, seconds, ["subtree"], hub_runs[n])
+                       if n in hub_runs and "subtree" in a.workloads else [])]
     costs, predicting = master_costs(measured, durations)
     for r in measured:
         sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],

@@ -73,8 +73,8 @@ def test_a_tree_job_costs_its_tree_for_any_worker_count():
 
 
 def test_batch_size_lasts_the_masters_target_and_shares_out_a_short_pool():
-    target = math.ceil(100 * schedule.MESSAGE_S / schedule.MAX_BUSY / 0.01)         # 25 tasks of 10 ms
-    assert schedule.batch_size(100, 0.01, 10 ** 6) == target == 25
+    target = math.ceil(100 * schedule.MESSAGE_S / schedule.MAX_BUSY / 0.01)         # 67 tasks of 10 ms
+    assert schedule.batch_size(100, 0.01, 10 ** 6) == target == 67
     assert schedule.batch_size(100, 0.01, 1000) == 5                               # 1000 / (2 x 100)
     assert schedule.batch_size(100, 0.01, 150) == schedule.batch_size(100, None, 10 ** 6) == 1
 
@@ -96,8 +96,8 @@ def test_the_master_notices_a_result_at_its_next_wake_up():
 
 def test_a_task_job_travels_in_batches_of_the_masters_target_length():
     """4,000 tasks of 0.3 ms on 8 workers, a master whose messages cost it MESSAGE_S: a first
-    round of single tasks, then batches that last 8 x MESSAGE_S / MAX_BUSY (20 ms: 67 tasks)
-    while the pool holds 16 x 67 tasks, then pending / 16 down to 1 (guided self-scheduling);
+    round of single tasks, then batches that last 8 x MESSAGE_S / MAX_BUSY (53 ms: 178 tasks)
+    while the pool holds 16 x 178 tasks, then pending / 16 down to 1 (guided self-scheduling);
     every task merged once, in its slot. A master whose messages cost it nothing (as measured
     after schedule.MEASURED_AFTER messages) sends single tasks from then on."""
     durations = [0.0003 + 1e-9 * k for k in range(4000)]
@@ -110,7 +110,7 @@ def test_a_task_job_travels_in_batches_of_the_masters_target_length():
     while pending:                        # one worker free at a time: one batch per answer
         sizes.append(max(1, min(k, pending // 16)))
         pending -= sizes[-1]
-    assert k == 67 and sizes[:3] == [67] * 3 and sizes[-3:] == [1, 1, 1]
+    assert k == 178 and sizes[:3] == [178] * 3 and sizes[-3:] == [1, 1, 1]
     assert sim.messages == 8 + len(sizes)
     assert sim.task_s == pytest.approx(sum(durations))
     free = simulate(TaskJob("t", _seconds_task, None, durations), 8, FREE, _result_seconds)
