@@ -239,7 +239,6 @@ def test_a_tree_job_of_short_tasks_travels_in_batches_with_the_same_answer(tmp_p
     counts the tree's 8,191 nodes; every node handed back became one task (tasks and
     handed_back depend on the split: the budget grows while the pool is long)."""
     import json
-    import re
     import subprocess
     import sys
 
