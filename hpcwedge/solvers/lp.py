@@ -155,6 +155,9 @@ def highs_run_watched(h, grace_s: float = 0.3) -> Status:
     point, the command line's exit after a stop does not) and raises TaskCancelled."""
     h.HandleUserInterrupt = True
     _arm_time_limit(h)
+    # highspy's solver thread locks are class attributes: while a run a stop left behind goes
+    # on (cancelled, up to its next interrupt point), no instance may start one
+    _join_left_running()
     h.startSolve()
     while not h.wait(0.1)[0]:
         if task_stopping():

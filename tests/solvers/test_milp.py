@@ -75,6 +75,9 @@ def test_a_stop_interrupts_a_long_milp_within_half_a_second():
     with pytest.raises(TaskCancelled):
         run_cancellable(lambda ctx, payload: wedge_milp(p, m, 100.0), None, None, check)
     assert asked and time.monotonic() - asked[0] < 0.5, time.monotonic() - start
+    # the next solve starts although the stopped one may still run (highspy's run locks are
+    # shared by every instance: before, "Solver is already running" under load)
+    assert wedge_milp(p, m, 100.0, time_limit=0.5).status == Status.UNDECIDED
 
 
 MILP_RUN = """
