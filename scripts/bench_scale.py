@@ -253,10 +253,10 @@ def floor_search(workload: str, durations: dict, seed: int, costs, ranks: int = 
             "longest_task_s": longest, "share_at_floor_s": share, "why": why}
 
 
-def master_costs(measured: list[dict], durations: dict) -> tuple[dict, dict]:
+def master_costs(measured: list[dict], durations: dict, mapper=map) -> tuple[dict, dict]:
     """({workload: MasterCosts} fitted to the measured runs' busy wall seconds (the model's
     validation), the same with the master's CPU seconds (its predictions); see the module's
-    docstring)."""
+    docstring). mapper: map, or an executor's, over the grids' model runs (the same fit)."""
     from scipy.optimize import nnls
 
     from hpcwedge.parallel.model import MasterCosts
@@ -270,13 +270,19 @@ def master_costs(measured: list[dict], durations: dict) -> tuple[dict, dict]:
     wall, _ = nnls(np.array(rows, dtype=float), np.array([r["busy_s"] for r in measured]))
     cpu, _ = nnls(np.array(rows, dtype=float), np.array([r["cpu_s"] for r in measured]))
 
+    def worst(pairs):                   # [(workload, MasterCosts)] -> the worst |model_error| of each
+        return list(mapper(_worst, [runs[w] for w, _ in pairs], [durations] * len(pairs), [c for _, c in pairs]))
+
     def fit_latencies(idle_probe):      # per workload, the latency whose worst |model_error| is least
-        return {w: min(LATENCY_GRID, key=lambda lat: _worst(runs[w], durations, _costs(wall, i, lat, idle_probe)))
-                for i, w in enumerate(workloads)}
+        grid = [(w, _costs(wall, i, lat, idle_probe)) for i, w in enumerate(workloads) for lat in LATENCY_GRID]
+        errs = worst(grid)
+        n = len(LATENCY_GRID)
+        return {w: LATENCY_GRID[int(np.argmin(errs[i * n:(i + 1) * n]))] for i, w in enumerate(workloads)}
     runs = {w: [r for r in measured if r["workload"] == w] for w in workloads}
     latency = fit_latencies(0.0)
-    idle_probe = min(IDLE_PROBE_GRID, key=lambda k: max(
-        _worst(runs[w], durations, _costs(wall, i, latency[w], k)) for i, w in enumerate(workloads)))
+    errs = worst([(w, _costs(wall, i, latency[w], k)) for k in IDLE_PROBE_GRID for i, w in enumerate(workloads)])
+    n = len(workloads)
+    idle_probe = IDLE_PROBE_GRID[int(np.argmin([max(errs[j * n:(j + 1) * n]) for j in range(len(IDLE_PROBE_GRID))]))]
     latency = fit_latencies(idle_probe)
     validated = {w: _costs(wall, i, latency[w], idle_probe) for i, w in enumerate(workloads)}
     predicting = {w: _costs(cpu, i, latency[w], 0.0, mpi.POLL_MAX_OWN_CORE) for i, w in enumerate(workloads)}
@@ -352,7 +358,8 @@ def main() -> None:
         measured = [r for n in ranks for r in measure(n, a.durations, seconds, a.workloads)
                     + (measure(n, a.durations, seconds, ["subtree"], hub_runs[n])
                        if n in hub_runs and "subtree" in a.workloads else [])]
-    costs, predicting = master_costs(measured, durations)
+    with ProcessPoolExecutor(2) as pool:        # the fit's grids: ~900 model runs
+        costs, predicting = master_costs(measured, durations, pool.map)
     for r in measured:
         sim = model_run(r["workload"], durations, r["ranks"], r["worker_seconds_asked"], r["seed"],
                         costs[r["workload"]], r.get("hub_workers", 0))
