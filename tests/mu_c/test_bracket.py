@@ -71,6 +71,25 @@ def test_floor_and_guess_give_the_plain_bracket_value():
     assert short.solves == 1 < plain.solves
 
 
+def test_ladder_above_a_guess_below_mu_c(monkeypatch):
+    """A guess proven infeasible (mu_try 0.5 % below mu^c of plug2d's all-contact pattern,
+    m = 40): the ladder above it (TRY_LADDER) finds an upper end 1 % above mu^c, so the value
+    is the one without the ladder (Dinkelbach from mu_max) to 1e-12, in fewer solves and fewer
+    Dinkelbach steps."""
+    from hpcwedge.mu_c import bracket
+    res = global_run({"kind": "plug2d", "rows": 20, "taper_deg": 10.0}, mu_c="none")
+    p, m = parametrize(res.problem), res.m
+    rows = pattern_rows(p, m, np.ones(m, bool), np.zeros(m, bool))
+    want = math.tan(math.radians(10.0))
+    ladder, plain = Probe(), Probe()
+    mu1, pol1 = bracket_2d(rows, ladder, mu_try=0.995 * want)
+    monkeypatch.setattr(bracket, "TRY_LADDER", ())
+    mu0, pol0 = bracket_2d(rows, plain, mu_try=0.995 * want)
+    assert pol0 and pol1 and abs(mu1 - want) <= 1e-12 and abs(mu0 - want) <= 1e-12
+    assert ladder.solves < plain.solves
+    assert ladder.statuses["dinkelbach"] < plain.statuses["dinkelbach"]
+
+
 def test_polish_by_near_roots_equals_polish_by_qz(monkeypatch):
     """The polish of plug2d's all-contact pattern (m = 40) with every pencil through
     near_roots (POLISH_DENSE_MAX = 0) gives QZ's value to 1e-13."""
