@@ -413,15 +413,16 @@ def _floor(param: Parametrization, m: int, mu_max: float, stats: BnBStats) -> fl
 def _wedge_at(param: Parametrization, m: int, stats: BnBStats, scale: float, dive: int, mu: float) -> WedgeMilp:
     """Is there a wedged configuration at mu (inf: r_t free)? A short dive of the tree first
     (dive * m + 1 nodes; 0: none): it settles most steps with a few LPs (a relaxed vertex
-    that is complementary descends without a solve; an infeasible root proves none); the
-    MILP (milp.wedge_milp, `scale`) only where the dive's budget runs out. Counted into stats.
+    that is complementary descends without a solve; an infeasible root proves none; its LPs
+    chained, lp.TreeLp's chain); the MILP (milp.wedge_milp, `scale`) only where the dive's
+    budget runs out. Counted into stats.
     At mu = inf the dive's first leaf, contact before gap, is the all-contact pattern whenever
     that is feasible: it is tried first in the image coordinates (`_all_contact`), no tree."""
     if dive and np.isinf(mu) and _all_contact(param, m):
         count(stats.statuses, "dive_all_contact")
         return WedgeMilp(Status.FEASIBLE, math.nan, 0, np.ones(m, bool), np.zeros(m, bool))
     if dive:
-        tree = PatternTree(param, m, 0.0 if np.isinf(mu) else mu, friction=not np.isinf(mu))
+        tree = PatternTree(param, m, 0.0 if np.isinf(mu) else mu, friction=not np.isinf(mu), lp_chain=True)
         out = tree.explore(Subtree(0), budget=dive * m + 1, first_only=True)
         stats.add(out.stats)
         if out.found and not out.undecided:

@@ -149,7 +149,8 @@ class PatternTree:
 
     def __init__(self, param: Parametrization, m: int, mu: float, friction: bool = True,
                  order: list[int] | None = None, symmetry: Symmetry | None = None,
-                 options: SolverOptions = TREE_OPTIONS, screens: bool = False, branch: str = "violation"):
+                 options: SolverOptions = TREE_OPTIONS, screens: bool = False, branch: str = "violation",
+                 lp_chain: bool = False):
         if branch not in ("violation", "reaction"):
             raise ValueError(f"branch: 'violation' or 'reaction', got {branch!r}")
         self.param, self.m, self.mu, self.friction, self.branch = param, m, mu, friction, branch
@@ -171,7 +172,8 @@ class PatternTree:
         #: 3D with friction and screens: LP screens before the SOCPs of deep nodes (screens.py)
         self._screens = PyramidScreens(param, m, mu) if screens and self.dim == 3 and friction else None
         #: 2D with friction: the nodes' LPs in one warm HiGHS model (lp.TreeLp; decide on doubt)
-        self._lp = TreeLp(param, m, mu) if self.dim == 2 and friction and 0.0 < mu < np.inf else None
+        #: lp_chain: each LP from the last one's basis (TreeLp's chain: one process's dive only)
+        self._lp = TreeLp(param, m, mu, lp_chain) if self.dim == 2 and friction and 0.0 < mu < np.inf else None
 
     def root(self) -> Subtree:
         return Subtree(0)

@@ -269,7 +269,10 @@ class TreeLp:
     simplex (no presolve, LP_OPTIONS' tolerances and time limit) from the root pattern's
     final basis, always the same one: a node's answer and point depend on the node alone,
     not on the nodes solved before it, so a tree split into tasks in any way (or resumed)
-    finds the same points, counts and patterns.
+    finds the same points, counts and patterns. chain=True (a dive that one process runs
+    from its start: global_search's bracket dives): each solve starts where the last one
+    ended, after a checked answer (block2d m = 320 at depth: 0.08 s a node against 0.57 s);
+    the points then depend on the nodes solved before.
 
     An answer is taken only with its proof checked here: a point meeting every row to
     X_SPACE_TOL with a normalisation share (lp_feasible) of at least NORM_SHARE_MIN (or every
@@ -281,9 +284,10 @@ class TreeLp:
 
     FARKAS_RTOL = FARKAS_RTOL
 
-    def __init__(self, param: Parametrization, m: int, mu: float):
+    def __init__(self, param: Parametrization, m: int, mu: float, chain: bool = False):
         if not 0.0 < mu < np.inf:
             raise ValueError(f"TreeLp: 0 < mu < inf, got {mu}")
+        self.chain, self._restart = chain, True
         Un, (Rn, Rt) = blocks(param.U, m, 2)[0], blocks(param.R, m, 2)
         A = np.vstack([Un, mu * Rn + Rt, mu * Rn - Rt])
         A = A / np.maximum(np.linalg.norm(A, axis=1, keepdims=True), 1e-300)
@@ -292,7 +296,7 @@ class TreeLp:
         self._h = self._start = None
 
     def __getstate__(self):             # a tree sent to another rank takes no live HiGHS along
-        return {**self.__dict__, "_h": None, "_start": None}   # rebuilt on the next solve
+        return {**self.__dict__, "_h": None, "_start": None, "_restart": True}   # rebuilt on the next solve
 
     def _highs(self):
         if self._h is None:
@@ -317,16 +321,20 @@ class TreeLp:
             h.changeRowsBounds(changed.size, changed, np.zeros(changed.size),
                                np.clip(upper[changed], 0.0, highspy.kHighsInf))
             self.upper = upper
-        h.clearSolver()                 # no simplex state of earlier solves (edge weights, perturbations)
-        h.setBasis(self._start)
+        if self._restart or not self.chain:
+            h.clearSolver()             # no simplex state of earlier solves (edge weights, perturbations)
+            h.setBasis(self._start)
         status = highs_run(h)
+        self._restart = True
         if status == Status.FEASIBLE:
             x = np.array(h.getSolution().col_value)
             if self._point_holds(x):
                 count(counts, "warm_feasible")
+                self._restart = False
                 return status, x
         elif status == Status.INFEASIBLE and self._ray_holds(h):
             count(counts, "warm_infeasible")
+            self._restart = False
             return status, None
         count(counts, "warm_unsure")
         return Status.UNDECIDED, None
