@@ -107,8 +107,8 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
     last = {"x": None}                   # the point of the latest mu taken as feasible
     lo = 0.0
     if mu_try is not None and 0.0 < mu_try < (mu_max if mu_hi is None else mu_hi):
-        top = mu_max if mu_hi is None else mu_hi
-        for mu in [mu_try] + [mu_try * (1 + f) for f in TRY_LADDER if mu_hi is None and mu_try * (1 + f) < top]:
+        ladder = [] if mu_hi is not None else [mu_try * (1 + f) for f in TRY_LADDER if mu_try * (1 + f) < mu_max]
+        for mu in [mu_try] + ladder:
             d = probe.decide(rows, mu, warm=warm)
             if d.status == Status.FEASIBLE:
                 mu_hi, last["x"] = mu, d.x
