@@ -6,6 +6,8 @@
 - exact_2d.py: a 2D pattern's mu^c certified in rational arithmetic.
 - global_search.py: the least mu at which any pattern is feasible.
 - lower_bound.py: a certified lower bound on it (free bodies), which ends that search.
+- floor_pattern.py: a pattern whose mu^c meets that bound, by pivots on its certificate.
 """
 
-__all__ = ["critical", "bracket", "dinkelbach", "kkt", "exact_2d", "global_search", "lower_bound"]
+__all__ = ["critical", "bracket", "dinkelbach", "kkt", "exact_2d", "global_search", "lower_bound",
+           "floor_pattern"]

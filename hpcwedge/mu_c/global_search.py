@@ -14,6 +14,7 @@ import numpy as np
 from hpcwedge.contact.problem import Parametrization
 from hpcwedge.mu_c.critical import MuC, add_counts, mu_critical, run_mu_c
 from hpcwedge.mu_c.bracket import BRACKET_RTOL
+from hpcwedge.mu_c.floor_pattern import floor_candidate
 from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at, rigid_bound
 from hpcwedge.parallel.cancel import Continuation, TaskCancelled, task_pausing, task_tick
 from hpcwedge.parallel.engine import Engine, run_tasks
@@ -85,8 +86,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     is the answer, and neither route searches further (bound=False: the bound is not asked;
     the answer is the same). Otherwise the tree route settles (`settled`): every pattern (one
     per orbit) feasible at best (1 + 1e-9) gets its certified mu^c; the least is the answer.
-    The MILP route skips that enumeration
-    (exponential in m: 635 tree nodes on plug2d m = 16): its answer is the certified mu^c of
+    The MILP route skips that enumeration (exponential in m): its answer is the certified mu^c of
     the last pattern it found, the least to the MILP's tolerance (a pattern whose mu^c lies
     within ~1e-6 relative below it can go unseen, unless the bound met it: then it is the
     least by a certificate). stats.extra["route"] says which route
@@ -337,23 +337,30 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     end where the certified lower bound meets best (`bound_meets`; bound=False: not asked):
     then no pattern lies below best, by a certificate, at 1e-9. A free body's certified lower
     bound (lower_bound.rigid_bound, to 1e-10; bound=False: not asked) is each pattern's
-    floor (`_PatternValues`): a pattern feasible just above it has its mu^c bracketed at once."""
+    floor (`_PatternValues`): a pattern feasible just above it has its mu^c bracketed at once;
+    the first asked is floor_pattern's (pivots on the bound's certificate), which ends the
+    search where it meets the bound (block2d m = 320: no MILP)."""
     s = 1.0 if scale is None else float(scale)
     stats.extra["route"] = "milp"
     wedge = partial(_wedge_at, param, m, stats, s, dive)
     floor = _floor(param, m, mu_max, stats) if bound else None
     certified = _PatternValues(param, m, solve, stats, floor)
-    best = None
+    met = partial(bound_meets, param, m, stats=stats) if bound else None
+    found = floor_candidate(param, m, floor, stats) if floor and floor < mu_max else None
+    best = None if found is None else certified(WedgeMilp(Status.FEASIBLE, math.nan, 0, *found), floor * (1 + FLOOR_STEP))
+    if best is not None and met(best):
+        return best
     for mu in (np.inf, mu_max):
         ans = wedge(mu)
         if ans.status != Status.FEASIBLE:
             return None                   # no wedge, or undecided: the tree decides
-        best = certified(ans, mu)
-        if best is not None:
+        value = certified(ans, mu)
+        if value is not None:
+            best = value if best is None else min(best, value)
             break
     if best is None:
         return None                       # the MILP's pattern at mu_max is no wedge: doubt
-    return _lowered(best, wedge, certified, partial(bound_meets, param, m, stats=stats) if bound else None)
+    return _lowered(best, wedge, certified, met)
 
 
 def _lowered(best: float, wedge, certified: _PatternValues, met=None) -> float | None:

@@ -92,12 +92,14 @@ def announced(param, m, mu, *args, **kw):
 
 gs.wedge_milp = announced
 gs.global_bracket_milp = functools.partial(bracket, dive=0)      # every step a MILP
+gs.floor_candidate = lambda *args, **kw: None                    # no pattern at the floor
 sys.exit(cli.main())
 """
 
 
 def test_sigterm_inside_a_long_milp_exits_75_within_2_s_with_a_checkpoint(tmp_path):
-    """`hpcwedge run` (global mu^c, plug2d rows 40, m = 80, the MILP route without its dive)
+    """`hpcwedge run` (global mu^c, plug2d rows 40, m = 80, the MILP route without its dive
+    and without the floor's pattern, which would end the search before any MILP)
     gets SIGTERM 1 s into its MILP at mu_max = 100 (a 46 s HiGHS call on its own): exit 75
     with the checkpoint written, within 2 s of the process's CPU time after the signal and
     2 s of wall time (times the machine's load per core, when it is shared beyond its cores).
