@@ -347,7 +347,7 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     certified = _PatternValues(param, m, solve, stats, floor)
     met = partial(bound_meets, param, m, stats=stats) if bound else None
     found = floor_candidate(param, m, floor, stats) if floor and floor < mu_max else None
-    best = None if found is None else certified(WedgeMilp(Status.FEASIBLE, math.nan, 0, *found), floor * (1 + FLOOR_STEP))
+    best = None if found is None else certified(WedgeMilp(Status.FEASIBLE, math.nan, 0, *found), np.inf)
     if best is not None and met(best):
         return best
     for mu in (np.inf, mu_max):
@@ -481,7 +481,7 @@ class _PatternValues:
             count(self.stats.statuses, "milp_pattern_again")
             return self.seen[key]
         rows = pattern_rows(self.param, self.m, ans.zero_u, ans.zero_r)
-        self.stats.lps += 1
+        self.stats.lps += bool(np.isfinite(bound))
         ok = np.isfinite(bound) and decide(rows, bound, counts=self.stats.statuses).status == Status.FEASIBLE
         floor = self.floor
         guess = None if floor is None or floor * (1 + FLOOR_STEP) >= bound else floor * (1 + FLOOR_STEP)
