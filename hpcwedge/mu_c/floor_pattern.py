@@ -23,7 +23,7 @@ import numpy as np
 import scipy.linalg
 
 from hpcwedge.contact.problem import Parametrization, blocks
-from hpcwedge.mu_c.lower_bound import bound_at, equilibrium_rows
+from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at, equilibrium_rows, rigid_bound
 from hpcwedge.parallel.cancel import task_tick
 from hpcwedge.solvers.rows import problem_dim
 
@@ -106,3 +106,33 @@ def floor_candidate(param: Parametrization, m: int, floor: float | None, stats) 
     key = "floor_pattern" if found is not None else "floor_pattern_none"
     stats.statuses[key] = stats.statuses.get(key, 0) + 1
     return found
+
+
+def certified_floor(param: Parametrization, m: int, mu_max: float, stats) -> float | None:
+    """The certified lower bound on the global mu^c (lower_bound.rigid_bound up to mu_max,
+    to 1e-10), None when there is none above 0 (a supported body); its conic programs counted
+    into stats.extra["bound_solves"]. stats: a patterns.tree.BnBStats."""
+    value, solves = rigid_bound(param, m, mu_max)
+    stats.extra["bound_solves"] = stats.extra.get("bound_solves", 0) + solves
+    return value if value else None
+
+
+def floor_start(param: Parametrization, m: int, mu_max: float, stats) -> tuple | None:
+    """floor_candidate's masks at the certified_floor (None: no floor above 0 below mu_max,
+    or no pattern), counted into stats as those two count."""
+    floor = certified_floor(param, m, mu_max, stats)
+    return floor_candidate(param, m, floor, stats) if floor and floor < mu_max else None
+
+
+def bound_meets(param: Parametrization, m: int, best: float, stats) -> bool:
+    """Is no wedge below best (1 - BOUND_RTOL), by the certified lower bound
+    (lower_bound.bound_at; False for a supported body)? Counted into stats (a BnBStats).extra:
+    "bound_solves", and on success "bound_certified" = 1 and "bound" (the certified value)."""
+    b = bound_at(param, m, best * (1 - BOUND_RTOL))
+    if b is None:
+        return False
+    stats.extra["bound_solves"] = stats.extra.get("bound_solves", 0) + b.solves
+    if b.certified:
+        stats.extra["bound_certified"] = 1
+        stats.extra["bound"] = b.mu
+    return b.certified

@@ -14,8 +14,7 @@ import numpy as np
 from hpcwedge.contact.problem import Parametrization
 from hpcwedge.mu_c.critical import MuC, add_counts, mu_critical, run_mu_c
 from hpcwedge.mu_c.bracket import BRACKET_RTOL
-from hpcwedge.mu_c.floor_pattern import floor_candidate
-from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at, rigid_bound
+from hpcwedge.mu_c.floor_pattern import bound_meets, certified_floor, floor_candidate, floor_start
 from hpcwedge.parallel.cancel import Continuation, TaskCancelled, task_pausing, task_tick
 from hpcwedge.parallel.engine import Engine, run_tasks
 from hpcwedge.patterns.job import DEFAULT_BUDGET, run_patterns
@@ -199,6 +198,8 @@ class GlobalSearch:
             best = resume["best"]
             if best is not None:
                 pattern_of[best] = (np.array(resume["zero_u"], dtype=bool), np.array(resume["zero_r"], dtype=bool))
+            if resume.get("floor"):
+                return self._from_floor(stats, pattern_of)
             if resume["bound"] is None:            # the steps found none up to mu_max
                 return self._at_any_mu(stats, pattern_of)
             return self._tree_steps(stats, pattern_of, best, resume["bound"], resume.get("longest", 0))
@@ -209,7 +210,26 @@ class GlobalSearch:
             if best is not None:
                 return best, "found"
         stats.extra["route"] = "tree"
-        return self._tree_steps(stats, pattern_of, None, mu_max)
+        return self._from_floor(stats, pattern_of)
+
+    def _from_floor(self, stats: BnBStats, pattern_of: dict):
+        """The tree route's steps from the certified mu^c of floor_pattern's pattern (3D with
+        the bound: floor_start; plug3d m = 128 skips its 3.8 s dive to a first leaf, the bound
+        meets that value: "found"); a Continuation marked "floor" (this step again, from the
+        counts before it) when the engine stops it."""
+        best, state = None, {**_step_state(stats, pattern_of, None, self.mu_max, self.m), "floor": True}
+        if self.bound and problem_dim(self.param, self.m) == 3:
+            try:
+                found = floor_start(self.param, self.m, self.mu_max, stats)
+                r = None if found is None else _recorded(self.solve, pattern_of, *found)
+            except TaskCancelled:
+                return Continuation(state)
+            if r is not None:
+                _absorb(stats, r)
+                best = r.mu_c
+            if best is not None and bound_meets(self.param, self.m, best, stats):
+                return best, "found"
+        return self._tree_steps(stats, pattern_of, best, self.mu_max if best is None else best * (1 - TREE_STEP))
 
     def _at_any_mu(self, stats: BnBStats, pattern_of: dict):
         """The outcome when no pattern is feasible up to mu_max: "none_at_any_mu" when the tree
@@ -343,7 +363,7 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     s = 1.0 if scale is None else float(scale)
     stats.extra["route"] = "milp"
     wedge = partial(_wedge_at, param, m, stats, s, dive)
-    floor = _floor(param, m, mu_max, stats) if bound else None
+    floor = certified_floor(param, m, mu_max, stats) if bound else None
     certified = _PatternValues(param, m, solve, stats, floor)
     met = partial(bound_meets, param, m, stats=stats) if bound else None
     found = floor_candidate(param, m, floor, stats) if floor and floor < mu_max else None
@@ -392,29 +412,6 @@ def _lowered(best: float, wedge, certified: _PatternValues, met=None) -> float |
             if met is not None and met(best):
                 return best
     return best
-
-
-def bound_meets(param: Parametrization, m: int, best: float, stats: BnBStats) -> bool:
-    """Is no wedge below best (1 - BOUND_RTOL), by the certified lower bound
-    (lower_bound.bound_at; False for a supported body)? Counted into stats.extra:
-    "bound_solves", and on success "bound_certified" = 1 and "bound" (the certified value)."""
-    b = bound_at(param, m, best * (1 - BOUND_RTOL))
-    if b is None:
-        return False
-    stats.extra["bound_solves"] = stats.extra.get("bound_solves", 0) + b.solves
-    if b.certified:
-        stats.extra["bound_certified"] = 1
-        stats.extra["bound"] = b.mu
-    return b.certified
-
-
-def _floor(param: Parametrization, m: int, mu_max: float, stats: BnBStats) -> float | None:
-    """The certified lower bound on the global mu^c (lower_bound.rigid_bound up to mu_max,
-    to 1e-10), None when there is none above 0 (a supported body); its conic programs counted
-    into stats.extra["bound_solves"]."""
-    value, solves = rigid_bound(param, m, mu_max)
-    stats.extra["bound_solves"] = stats.extra.get("bound_solves", 0) + solves
-    return value if value else None
 
 
 def _wedge_at(param: Parametrization, m: int, stats: BnBStats, scale: float, dive: int, mu: float) -> WedgeMilp:

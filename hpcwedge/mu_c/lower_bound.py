@@ -105,14 +105,16 @@ def bound_at(param: Parametrization, m: int, mu: float) -> Bound | None:
 
 def rigid_bound(param: Parametrization, m: int, mu_hi: float, rtol: float = 1e-10) -> tuple[float | None, int]:
     """(L, solves): the largest certified lower bound L <= mu_hi found by bisection to rtol
-    (0.0 when none above 0 certifies; None for a supported body)."""
+    (0.0 when none above 0 certifies; None for a supported body). The bisection stops
+    where hi <= rtol mu_hi too (a body wedged at every mu > 0, e.g. a plug at a 0 deg taper:
+    before, hi halved until mid underflowed to 0)."""
     first = bound_at(param, m, mu_hi)
     if first is None:
         return None, 0
     if first.certified:
         return mu_hi, 1
     lo, hi, solves = 0.0, mu_hi, 1
-    while hi - lo > rtol * hi:
+    while hi - lo > rtol * hi and hi > rtol * mu_hi:
         mid = 0.5 * (lo + hi)
         b = bound_at(param, m, mid)
         solves += 1

@@ -244,6 +244,7 @@ def test_no_wedge_up_to_mu_max_is_told_from_none_at_any_mu_and_resumes_between()
     nothing; a bracket resumed between the two (a Continuation's payload, bound None) ends
     with the uninterrupted bracket's outcome and counts."""
     from hpcwedge.contact.problem import ContactProblem
+    from hpcwedge.mu_c.floor_pattern import floor_start
     from hpcwedge.mu_c.global_search import GlobalSearch, _counts_json, _step_state
     single = parametrize(ContactProblem(3, np.diag([2.0, 1.0, 3.0]), np.zeros((3, 0))))
     for (p, m), want in ((plug3d_param(2, 5), "none_up_to_mu_max"), ((single, 1), "none_at_any_mu")):
@@ -252,7 +253,31 @@ def test_no_wedge_up_to_mu_max_is_told_from_none_at_any_mu_and_resumes_between()
         whole = BnBStats()
         assert search.bracket(whole, {}) == (None, want)
         before = BnBStats(extra={"route": "tree"})
+        assert floor_start(p, m, 0.1, before) is None          # the floor is mu_max, or none
         assert search._first_leaf(before, 0.1) is None
         resumed = BnBStats()
         assert search.bracket(resumed, {}, resume=_step_state(before, {}, None, None, m)) == (None, want)
         assert _counts_json(resumed) == _counts_json(whole) and whole.nodes > before.nodes > 0
+
+
+def test_3d_tree_route_starts_from_the_floor_pattern_and_resumes_it():
+    """3D with the bound: the tree route first takes floor_pattern's pattern at the certified
+    rigid bound; on plug3d 2 x 5 its mu^c meets the bound, so no tree node is solved, and the
+    answer is the whole tree's (bound=False) to 1e-9. A bracket paused in that step (its
+    Continuation's payload marked "floor") ends with the uninterrupted bracket's counts."""
+    from hpcwedge.mu_c.global_search import GlobalSearch, _counts_json, _step_state
+    p, m = plug3d_param(2, 5)
+    st, tree = BnBStats(), BnBStats()
+    mu, status = global_mu_critical(p, m, 5.0, stats=st)
+    assert status == "found" and abs(mu - math.tan(math.radians(10.0))) <= 1e-9
+    assert st.nodes == 0 and st.statuses["floor_pattern"] == 1 and st.extra["bound_certified"] == 1
+    mu_tree, _ = global_mu_critical(p, m, 5.0, stats=tree, bound=False)
+    assert tree.nodes > 0 and abs(mu_tree - mu) <= 1e-9 * mu
+    search = GlobalSearch(p, m, 5.0, "accurate", 1e-6, None, None, "auto")
+    whole = BnBStats()
+    best, how = search.bracket(whole, {})
+    assert how == "found" and best == mu
+    resumed = BnBStats()
+    state = {**_step_state(BnBStats(extra={"route": "tree"}), {}, None, 5.0, m), "floor": True}
+    assert search.bracket(resumed, {}, resume=state) == (best, "found")
+    assert _counts_json(resumed) == _counts_json(whole)

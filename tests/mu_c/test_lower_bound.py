@@ -64,6 +64,17 @@ def test_bound_on_free_plugs_is_tan_taper(body, taper):
     assert not bound_at(p, m, want * (1 + 1e-9)).certified
 
 
+@pytest.mark.parametrize("body", ["plug2d", "plug3d"])
+def test_a_body_wedged_at_every_mu_has_bound_zero_in_few_solves(body):
+    """A plug at a 0 deg taper (mu^c = 0): no bound above 0 certifies, and the bisection
+    ends where hi <= rtol mu_hi (~34 halvings from 100 at 1e-10) with 0.0, instead of
+    halving until mid underflows to 0 (bound_at None: an AttributeError)."""
+    p, m = plug2d_param(4, 0.0) if body == "plug2d" else plug3d_param(2, 5, taper_deg=0.0)
+    L, solves = rigid_bound(p, m, 100.0)
+    assert L == 0.0 and solves <= 40
+    assert not bound_at(p, m, 1e-8).certified
+
+
 def test_tampered_certificates_are_rejected():
     """plug3d 2 x 6: the certificate found at tan 10 deg (1 - 1e-9) passes the exact check;
     the same w at a mu past the bound, w perturbed by 1e-7, and -w fail it; and the check
