@@ -17,14 +17,17 @@ scripts/bench_socp_count.py (results/bench_socp_count.json); its table is
 copied into the JSON here when present.
 
     .venv/bin/python scripts/bench_parallel.py [--levels 3] [--ring 6] [--mu 1.0] [--repeat 2]
-        [--mu-c cones|none] [--no-symmetry] [--screens] [--workers 0 1 2 3] [--out results/bench_parallel]
+        [--mu-c cones|none|global] [--no-symmetry] [--screens] [--neck] [--workers 0 1 2 3]
+        [--out results/bench_parallel]
 
 Issue 13's target (plug3d 4 x 6 without symmetry, patterns only, 2 workers >= 1.8x 1 worker):
     .venv/bin/python scripts/bench_parallel.py --levels 4 --ring 6 --mu 0.65 --mu-c none \
         --no-symmetry --workers 1 2 --repeat 1 --out results/bench_parallel_4x6
-The global mu^c search alone (plug3d 4 x 8 without symmetry, m = 32; stats.bnb compared too):
-    .venv/bin/python scripts/bench_parallel.py --levels 4 --ring 8 --mu 1.0 --mu-c global \
-        --no-symmetry --workers 0 1 2 --repeat 2 --out results/bench_parallel_global
+The global mu^c search alone (stats.bnb compared too) on a body where elasticity sets it
+(the curved neck 4 x 8, m = 32: its settling tree is the work the workers share; plug3d's
+search ends at its rigid bound, with no tree to share):
+    .venv/bin/python scripts/bench_parallel.py --neck --levels 4 --ring 8 --mu-c global \
+        --workers 0 1 2 --repeat 2 --out results/bench_parallel_global_neck
 Issue 41's target (the m = 128 global mu^c, `mpirun -n 3` >= 1.8x over 1 worker):
     .venv/bin/python scripts/bench_parallel.py --levels 8 --ring 16 --mu 0.1 --mu-c global \
         --no-symmetry --workers 0 1 2 --repeat 1 --out results/bench_parallel_global_8x16
@@ -52,6 +55,19 @@ def scene_text(levels: int, ring: int, mu: float, mu_c: str = "cones", symmetry:
             f'ring = {ring}\n[friction]\nmu = [{mu}]\n[compute]\nenumerate = {enumerate_}\nmu_c = "{mu_c}"\n'
             f'[run]\ncheckpoint_every_s = 600\nsymmetry = {str(symmetry).lower()}\n'
             f'screens = {str(screens).lower()}\n')
+
+
+def neck_text(levels: int, ring: int, mu: float, mu_c: str = "global") -> str:
+    """tests/instances.py's curved neck LEVELS x RING (seed 0; elasticity sets its mu^c, so
+    the global search settles a tree) as a scene file, without symmetry."""
+    import sys
+    sys.path.insert(0, os.path.join(ROOT, "tests"))
+    from fault_campaign import toml_text
+    from instances import curved_neck
+    data = curved_neck(levels, ring, 0, mu=mu)
+    data.update(compute={"enumerate": mu_c != "global", "mu_c": mu_c},
+                run={"symmetry": False, "checkpoint_every_s": 600})
+    return toml_text(data)
 
 
 def run(ranks: int | None, scene: str, out: str, limit: float | None = None) -> dict:
@@ -92,6 +108,8 @@ def main() -> int:
                          "global_mu_c), no enumeration")
     ap.add_argument("--no-symmetry", action="store_true", help="run.symmetry = false (a generic body)")
     ap.add_argument("--screens", action="store_true", help="run.screens = true (LP screens in the 3D tree)")
+    ap.add_argument("--neck", action="store_true",
+                    help="tests/instances.py's curved neck LEVELS x RING instead of plug3d (no symmetry)")
     ap.add_argument("--workers", type=int, nargs="*", default=[0, 1, 2, 3],
                     help="configurations: 0 = serial, k = mpirun with k workers (1 must be among them)")
     ap.add_argument("--out", default=os.path.join(OUT, "bench_parallel"))
@@ -99,7 +117,8 @@ def main() -> int:
     args = ap.parse_args()
     if 1 not in args.workers:
         ap.error("--workers must include 1: the speedups are against 1 worker")
-    text = scene_text(args.levels, args.ring, args.mu, args.mu_c, not args.no_symmetry, args.screens)
+    text = (neck_text(args.levels, args.ring, args.mu, args.mu_c) if args.neck else
+            scene_text(args.levels, args.ring, args.mu, args.mu_c, not args.no_symmetry, args.screens))
     tmp = tempfile.mkdtemp(prefix="bench_parallel_")
     scene = os.path.join(tmp, "scene.toml")
     with open(scene, "w") as f:

@@ -246,7 +246,10 @@ def test_multinode_script_requeues_and_resumes(slurm, scenes, tmp_path):
     logpath = tmp_path / f"job-{jid}.out"
     wait_running(slurm, jid, logpath)
     slurm.run("scancel", "-b", "-s", "USR1", jid)
-    slurm.wait_for(lambda: slurm.job(jid).get("Restarts", "0") != "0", 90, f"job {jid} to be requeued")
+    try:            # 4 ranks on 2 cores beside the rest of the suite: minutes in the worst case
+        slurm.wait_for(lambda: slurm.job(jid).get("Restarts", "0") != "0", 180, f"job {jid} to be requeued")
+    except TimeoutError as e:
+        pytest.fail(f"{e}\njob: {slurm.job(jid)}\nlog:\n{read(logpath)}")
     slurm.start_now(jid)
     info = slurm.wait_gone(jid, timeout=300)
     log = read(logpath)
