@@ -73,7 +73,7 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     pattern feasible below best (1 - TREE_STEP) (tree route: or a dive below best spent its
     budget, STEP_DIVE_FACTOR), found by
       route "tree": branch and bound over patterns with an incumbent (LPs in 2D, SOCPs in 3D;
-        3D trees branch by TREE_BRANCH);
+        3D trees branch by TREE_BRANCH; 3D with the bound: floor_pattern's pattern first);
       route "milp" (2D; 3D runs the tree): `global_bracket_milp`, per step a short dive of
         the tree and, where it does not settle the step, one MILP (HiGHS); each pattern
         it returns checked by our LP and its mu^c computed by our certified route; any doubt
