@@ -15,9 +15,14 @@ from hpcwedge.solvers.rows import Status
 #: a MILP optimum sum(r_n) below this (the normalisation makes it a share in [0, 1]) is
 #: no wedged configuration: HiGHS's MIP feasibility tolerance is 1e-6
 MILP_WEDGE_TOL = 1e-5
+#: branch-and-bound nodes one MILP may take (then UNDECIDED: global_bracket_milp hands the
+#: search to the tree, whatever the machine's speed). plug2d at a 0 deg taper, m = 26, where
+#: elasticity sets mu^c (0.8836): the route's MILPs took 67, 2,126 and 6,029 nodes, then
+#: 126,145 (339 s) a 1 % step lower, with ~200 such steps to go; its tree route: 117 s
+MILP_NODE_LIMIT = 10_000
 #: HiGHS options of `wedge_milp` (presolve off: plug2d m = 40 at mu = 100, 1.8 s against
 #: 4.4 s with it)
-MILP_OPTIONS: dict = {"presolve": "off"}
+MILP_OPTIONS: dict = {"presolve": "off", "mip_max_nodes": MILP_NODE_LIMIT}
 #: seconds one MILP may run by default (then UNDECIDED: global_bracket_milp hands the search
 #: to the tree); a stop interrupts it sooner
 MILP_TIME_LIMIT_S = 600.0

@@ -29,6 +29,28 @@ def test_wedge_milp_decides_around_mu_c_and_its_pattern_verifies():
     assert stopped.status == Status.UNDECIDED and stopped.zero_u is None
 
 
+def test_a_milp_past_its_node_limit_is_undecided_and_the_search_falls_back_to_the_tree(monkeypatch):
+    """milp.MILP_NODE_LIMIT (HiGHS's mip_max_nodes): on plug2d at a 0 deg taper (rows 5, m =
+    10; elasticity sets mu^c, 0.8142, the rigid bound is 0) the MILP route (MILPs of up to
+    ~700 nodes) gives the tree route's answer; with the limit at 1 node its first MILP is
+    UNDECIDED and the search falls back to the tree (route "tree"), with the same answer."""
+    import hpcwedge.solvers.milp as milp
+    from hpcwedge.mu_c.global_search import global_mu_critical
+    from hpcwedge.patterns.tree import BnBStats
+    res = global_run({"kind": "plug2d", "rows": 5, "taper_deg": 0.0}, mu_c="none")
+    p, m = parametrize(res.problem), res.m
+    want, _ = global_mu_critical(p, m, 100.0, route="tree")
+    assert 0.8 < want < 0.83
+    routed = BnBStats()
+    mu, _ = global_mu_critical(p, m, 100.0, stats=routed, route="milp")
+    assert routed.extra["route"] == "milp" and routed.extra["milp_nodes"] > 1 and abs(mu - want) <= 1e-12 * want
+    monkeypatch.setitem(milp.MILP_OPTIONS, "mip_max_nodes", 1)
+    limited = BnBStats()
+    mu, _ = global_mu_critical(p, m, 100.0, stats=limited, route="milp")
+    assert limited.extra["route"] == "tree" and limited.statuses["milp_undecided"] == 1
+    assert abs(mu - want) <= 1e-12 * want
+
+
 def test_highs_debug_prints_never_reach_stdout():
     """HiGHS's MIP solver printf()s debug lines past its output_flag on these bodies (6 lines
     without lp.stdout_silenced); stdout carries `hpcwedge run --json`."""
