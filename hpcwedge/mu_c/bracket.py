@@ -91,14 +91,18 @@ def bisect(ok, lo: float, hi: float, rtol: float) -> tuple[float, float]:
 
 def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: float = 100.0,
                method: str = "accurate", tol: float = 1e-6, mu_lo: float | None = None,
-               mu_floor: float | None = None, mu_try: float | None = None) -> tuple[float | None, bool]:
+               mu_floor: float | None = None, mu_try: float | None = None,
+               x_try: np.ndarray | None = None) -> tuple[float | None, bool]:
     """(mu^c, polished) of an LP pattern problem given by its rows (module doc; mu^c None:
     infeasible at mu_max). mu_lo: a guess of an infeasible mu below mu^c; the bisection
     starts from it when an LP confirms it (else from 0). mu_floor: a mu proven infeasible
     another way (a certificate: lower_bound.py), taken as the lower end unchecked. mu_try: a
     guess of a feasible mu just above mu^c, asked first (below mu_hi): feasible, it is the
     upper end; proven infeasible, the lower end, and (without mu_hi) mu_try (1 + TRY_LADDER)
-    are asked in turn, up to the first not proven infeasible. Route
+    are asked in turn, up to the first not proven infeasible. x_try: a point believed feasible
+    at mu_try (sum r_n = 1): where it holds there (pattern_lp.point_holds, the LPs' own
+    acceptance) mu_try is the upper end without an LP (plug2d m = 1,280: the warm LP at
+    mu_try took 162 s; floor_pattern's wedge holds). Route
     "accurate" first lowers the upper end by Dinkelbach steps (`dinkelbach_hi`; none when the
     bracket is already within BRACKET_RTOL) and asks just below it: infeasible there, the
     bracket is done. Every LP is first the rows' one warm model (pattern_lp.PatternLp,
@@ -109,7 +113,8 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
     if mu_try is not None and 0.0 < mu_try < (mu_max if mu_hi is None else mu_hi):
         ladder = [] if mu_hi is not None else [mu_try * (1 + f) for f in TRY_LADDER if mu_try * (1 + f) < mu_max]
         for mu in [mu_try] + ladder:
-            d = probe.decide(rows, mu, warm=warm)
+            d = _witnessed(rows, mu, x_try, probe) if mu == mu_try else None
+            d = d or probe.decide(rows, mu, warm=warm)
             if d.status == Status.FEASIBLE:
                 mu_hi, last["x"] = mu, d.x
             if d.status != Status.INFEASIBLE:
@@ -156,6 +161,18 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
         if mu is not None:
             return mu, True
     return hi, False
+
+
+def _witnessed(rows: Rows, mu: float, x: np.ndarray | None, probe: Probe) -> Decision | None:
+    """FEASIBLE with x when x holds at mu (point_holds; counted "witness_feasible"), else None
+    (counted "witness_failed" when there was one)."""
+    if x is None:
+        return None
+    if point_holds(rows, mu, x):
+        count(probe.statuses, "witness_feasible")
+        return Decision(Status.FEASIBLE, x)
+    count(probe.statuses, "witness_failed")
+    return None
 
 
 def dinkelbach_hi(rows: Rows, warm: PatternLp, probe: Probe, hi: float) -> float:

@@ -54,14 +54,15 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
                 mu_hi: float | None = None, mu_max: float = 100.0,
                 method: str = "accurate", tol: float = 1e-6, scale: float | None = None,
                 options: SolverOptions = DEFAULT_OPTIONS, mu_floor: float | None = None,
-                     mu_try: float | None = None) -> MuC:
+                mu_try: float | None = None, x_try: np.ndarray | None = None) -> MuC:
     """Least mu at which the pattern (zero_u, zero_r) admits a solution with r != 0.
 
     mu_hi: a mu known feasible (e.g. the run's mu for a cone found there); else
     mu_max is tested first. Returns MuC(None) when infeasible at mu_max.
     mu_floor (2D): a mu at which no wedge exists by a certificate (lower_bound.rigid_bound),
     the bracket's lower end without an LP; mu_try (2D): a guess of a feasible mu just above
-    mu^c, asked first (bracket_2d; 3D: not used). With a scale the first coordinates are
+    mu^c, asked first (bracket_2d; 3D: not used); x_try (2D): a point (param's coordinates,
+    sum r_n = 1) believed feasible at mu_try, checked there instead of an LP. With a scale the first coordinates are
     balanced at mu_try, else mu_hi, else mu_max.
     scale: the stiffness that weighs u_n against r (numerics.NumericsReport.scale). The
     LPs (2D) or SOCPs (3D) then run in the balanced coordinates of problem.balanced at
@@ -72,14 +73,17 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
         return _mu_critical_3d(param, m, zero_u, zero_r, mu_hi, mu_max, method, tol, scale, options)
     if scale is None:
         return mu_critical_rows(pattern_rows(param, m, zero_u, zero_r), mu_hi, mu_max, method, tol, options=options,
-                                mu_floor=mu_floor, mu_try=mu_try)
+                                mu_floor=mu_floor, mu_try=mu_try, x_try=x_try)
 
-    def solve(ref: float, hi: float | None, lo: float | None = None, guess: float | None = None) -> MuC:
-        return mu_critical_rows(pattern_rows(balanced(param, ref, m, scale)[0], m, zero_u, zero_r),
-                                hi, mu_max, method, tol, mu_lo=lo, options=options, mu_floor=mu_floor, mu_try=guess)
+    def solve(ref: float, hi: float | None, lo: float | None = None, guess: float | None = None,
+              witness: np.ndarray | None = None) -> MuC:
+        p, _, T = balanced(param, ref, m, scale)
+        return mu_critical_rows(pattern_rows(p, m, zero_u, zero_r), hi, mu_max, method, tol, mu_lo=lo,
+                                options=options, mu_floor=mu_floor, mu_try=guess,
+                                x_try=None if witness is None else T @ witness)
 
     ref = mu_try if mu_try is not None else mu_max if mu_hi is None else mu_hi
-    out = solve(ref, mu_hi, guess=mu_try)
+    out = solve(ref, mu_hi, guess=mu_try, witness=x_try)
     if out.mu_c is None or method != "accurate" or ref / REBALANCE < out.mu_c < ref * REBALANCE:
         return out
     again = solve(out.mu_c, out.mu_c * (1 + REBALANCE_BRACKET), out.mu_c * (1 - REBALANCE_BRACKET))
@@ -134,12 +138,12 @@ def add_counts(into, other: MuC) -> None:
 def mu_critical_rows(rows: Rows, mu_hi: float | None = None, mu_max: float = 100.0,
                      method: str = "accurate", tol: float = 1e-6, mu_lo: float | None = None,
                      options: SolverOptions = DEFAULT_OPTIONS, mu_floor: float | None = None,
-                     mu_try: float | None = None) -> MuC:
+                     mu_try: float | None = None, x_try: np.ndarray | None = None) -> MuC:
     """mu^c of an LP pattern problem given by its rows (2D patterns; also any
     polyhedral problem of the same form, e.g. a 3D pattern with pyramids):
     mu_bracket.bracket_2d, counted."""
     probe = Probe(options)
-    mu_c, polished = bracket_2d(rows, probe, mu_hi, mu_max, method, tol, mu_lo, mu_floor, mu_try)
+    mu_c, polished = bracket_2d(rows, probe, mu_hi, mu_max, method, tol, mu_lo, mu_floor, mu_try, x_try)
     return _result(probe, mu_c, polished)
 
 

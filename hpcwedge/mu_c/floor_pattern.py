@@ -19,6 +19,8 @@ took minutes each).
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import scipy.linalg
 
@@ -36,9 +38,18 @@ NULL_RTOL = 1e-10
 SIGN_RTOL = 1e-9
 
 
+class FloorWedge(NamedTuple):
+    """floor_pattern's pattern, zero_u and zero_r bool (m,) masks, and its wedge x (d,) at the
+    floor (x-space, sum r_n = 1): a witness that the pattern is feasible just above it."""
+
+    zero_u: np.ndarray
+    zero_r: np.ndarray
+    x: np.ndarray
+
+
 def floor_pattern(param: Parametrization, m: int, floor: float,
-                  max_pivots: int | None = None) -> tuple[tuple[np.ndarray, np.ndarray] | None, int]:
-    """((zero_u, zero_r) bool (m,) masks, pivots): a pattern with a wedge at mu = floor (module
+                  max_pivots: int | None = None) -> tuple[FloorWedge | None, int]:
+    """(FloorWedge, pivots): a pattern with a wedge at mu = floor (module
     doc), or None with the pivots spent when none is found (no certificate at floor, a null
     space not of dimension 1, a pattern met again, an untight node that would need contact,
     or more than max_pivots (default m) pivot steps). floor: a certified lower bound > 0.
@@ -69,7 +80,7 @@ def floor_pattern(param: Parametrization, m: int, floor: float,
         pull = contact & (rn < -SIGN_RTOL * np.abs(rn).max())
         bite = ~contact & (un < -SIGN_RTOL * max(np.abs(un).max(), 1e-300))
         if not (pull.any() or bite.any()):
-            return (contact.copy(), ~contact), pivots
+            return FloorWedge(contact.copy(), ~contact, x / rn.sum()), pivots
         if (bite & ~tight).any():
             return None, pivots
         contact = (contact & ~pull) | bite
@@ -93,8 +104,8 @@ def _null_vector(Un: np.ndarray, Rn: np.ndarray, Rt: list, contact: np.ndarray,
     return None if total == 0 else x * np.sign(total)
 
 
-def floor_candidate(param: Parametrization, m: int, floor: float | None, stats) -> tuple | None:
-    """floor_pattern's masks (zero_u, zero_r), or None (none found, or floor None or 0); its
+def floor_candidate(param: Parametrization, m: int, floor: float | None, stats) -> FloorWedge | None:
+    """floor_pattern's FloorWedge, or None (none found, or floor None or 0); its
     pivots counted into stats.extra["floor_pivots"], its certificate's conic program into
     ["bound_solves"] and its outcome into stats.statuses ("floor_pattern",
     "floor_pattern_none"). stats: a patterns.tree.BnBStats."""
@@ -117,8 +128,8 @@ def certified_floor(param: Parametrization, m: int, mu_max: float, stats) -> flo
     return value if value else None
 
 
-def floor_start(param: Parametrization, m: int, mu_max: float, stats) -> tuple | None:
-    """floor_candidate's masks at the certified_floor (None: no floor above 0 below mu_max,
+def floor_start(param: Parametrization, m: int, mu_max: float, stats) -> FloorWedge | None:
+    """floor_candidate's FloorWedge at the certified_floor (None: no floor above 0 below mu_max,
     or no pattern), counted into stats as those two count."""
     floor = certified_floor(param, m, mu_max, stats)
     return floor_candidate(param, m, floor, stats) if floor and floor < mu_max else None

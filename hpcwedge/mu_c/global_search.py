@@ -221,7 +221,7 @@ class GlobalSearch:
         if self.bound and problem_dim(self.param, self.m) == 3:
             try:
                 found = floor_start(self.param, self.m, self.mu_max, stats)
-                r = None if found is None else _recorded(self.solve, pattern_of, *found)
+                r = None if found is None else _recorded(self.solve, pattern_of, found.zero_u, found.zero_r)
             except TaskCancelled:
                 return Continuation(state)
             if r is not None:
@@ -367,7 +367,8 @@ def global_bracket_milp(param: Parametrization, m: int, mu_max: float, solve, st
     certified = _PatternValues(param, m, solve, stats, floor)
     met = partial(bound_meets, param, m, stats=stats) if bound else None
     found = floor_candidate(param, m, floor, stats) if floor and floor < mu_max else None
-    best = None if found is None else certified(WedgeMilp(Status.FEASIBLE, math.nan, 0, *found), np.inf)
+    best = None if found is None else \
+        certified(WedgeMilp(Status.FEASIBLE, math.nan, 0, found.zero_u, found.zero_r), np.inf, found.x)
     if best is not None and met(best):
         return best
     for mu in (np.inf, mu_max):
@@ -466,13 +467,14 @@ class _PatternValues:
     `floor` (a mu below which no wedge exists, by a certificate) the computation asks
     floor (1 + FLOOR_STEP) first (mu_critical's mu_try): feasible there, the bracket
     [floor, floor (1 + FLOOR_STEP)] is within the 2D bracket's tolerance (no Dinkelbach step,
-    no bisection; a free plug's all-contact pattern, whose mu^c the rigid bound meets)."""
+    no bisection; a free plug's all-contact pattern, whose mu^c the rigid bound meets), checking
+    `witness` there first when given (floor_pattern's wedge: no LP)."""
 
     def __init__(self, param: Parametrization, m: int, solve, stats: BnBStats, floor: float | None = None):
         self.param, self.m, self.solve, self.stats, self.floor = param, m, solve, stats, floor
         self.seen: dict = {}
 
-    def __call__(self, ans: WedgeMilp, bound: float) -> float | None:
+    def __call__(self, ans: WedgeMilp, bound: float, witness: np.ndarray | None = None) -> float | None:
         key = (ans.zero_u.tobytes(), ans.zero_r.tobytes())
         if key in self.seen:
             count(self.stats.statuses, "milp_pattern_again")
@@ -482,7 +484,8 @@ class _PatternValues:
         ok = np.isfinite(bound) and decide(rows, bound, counts=self.stats.statuses).status == Status.FEASIBLE
         floor = self.floor
         guess = None if floor is None or floor * (1 + FLOOR_STEP) >= bound else floor * (1 + FLOOR_STEP)
-        r = self.solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None, mu_floor=floor, mu_try=guess)
+        r = self.solve(ans.zero_u, ans.zero_r, mu_hi=bound if ok else None, mu_floor=floor, mu_try=guess,
+                       x_try=None if guess is None else witness)
         _absorb(self.stats, r)
         self.seen[key] = r.mu_c
         return r.mu_c

@@ -46,7 +46,7 @@ def test_thin_block_opens_its_top_corners_and_meets_tan_taper():
     assert abs(floor - want) <= 1e-9 * want
     found, pivots = floor_pattern(p, m, floor)
     assert found is not None and pivots == 1
-    zero_u, zero_r = found
+    zero_u, zero_r, _ = found
     assert sorted(np.flatnonzero(zero_r)) == [6, 13] and np.array_equal(zero_u, ~zero_r)
     top = floor * (1 + 1e-7)
     assert feasible(p, m, zero_u, top)
@@ -100,5 +100,28 @@ def test_free_plug3d_floor_pattern_is_all_contact():
     floor, _ = rigid_bound(p, m, MU_HI)
     found, pivots = floor_pattern(p, m, floor)
     assert found is not None and pivots == 0 and found[0].all()
-    r = mu_critical(p, m, *found, mu_max=MU_HI)
+    r = mu_critical(p, m, found.zero_u, found.zero_r, mu_max=MU_HI)
     assert abs(r.mu_c - math.tan(math.radians(10.0))) <= 1e-9
+
+
+def test_floor_wedge_is_the_witness_of_its_pattern_just_above_the_floor():
+    """thin block: the FloorWedge's x (sum r_n = 1) is the bracket's upper end at floor
+    (1 + FLOOR_STEP) without an LP, plain and balanced (a scale), and gives the mu^c of the
+    route that asks HiGHS there; a point that does not hold there (x with r_t flipped) is
+    counted as failed and the LP decides, to the same value."""
+    from hpcwedge.mu_c.global_search import FLOOR_STEP
+    p, m = thin_block()
+    floor, _ = rigid_bound(p, m, MU_HI)
+    found, _ = floor_pattern(p, m, floor)
+    assert abs((p.R[:m] @ found.x).sum() - 1.0) < 1e-12
+    guess = floor * (1 + FLOOR_STEP)
+    for scale in (None, 1.0):
+        kw = dict(mu_max=MU_HI, mu_floor=floor, mu_try=guess, scale=scale)
+        lp = mu_critical(p, m, found.zero_u, found.zero_r, **kw)
+        w = mu_critical(p, m, found.zero_u, found.zero_r, x_try=found.x, **kw)
+        assert w.statuses.get("witness_feasible") == 1 and w.solves == lp.solves - 1, (scale, w.statuses)
+        assert w.polished and lp.polished and abs(w.mu_c - lp.mu_c) <= 1e-12 * lp.mu_c
+        bad = found.x.copy()
+        bad[:] = np.linalg.lstsq(p.R, np.concatenate([p.R[:m] @ found.x, -(p.R[m:] @ found.x)]), rcond=None)[0]
+        f = mu_critical(p, m, found.zero_u, found.zero_r, x_try=bad, **kw)
+        assert f.statuses.get("witness_failed") == 1 and f.solves == lp.solves and f.mu_c == lp.mu_c
