@@ -17,6 +17,8 @@ For a supported body (k = 0): x = r, u = K^-1 r.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
@@ -24,6 +26,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from hpcwedge import exact as xq
+from hpcwedge.dense import dense_call, null_space
 
 #: constraint kinds inside a node, in the node-wise constraint numbering 3*i + kind
 U_N, F_PLUS, F_MINUS = 0, 1, 2
@@ -94,7 +97,7 @@ class Parametrization:
         once."""
         ny = self.d - self.n_alpha
         B = self.R[:, :ny]
-        E = sla.null_space(B.T).T if ny < B.shape[0] else np.zeros((0, B.shape[0]))
+        E = null_space(B.T).T if ny < B.shape[0] else np.zeros((0, B.shape[0]))
         return ReactionCoordinates(U=np.hstack([self.U[:, :ny] @ B.T, self.U[:, ny:]]), E=E, B=B)
 
 
@@ -162,7 +165,7 @@ def parametrize(problem: ContactProblem, exact: bool = False) -> Parametrization
         if k == 0:
             return Parametrization(U=np.linalg.inv(K), R=np.eye(n), n_alpha=0)
         Qn, _ = np.linalg.qr(N)
-        B = sla.null_space(Qn.T)                      # orthonormal basis of N^perp
+        B = null_space(Qn.T)                          # orthonormal basis of N^perp
         FB = np.linalg.solve(_bordered(K, Qn), np.vstack([B, np.zeros((k, B.shape[1]))]))[:n]
         W = N[rows].T
         U = np.hstack([FB, N @ W])
@@ -223,7 +226,8 @@ def _bordered(K: np.ndarray, N: np.ndarray) -> np.ndarray:
     return np.block([[K, N], [N.T, np.zeros((k, k))]])
 
 
-def balanced(param: Parametrization, mu: float, m: int, s: float) -> tuple[Parametrization, float, np.ndarray]:
+def balanced(param: Parametrization, mu: float, m: int, s: float,
+             cond: bool = True) -> tuple[Parametrization, float, np.ndarray]:
     """The same cone P(mu) in coordinates x' = T x balanced at mu (2D and 3D; the dimension
     from R's rows).
 
@@ -239,12 +243,13 @@ def balanced(param: Parametrization, mu: float, m: int, s: float) -> tuple[Param
     136 SOCPs, 24 undecided and an unpolished 5e-10 in the plain coordinates).
     Returns (float Parametrization with U' = U T^-1, R' = R T^-1 — the rows taken from Q
     itself, not from a solve with T — and n_alpha = 0 since the rigid amplitudes are mixed
-    in; cond(T); T, to map a point back: x = T^-1 x').
+    in; cond(T) (NaN with cond=False: an SVD of T, 2.5 s at d = 2,563, that the mu^c
+    computations do not read); T, to map a point back: x = T^-1 x').
     """
     U, R = param.U, param.R
     dim = R.shape[0] // m
     Un, Rb = blocks(U, m, dim)[0], blocks(R, m, dim)
-    Q, T = np.linalg.qr(np.vstack([s * Un, Rb[0], *(Rt / mu for Rt in Rb[1:])]))
+    Q, T = dense_call(np.linalg.qr, np.vstack([s * Un, Rb[0], *(Rt / mu for Rt in Rb[1:])]))
     Up = sla.solve_triangular(T, U.T, trans="T").T
     Rp = sla.solve_triangular(T, R.T, trans="T").T
     Qb = blocks(Q, m, dim + 1)
@@ -256,7 +261,7 @@ def balanced(param: Parametrization, mu: float, m: int, s: float) -> tuple[Param
     # the reaction form (r, beta) is the same states', reached through T: param's, composed
     rc = param.reactions
     out.__dict__["reactions"] = ReactionCoordinates(rc.U, rc.E, rc.B, T if rc.T is None else T @ rc.T)
-    return out, float(np.linalg.cond(T)), T
+    return out, float(dense_call(np.linalg.cond, T)) if cond else math.nan, T
 
 
 def friction_rows_2d(param: Parametrization, mu: float, m: int, exact: bool = False):

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
+from hpcwedge.dense import dense_call
 from hpcwedge.parallel.cancel import task_tick
 from hpcwedge.solvers.feasibility import DEFAULT_OPTIONS, PYRAMID_SIDES, Decision, SolverOptions, decide
 from hpcwedge.solvers.pattern_lp import PatternLp, point_holds, ratio
@@ -276,7 +277,7 @@ def _verified(rows: Rows, act: np.ndarray, mu: float) -> bool:
     """The active rows at mu have a null vector (relative singular value <= POLISH_TOL)
     that, scaled to sum(r_n) = 1, satisfies every row to POLISH_TOL."""
     unit = rows_at(rows, mu)
-    _, s, vt = np.linalg.svd(unit[act], full_matrices=False)     # act >= d rows (polish): vt is (d, d)
+    _, s, vt = dense_call(np.linalg.svd, unit[act], full_matrices=False)   # act >= d rows (polish): vt (d, d)
     if len(s) >= vt.shape[0] and s[-1] > POLISH_TOL * s[0]:
         return False
     x = vt[-1]

@@ -77,7 +77,7 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
 
     def solve(ref: float, hi: float | None, lo: float | None = None, guess: float | None = None,
               witness: np.ndarray | None = None) -> MuC:
-        p, _, T = balanced(param, ref, m, scale)
+        p, _, T = balanced(param, ref, m, scale, cond=False)
         return mu_critical_rows(pattern_rows(p, m, zero_u, zero_r), hi, mu_max, method, tol, mu_lo=lo,
                                 options=options, mu_floor=mu_floor, mu_try=guess,
                                 x_try=None if witness is None else T @ witness)
@@ -105,7 +105,7 @@ def _mu_critical_3d(param: Parametrization, m: int, zero_u, zero_r, mu_hi: float
     mu_hi (problem.balanced), and once more at the mu^c found when it lies below mu_hi /
     REBALANCE (as 2D). The point x is returned in param's coordinates."""
     def solve(ref: float | None, hi: float | None) -> MuC:
-        p, _, T = (param, None, None) if ref is None else balanced(param, ref, m, scale)
+        p, _, T = (param, None, None) if ref is None else balanced(param, ref, m, scale, cond=False)
         probe = Probe(options)
         out = _result(probe, *mu_critical_3d(p, m, zero_u, zero_r, pattern_rows(p, m, zero_u, zero_r), probe,
                                              hi, mu_max, method, tol))

@@ -49,7 +49,7 @@ def tight_rows(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.nd
     """The labels of the inequality rows by increasing relative slack at the float LP's
     vertex at mu_f (1 + SEARCH_RTOL), in coordinates balanced there; None: no vertex."""
     mu = mu_f * (1 + SEARCH_RTOL)
-    rows = pattern_rows(balanced(param, mu, m, scale)[0], m, zero_u, zero_r)
+    rows = pattern_rows(balanced(param, mu, m, scale, cond=False)[0], m, zero_u, zero_r)
     d = decide(rows, mu)
     if d.status != Status.FEASIBLE:
         return None

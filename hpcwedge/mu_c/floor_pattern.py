@@ -22,10 +22,10 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 
 from hpcwedge.contact.problem import Parametrization, blocks
 from hpcwedge.mu_c.lower_bound import BOUND_RTOL, bound_at, equilibrium_rows, rigid_bound
+from hpcwedge.dense import null_space
 from hpcwedge.parallel.cancel import task_tick
 from hpcwedge.solvers.rows import problem_dim
 
@@ -96,7 +96,7 @@ def _null_vector(Un: np.ndarray, Rn: np.ndarray, Rt: list, contact: np.ndarray,
     rows = [Un[contact]]
     rows += [Rt[a][contact] - slope[contact, a:a + 1] * Rn[contact] for a in range(len(Rt))]
     rows += [Rn[gap]] + [Rt[a][gap] for a in range(len(Rt))]
-    null = scipy.linalg.null_space(np.vstack(rows), rcond=NULL_RTOL)
+    null = null_space(np.vstack(rows), rcond=NULL_RTOL)
     if null.shape[1] != 1:
         return None
     x = null[:, 0]

@@ -10,6 +10,7 @@ import contextlib
 import math
 import time
 
+from hpcwedge import dense
 from hpcwedge.errors import Interrupted
 
 #: how often task_stopping() asks the engine, at most (seconds)
@@ -69,6 +70,9 @@ def task_tick() -> None:
     checkpoint keeps it as open). A no-op outside a task."""
     if task_stopping():
         raise TaskCancelled()
+
+
+dense.on_wait(task_tick)          # a long dense call (dense.interruptible) is cancelled within a step
 
 
 # ---------------------------------------------------------------- task scopes

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hpcwedge.contact.problem import Parametrization, ReactionCoordinates, blocks, kept_on
+from hpcwedge.dense import dense_call
 
 
 class Status(enum.StrEnum):
@@ -241,7 +242,7 @@ def eq_null_space(eq: np.ndarray, d: int) -> np.ndarray:
     an SVD; rank: singular values above EQ_RANK_RTOL times the largest."""
     if not eq.shape[0]:
         return np.eye(d)
-    _, s, vt = np.linalg.svd(eq)
+    _, s, vt = dense_call(np.linalg.svd, eq)
     rank = int((s > EQ_RANK_RTOL * s[0]).sum())
     return vt[rank:].T
 

@@ -69,3 +69,18 @@ def test_task_pausing_after_its_period_or_at_a_stop():
     assert 0.05 <= cancel.run_cancellable(paused_at, None, None, lambda: False, 0.0, pause_every_s=0.05) - t0 < 1.0
     assert cancel.run_cancellable(lambda ctx, p: cancel.task_pausing(), None, None, lambda: True, 0.0) is True
     assert cancel.task_pausing() is False
+
+
+
+def test_a_long_dense_call_is_cancelled_within_a_step():
+    """dense.interruptible polls task_tick (registered by this module): inside a task whose
+    check turns True, a call that would block for 60 s (time.sleep releases the GIL as numpy's
+    LAPACK does) is given up on with TaskCancelled within a few wait steps."""
+    import time
+
+    from hpcwedge import dense
+    start = time.monotonic()
+    with pytest.raises(cancel.TaskCancelled):
+        cancel.run_cancellable(lambda ctx, p: dense.interruptible(time.sleep, 60.0), None, None,
+                               lambda: time.monotonic() - start > 0.2, tick_every_s=0.0)
+    assert time.monotonic() - start < 5.0

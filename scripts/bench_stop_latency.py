@@ -1,0 +1,133 @@
+#!/usr/bin/env python3
+"""SIGTERM at many moments of one serial global mu^c run (issue 41): the exit status (75: the
+checkpoint written, the run stopped) and the seconds from the signal to the exit.
+
+    python scripts/bench_stop_latency.py [--quick] [--cases plug2d-r640 ...] [--out results/bench_stop_latency]
+
+Per case: one uninterrupted `hpcwedge run` (its seconds and mu^c), then one run per moment
+(every --step seconds from --step to 90 % of the uninterrupted run), each sent SIGTERM at that
+moment, and the last of them resumed (`--resume`) to the end: its mu^c must be the
+uninterrupted one's. A moment after the run has ended is not a row. Counts: the worst and the
+median latency and how many stops took more than the target of 2 s. Seconds are wall clock
+on a shared machine (read them as +-30 %). Writes <out>.json and <out>.csv; prints the table.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+HPCWEDGE = [sys.executable, "-m", "hpcwedge"]
+#: name -> (dim, model table): the global runs of issue 41's targets and one beyond (m = 1,280)
+CASES = {
+    "plug2d-r320": (2, {"kind": "plug2d", "rows": 320}),          # m = 640
+    "block2d-r159": (2, {"kind": "block2d", "rows": 159}),        # m = 320
+    "plug3d-8x16": (3, {"kind": "plug3d", "levels": 8, "ring": 16}),   # m = 128
+    "plug2d-r640": (2, {"kind": "plug2d", "rows": 640}),          # m = 1,280
+}
+QUICK = ("block2d-r159",)
+TARGET_S = 2.0
+
+
+def scene_text(name: str, dim: int, model: dict) -> str:
+    """The case's scene: global mu^c only, symmetry off (as bench_global_scale's)."""
+    body = "\n".join(f"{k} = {json.dumps(v)}" for k, v in model.items())
+    return (f'name = "{name}"\ndim = {dim}\n[model]\n{body}\n[friction]\nmu = [0.01]\n'
+            '[compute]\nenumerate = false\nmu_c = "global"\n[run]\nsymmetry = false\n')
+
+
+def run(scene: str, out: str, stop_at: float | None = None, resume: bool = False) -> dict:
+    """One `hpcwedge run` (quiet, stdin closed); with stop_at, SIGTERM that many seconds after
+    the start: {"exit", "seconds" (start to exit), "latency_s" (signal to exit) or None}."""
+    cmd = HPCWEDGE + ["run", "-q", scene, "-o", out] + (["--resume"] if resume else [])
+    t0 = time.monotonic()
+    p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    sent = None
+    if stop_at is not None:
+        try:
+            p.wait(timeout=stop_at)
+        except subprocess.TimeoutExpired:
+            sent = time.monotonic()
+            p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=3600)
+    end = time.monotonic()
+    return {"exit": p.returncode, "seconds": round(end - t0, 3),
+            "latency_s": None if sent is None else round(end - sent, 3), "stderr": err[-300:]}
+
+
+def mu_c_of(path: str) -> float | None:
+    import h5py
+    with h5py.File(path, "r") as f:
+        v = f.attrs.get("mu_c")
+        return None if v is None else float(v)
+
+
+def measure(name: str, step: float, folder: str) -> dict:
+    """The case's record (module doc)."""
+    dim, model = CASES[name]
+    scene = os.path.join(folder, f"{name}.toml")
+    with open(scene, "w") as f:
+        f.write(scene_text(name, dim, model))
+    full = run(scene, os.path.join(folder, f"{name}-full.h5"))
+    rec = {"case": name, "full_s": full["seconds"], "full_exit": full["exit"]}
+    if full["exit"] != 0:
+        return {**rec, "error": full["stderr"]}
+    rec["mu_c"] = mu_c_of(os.path.join(folder, f"{name}-full.h5"))
+    stops, out = [], os.path.join(folder, f"{name}-stop.h5")
+    t = step
+    while t < 0.9 * full["seconds"]:
+        for path in (out, out + ".ckpt"):
+            if os.path.exists(path):
+                os.remove(path)
+        r = run(scene, out, stop_at=t)
+        if r["latency_s"] is not None:
+            stops.append({"at_s": t, "exit": r["exit"], "latency_s": r["latency_s"]})
+            print(json.dumps({"case": name, **stops[-1]}), flush=True)
+        t = round(t + step, 3)
+    rec["stops"] = stops
+    lat = sorted(s["latency_s"] for s in stops)
+    rec.update(worst_latency_s=lat[-1] if lat else None, median_latency_s=lat[len(lat) // 2] if lat else None,
+               over_target=sum(x > TARGET_S for x in lat), all_exit_75=all(s["exit"] == 75 for s in stops))
+    if stops and os.path.exists(out + ".ckpt"):
+        r = run(scene, out, resume=True)
+        rec["resume_exit"] = r["exit"]
+        rec["resume_mu_c"] = mu_c_of(out) if r["exit"] == 0 else None
+        rec["resume_same"] = rec["resume_mu_c"] == rec["mu_c"]
+    return rec
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=f"only {', '.join(QUICK)}")
+    ap.add_argument("--cases", nargs="+", choices=sorted(CASES), help="the cases to run (default: all)")
+    ap.add_argument("--step", type=float, default=2.0, help="seconds between the moments of the stops")
+    ap.add_argument("--out", default=os.path.join(ROOT, "results", "bench_stop_latency"))
+    args = ap.parse_args()
+    names = list(QUICK) if args.quick else args.cases or list(CASES)
+    with tempfile.TemporaryDirectory() as folder:
+        records = [measure(n, args.step, folder) for n in names]
+    doc = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                       "note": "shared with other jobs: seconds are noisy"},
+           "target_s": TARGET_S, "records": records}
+    os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
+    with open(args.out + ".json", "w") as f:
+        json.dump(doc, f, indent=1)
+    cols = ("case", "full_s", "mu_c", "worst_latency_s", "median_latency_s", "over_target", "all_exit_75", "resume_same")
+    with open(args.out + ".csv", "w") as f:
+        f.write(",".join(cols) + "\n")
+        for r in records:
+            f.write(",".join(str(r.get(c, "")) for c in cols) + "\n")
+    for r in records:
+        print("  ".join(f"{c}={r.get(c)}" for c in cols))
+    return 0 if all(r.get("all_exit_75") and r.get("resume_same", True) for r in records) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
