@@ -2,12 +2,13 @@
 """SIGTERM at many moments of one serial global mu^c run (issue 41): the exit status (75: the
 checkpoint written, the run stopped) and the seconds from the signal to the exit.
 
-    python scripts/bench_stop_latency.py [--quick] [--cases plug2d-r640 ...] [--out results/bench_stop_latency]
+    python scripts/bench_stop_latency.py [--quick] [--cases plug2d-r640 ...] [--stops 12]
+                                         [--out results/bench_stop_latency]
 
-Per case: one uninterrupted `hpcwedge run` (its seconds and mu^c), then one run per moment
-(every --step seconds from --step to 90 % of the uninterrupted run), each sent SIGTERM at that
-moment, and the last of them resumed (`--resume`) to the end: its mu^c must be the
-uninterrupted one's. A moment after the run has ended is not a row. Counts: the worst and the
+Per case: one uninterrupted `hpcwedge run` (its seconds T and mu^c), then one run per moment
+i T / (N + 1), i = 1 .. N (N = --stops), each sent SIGTERM at that moment, and the last of them
+resumed (`--resume`) to the end: its mu^c must be the uninterrupted one's. A run that ended
+before its moment is not a row. Counts: the worst and the
 median latency and how many stops took more than the target of 2 s. Seconds are wall clock
 on a shared machine (read them as +-30 %). Writes <out>.json and <out>.csv; prints the table.
 """
@@ -69,7 +70,7 @@ def mu_c_of(path: str) -> float | None:
         return None if v is None else float(v)
 
 
-def measure(name: str, step: float, folder: str) -> dict:
+def measure(name: str, n_stops: int, folder: str) -> dict:
     """The case's record (module doc)."""
     dim, model = CASES[name]
     scene = os.path.join(folder, f"{name}.toml")
@@ -80,25 +81,23 @@ def measure(name: str, step: float, folder: str) -> dict:
     if full["exit"] != 0:
         return {**rec, "error": full["stderr"]}
     rec["mu_c"] = mu_c_of(os.path.join(folder, f"{name}-full.h5"))
-    stops, out = [], os.path.join(folder, f"{name}-stop.h5")
-    t = step
-    while t < 0.9 * full["seconds"]:
-        for path in (out, out + ".ckpt"):
-            if os.path.exists(path):
-                os.remove(path)
+    stops, last = [], None
+    for i in range(1, n_stops + 1):
+        t = round(i * full["seconds"] / (n_stops + 1), 3)
+        out = os.path.join(folder, f"{name}-stop{i}.h5")
         r = run(scene, out, stop_at=t)
         if r["latency_s"] is not None:
             stops.append({"at_s": t, "exit": r["exit"], "latency_s": r["latency_s"]})
             print(json.dumps({"case": name, **stops[-1]}), flush=True)
-        t = round(t + step, 3)
+            last = out if os.path.exists(out + ".ckpt") else last
     rec["stops"] = stops
     lat = sorted(s["latency_s"] for s in stops)
     rec.update(worst_latency_s=lat[-1] if lat else None, median_latency_s=lat[len(lat) // 2] if lat else None,
                over_target=sum(x > TARGET_S for x in lat), all_exit_75=all(s["exit"] == 75 for s in stops))
-    if stops and os.path.exists(out + ".ckpt"):
-        r = run(scene, out, resume=True)
+    if last is not None:
+        r = run(scene, last, resume=True)
         rec["resume_exit"] = r["exit"]
-        rec["resume_mu_c"] = mu_c_of(out) if r["exit"] == 0 else None
+        rec["resume_mu_c"] = mu_c_of(last) if r["exit"] == 0 else None
         rec["resume_same"] = rec["resume_mu_c"] == rec["mu_c"]
     return rec
 
@@ -107,12 +106,12 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help=f"only {', '.join(QUICK)}")
     ap.add_argument("--cases", nargs="+", choices=sorted(CASES), help="the cases to run (default: all)")
-    ap.add_argument("--step", type=float, default=2.0, help="seconds between the moments of the stops")
+    ap.add_argument("--stops", type=int, default=12, help="stopped runs per case")
     ap.add_argument("--out", default=os.path.join(ROOT, "results", "bench_stop_latency"))
     args = ap.parse_args()
     names = list(QUICK) if args.quick else args.cases or list(CASES)
     with tempfile.TemporaryDirectory() as folder:
-        records = [measure(n, args.step, folder) for n in names]
+        records = [measure(n, args.stops, folder) for n in names]
     doc = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                        "note": "shared with other jobs: seconds are noisy"},
            "target_s": TARGET_S, "records": records}

@@ -108,7 +108,7 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
     bracket is already within BRACKET_RTOL) and asks just below it: infeasible there, the
     bracket is done. Every LP is first the rows' one warm model (pattern_lp.PatternLp,
     when the equalities do not depend on mu), feasibility.decide where it proves nothing."""
-    warm = PatternLp(rows) if rows.Z is not None else None
+    warm = _OnFirstUse(lambda: PatternLp(rows)) if rows.Z is not None else None
     last = {"x": None}                   # the point of the latest mu taken as feasible
     lo = 0.0
     if mu_try is not None and 0.0 < mu_try < (mu_max if mu_hi is None else mu_hi):
@@ -162,6 +162,19 @@ def bracket_2d(rows: Rows, probe: Probe, mu_hi: float | None = None, mu_max: flo
         if mu is not None:
             return mu, True
     return hi, False
+
+
+class _OnFirstUse:
+    """The object make() returns, made on first use (an attribute asked): a bracket that a
+    witness settles builds no PatternLp (plug2d m = 1,280: ~1 s of products)."""
+
+    def __init__(self, make):
+        self._make, self._made = make, None
+
+    def __getattr__(self, name):
+        if self._made is None:
+            self._made = self._make()
+        return getattr(self._made, name)
 
 
 def _witnessed(rows: Rows, mu: float, x: np.ndarray | None, probe: Probe) -> Decision | None:
@@ -221,7 +234,7 @@ def polish(rows: Rows, x: np.ndarray, lo: float, hi: float, seed: int = 0) -> fl
         if M0.shape[0] < M0.shape[1]:
             continue             # fewer than d rows always have a null vector: no root to find
         G = rng.standard_normal((M0.shape[1], M0.shape[0]))
-        A, B = G @ M0, -(G @ M1)
+        A, B = dense_call(np.matmul, G, M0), -dense_call(np.matmul, G, M1)
         try:
             lam = None if A.shape[0] <= POLISH_DENSE_MAX else near_roots(A, B, lo - pad, hi + pad, rng)
             lam = sla.eigvals(A, B) if lam is None else lam

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hpcwedge.dense import dense_call
 from hpcwedge.solvers.lp import (
     FARKAS_RTOL,
     LP_METHODS,
@@ -45,7 +46,7 @@ class PatternLp:
         if rows.Z is None:
             raise ValueError("PatternLp: the equality rows depend on mu")
         self.rows, Z = rows, rows.Z
-        B0, B1 = rows.a0[~rows.eq] @ Z, rows.a1[~rows.eq] @ Z
+        B0, B1 = dense_call(np.matmul, rows.a0[~rows.eq], Z), dense_call(np.matmul, rows.a1[~rows.eq], Z)
         # rows that vanish on the equalities' null space hold identically
         keep = np.linalg.norm(B0, axis=1) + np.linalg.norm(B1, axis=1) > ZERO_ROW_RTOL
         self.B0, self.B1 = B0[keep], B1[keep]

@@ -1,0 +1,38 @@
+"""scripts/bench_stop_latency.py: its scenes parse, one small case end to end (real runs,
+real SIGTERM, a resume), and the committed record's claims."""
+import json
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "..", "scripts"))
+import bench_stop_latency  # noqa: E402
+
+RESULTS = os.path.join(HERE, "..", "..", "results")
+
+
+def test_every_case_is_a_scene_of_a_global_run(tmp_path):
+    from hpcwedge.scene.parse import load_scene
+    for name, (dim, model) in bench_stop_latency.CASES.items():
+        path = tmp_path / f"{name}.toml"
+        path.write_text(bench_stop_latency.scene_text(name, dim, model))
+        scene = load_scene(str(path))
+        assert scene.dim == dim and scene.mu_c == "global" and scene.enumerate is False and not scene.symmetry, name
+
+
+def test_a_small_case_stops_with_75_and_resumes_to_the_same_mu_c(tmp_path, monkeypatch):
+    """plug3d 2 x 6 (global mu^c, a few seconds): every stop exits 75 and the resume of the last
+    stopped run writes the uninterrupted run's mu^c."""
+    monkeypatch.setitem(bench_stop_latency.CASES, "small", (3, {"kind": "plug3d", "levels": 2, "ring": 6}))
+    rec = bench_stop_latency.measure("small", 3, str(tmp_path))
+    assert rec["full_exit"] == 0 and rec["mu_c"] is not None
+    assert rec["stops"] and rec["all_exit_75"], rec
+    assert rec["resume_exit"] == 0 and rec["resume_same"], rec
+
+
+def test_the_committed_record_stops_with_75_and_resumes_to_the_same_mu_c():
+    with open(os.path.join(RESULTS, "bench_stop_latency.json")) as f:
+        records = json.load(f)["records"]
+    assert {r["case"] for r in records} == set(bench_stop_latency.CASES)
+    for r in records:
+        assert r["stops"] and r["all_exit_75"] and r["resume_same"], r["case"]
