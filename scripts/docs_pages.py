@@ -581,6 +581,22 @@ def bench_global_scale() -> str:
                   "solves (SOCPs 3D, LPs 2D) / pyramid LPs", "MILPs", "bound solves / certified", "undecided"], rows)
 
 
+def bench_stop_latency() -> str:
+    """results/bench_stop_latency.json: SIGTERM at N moments of each serial global run
+    (scripts/bench_stop_latency.py): the seconds to the exit, the exits and the resume."""
+    recs = _records("bench_stop_latency.json")
+    if recs is None:
+        return not_measured("bench_stop_latency.json")
+    rows = []
+    for r in recs:
+        resumed = "–" if r.get("resume_same") is None else "same mu^c" if r["resume_same"] else "**differs**"
+        served = f"{_g(r, 'exit_75')} / {_g(r, 'exit_0')}" + ("" if r.get("all_served") else " (**not all served**)")
+        rows.append([r.get("case", "–"), _g(r, "full_s"), f"{len(r.get('stops') or []):,}", served,
+                     _g(r, "median_latency_s"), _g(r, "worst_latency_s"), _g(r, "over_target"), resumed])
+    return table(["case", "run s", "stops", "exit 75 / 0 (finished)", "median s to exit", "worst s to exit",
+                  "over 2 s", "resumed"], rows)
+
+
 def bench_near_critical() -> str:
     """results/bench_near_critical.json: the 3D tree near the critical mu (scripts/bench_near_critical.py),
     one row per record, grouped by search and body, "before" above "after"."""
@@ -728,6 +744,8 @@ BENCHMARKS: dict = {
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
     "bench_global_scale": (bench_global_scale, "results/bench_global_scale.json",
                            ".venv/bin/python scripts/bench_global_scale.py [--limit 300]"),
+    "bench_stop_latency": (bench_stop_latency, "results/bench_stop_latency.json",
+                           ".venv/bin/python scripts/bench_stop_latency.py"),
     "bench_near_critical": (bench_near_critical, "results/bench_near_critical.json",
                             ".venv/bin/python scripts/bench_near_critical.py"),
     "bench_highs_lp": (bench_highs_lp, ", ".join(f"results/{f}" for f, _ in HIGHS_LP_FILES),

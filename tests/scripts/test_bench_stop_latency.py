@@ -26,13 +26,13 @@ def test_a_small_case_stops_with_75_and_resumes_to_the_same_mu_c(tmp_path, monke
     monkeypatch.setitem(bench_stop_latency.CASES, "small", (3, {"kind": "plug3d", "levels": 2, "ring": 6}))
     rec = bench_stop_latency.measure("small", 3, str(tmp_path))
     assert rec["full_exit"] == 0 and rec["mu_c"] is not None
-    assert rec["stops"] and rec["all_exit_75"], rec
+    assert rec["stops"] and rec["all_served"] and rec["exit_75"] >= 1, rec
     assert rec["resume_exit"] == 0 and rec["resume_same"], rec
 
 
-def test_the_committed_record_stops_with_75_and_resumes_to_the_same_mu_c():
+def test_the_committed_record_serves_every_stop_within_2_s_and_resumes_to_the_same_mu_c():
     with open(os.path.join(RESULTS, "bench_stop_latency.json")) as f:
         records = json.load(f)["records"]
     assert {r["case"] for r in records} == set(bench_stop_latency.CASES)
     for r in records:
-        assert r["stops"] and r["all_exit_75"] and r["resume_same"], r["case"]
+        assert r["stops"] and r["all_served"] and r["resume_same"] and r["over_target"] == 0, r["case"]
