@@ -7,8 +7,9 @@ checkpoint written, the run stopped) and the seconds from the signal to the exit
 
 Per case: one uninterrupted `hpcwedge run` (its seconds T and mu^c), then one run per moment
 i T / (N + 1), i = 1 .. N (N = --stops), each sent SIGTERM at that moment, and the last of them
-resumed (`--resume`) to the end: its mu^c must be the uninterrupted one's. A run that ended
-before its moment is not a row; one the signal reached while it wrote its result ends 0 with it
+resumed (`--resume`, from its checkpoint when it wrote one; a stop during start-up writes
+none) to the end: its mu^c must be the uninterrupted one's. A run that ended before its moment
+is not a row; one the signal reached while it wrote its result ends 0 with it
 (a signal after the answer does not fail a run) and counts as served. Counts: the worst and the
 median latency and how many stops took more than the target of 2 s. Seconds are wall clock
 on a shared machine (read them as +-30 %). Writes <out>.json and <out>.csv; prints the table.
@@ -90,10 +91,11 @@ def measure(name: str, n_stops: int, folder: str) -> dict:
         if r["latency_s"] is not None:
             stops.append({"at_s": t, "exit": r["exit"], "latency_s": r["latency_s"]})
             print(json.dumps({"case": name, **stops[-1]}), flush=True)
-            last = out if os.path.exists(out + ".ckpt") else last
+            last = out
     rec["stops"] = stops
     rec.update(summary(stops))
     if last is not None:
+        rec["resume_from_checkpoint"] = os.path.exists(last + ".ckpt")   # else stopped before one: afresh
         r = run(scene, last, resume=True)
         rec["resume_exit"] = r["exit"]
         rec["resume_mu_c"] = mu_c_of(last) if r["exit"] == 0 else None

@@ -26,7 +26,7 @@ def test_a_small_case_stops_with_75_and_resumes_to_the_same_mu_c(tmp_path, monke
     monkeypatch.setitem(bench_stop_latency.CASES, "small", (3, {"kind": "plug3d", "levels": 2, "ring": 6}))
     rec = bench_stop_latency.measure("small", 3, str(tmp_path))
     assert rec["full_exit"] == 0 and rec["mu_c"] is not None
-    assert rec["stops"] and rec["all_served"] and rec["exit_75"] >= 1, rec
+    assert rec["stops"] and rec["all_served"] and rec["exit_75"] >= 1, rec   # a stop at start-up exits 75 too
     assert rec["resume_exit"] == 0 and rec["resume_same"], rec
 
 
