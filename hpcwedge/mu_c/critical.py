@@ -62,8 +62,8 @@ def mu_critical(param: Parametrization, m: int, zero_u: np.ndarray, zero_r: np.n
     mu_floor (2D): a mu at which no wedge exists by a certificate (lower_bound.rigid_bound),
     the bracket's lower end without an LP; mu_try (2D): a guess of a feasible mu just above
     mu^c, asked first (bracket_2d; 3D: not used); x_try (2D): a point (param's coordinates,
-    sum r_n = 1) believed feasible at mu_try, checked there instead of an LP. With a scale the first coordinates are
-    balanced at mu_try, else mu_hi, else mu_max.
+    sum r_n = 1) believed feasible at mu_try, checked there instead of an LP. With a scale
+    the first coordinates are balanced at mu_try, else mu_hi, else mu_max.
     scale: the stiffness that weighs u_n against r (numerics.NumericsReport.scale). The
     LPs (2D) or SOCPs (3D) then run in the balanced coordinates of problem.balanced at
     mu_hi, and once more at the mu^c found when it lies below mu_hi / REBALANCE
