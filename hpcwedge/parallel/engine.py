@@ -118,7 +118,9 @@ class Engine:
         self._current = None             # the job being run
         self._inflight: dict = {}        # rank -> token of its task in flight
         self.job_id = 0                  # the current job's (workers hold one job's context)
-        self._job_start = (time.monotonic(), 0)    # (when, tasks done) as the current job started
+        #: (when, tasks done, share of the trees decided) as the current job started
+        self._job_start = (time.monotonic(), 0, 0.0)
+        self._task_started = time.monotonic()     # the serial engine's current task
         self._batched = [0.0, 0]         # the current job's tasks: seconds, units of work (schedule.py)
         self._sent_at: dict = {}         # rank -> when its unbatched task was sent (its seconds)
         self._scale: dict = {}           # rank -> the budget scale of its tasks in flight
@@ -177,9 +179,12 @@ class Engine:
             return False
         jobs = [(name, _state(job, [], finished=True)) for name, job in self._jobs.items()]
         if self._current is not None and self._current.name not in self._jobs:
-            in_flight = [t for v in self._inflight.values() for t in (v if isinstance(v, Batch) else [v])]
-            jobs.append((self._current.name, _state(self._current, in_flight, finished=False)))
+            jobs.append((self._current.name, _state(self._current, self._in_flight_tokens(), finished=False)))
         return self.checkpoints.write(jobs, self.size, reason)
+
+    def _in_flight_tokens(self) -> list:
+        """The tokens of every task in flight (a hub's batch unpacked)."""
+        return [t for v in self._inflight.values() for t in (v if isinstance(v, Batch) else [v])]
 
     def remove_checkpoint(self) -> None:
         """The result is written: remove the checkpoint (Checkpointer.remove)."""
@@ -221,8 +226,11 @@ class Engine:
         if self.signals.stop_reason():
             return True
         self._serve_checkpoint()
-        if self.progress is not None and 0 < self.progress_every_s <= time.monotonic() - self._last_note:
-            self._last_note = time.monotonic()
+        now = time.monotonic()
+        # only a task that has run a whole period itself: short tasks leave the line to note()
+        if (self.progress is not None and 0 < self.progress_every_s <= now - self._last_note
+                and now - self._task_started >= self.progress_every_s):
+            self._last_note = now
             self.progress.note(f"{self._current.name}: a task running (1 rank, {self.elapsed():.0f} s)")
         return False
 
@@ -245,7 +253,8 @@ class Engine:
                 job.counters.update(json.loads(state["attrs"]["counters"]))
             self.job_id += 1
             self._current, self._inflight, self._batched = job, {}, [0.0, 0]
-            self._job_start = (time.monotonic(), job.counters.get("tasks", 0))
+            self._job_start = (time.monotonic(), job.counters.get("tasks", 0),
+                               job.decided_share([]) if isinstance(job, TreeJob) else 0.0)
             self.checkpoints.restored.pop(job.name, None)
             if self.signals.stop_reason():
                 raise Interrupted(self.signals.stop_reason())
@@ -271,7 +280,7 @@ class Engine:
 
     def _run_serial(self, job) -> None:
         handler = job.handler
-        self._last_note = time.monotonic()
+        self._last_note = self._task_started = time.monotonic()
         while True:
             self.safe_point()
             taken = job.take(1, getattr(job, "max_scale", 1))
@@ -279,6 +288,7 @@ class Engine:
                 return
             token, payload = taken
             self._inflight[0] = token
+            self._task_started = time.monotonic()
             try:
                 result = run_cancellable(handler, job.context, payload, self._in_task, self.tick_every_s,
                                          self.checkpoints.every_s)
@@ -406,13 +416,16 @@ class Engine:
             return last
         from hpcwedge.progress import eta
         done = job.counters.get("tasks", 0)
-        left = ""
+        left = decided = ""
+        t0, done0, share0 = self._job_start
         if isinstance(job, TaskJob):           # a fixed list of tasks: the time left at this session's rate
-            t0, done0 = self._job_start
-            total = len(job.payloads)
-            left = eta(now - t0, done - done0, total - done0)
+            left = eta(now - t0, done - done0, len(job.payloads) - done0)
+        elif isinstance(job, TreeJob):         # the share of the trees decided, and its rate
+            share = job.decided_share(self._in_flight_tokens())
+            decided = f", {100 * share:.3g} % of the tree decided"
+            left = eta(now - t0, share - share0, 1.0 - share0)
         self.progress.note(f"{job.name}: {done} tasks done, {job.pending()} pending, "
-                           f"{len(self._inflight)} running{job.progress()} ({self.size} rank(s), "
+                           f"{len(self._inflight)} running{job.progress()}{decided} ({self.size} rank(s), "
                            f"{self.elapsed():.0f} s{left})")
         return now
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import heapq
 import json
+import math
 
 import numpy as np
 
@@ -164,6 +165,8 @@ class TreeJob:
         self.counters = {"tasks": 0, "handed_back": 0, **counters}
         self._pool: list = []
         self._seq = 0
+        #: the roots' mass (decided_share)
+        self._mass = sum(math.ldexp(1.0, -node.depth) for node in roots)
         for group, node in enumerate(roots):
             self._push(group, node)
 
@@ -173,6 +176,10 @@ class TreeJob:
 
     def pending(self) -> int:
         return len(self._pool)
+
+    def progress(self) -> str:
+        """What a subclass adds to the engine's progress line (e.g. ", 3 leaves found")."""
+        return ""
 
     def take(self, n_workers: int, scale: int = 1):
         if not self._pool:
@@ -223,6 +230,16 @@ class TreeJob:
     def open_nodes(self, in_flight) -> list:
         """[(group, node, witness)]: the pool's open nodes, then those of the tasks in flight."""
         return [(g, n, w) for _, _, g, n, w in self._pool] + [tuple(t) for t in in_flight]
+
+    def decided_share(self, in_flight) -> float:
+        """The share of the trees decided, in [0, 1]: 1 - the open nodes' mass over the roots',
+        a node at depth d weighing 2^-d (the share of a binary tree's leaves below it). It
+        never falls: a node's children weigh no more than it (depth d + 1 each, or deeper),
+        and a closed node weighs nothing. in_flight: the tokens of the tasks in flight."""
+        if not self._mass:
+            return 1.0
+        left = sum(math.ldexp(1.0, -node.depth) for _, node, _ in self.open_nodes(in_flight))
+        return min(1.0, max(0.0, 1.0 - left / self._mass))
 
     def restore(self, found: list, opens: list) -> None:
         """The state of saved_nodes' lists (a resumed job)."""

@@ -172,11 +172,10 @@ class PatternLp:
 def _null_projection(A: np.ndarray, y: np.ndarray) -> np.ndarray | None:
     """y (rows of A,) projected on the null space of A_S^T, S the support of y (|y_i| above
     1e-13 max|y|), by a full QR of A_S; None when A_S has no more rows than columns."""
-    import scipy.linalg as sla
     S = np.flatnonzero(np.abs(y) > 1e-13 * np.abs(y).max())
     if S.size <= A.shape[1]:
         return None
-    Q = sla.qr(A[S], mode="full")[0]
+    Q = dense_call(np.linalg.qr, A[S], mode="complete")[0]
     N = Q[:, A.shape[1]:]
     z = np.zeros_like(y)
     z[S] = N @ (N.T @ y[S])

@@ -126,6 +126,77 @@ def test_tree_job_finds_every_leaf_for_any_budget_and_resumes_mid_way():
     assert all(sorted(f) == [x for x in leaves if sum(x) % 2] for f in out.flagged)
 
 
+def _explore_pruned(ctx, payload):
+    """_explore, but a node whose path has three 1s is closed unvisited (infeasible)."""
+    group, node, budget, witness = payload
+    stack, found, visited = [node], [], 0
+    while stack and visited < budget:
+        n = stack.pop()
+        visited += 1
+        if sum(n) >= 3:
+            continue
+        if n.depth == DEPTH:
+            found.append(n)
+        else:
+            stack += [_Node(n + (1,)), _Node(n + (0,))]
+    return found, stack, {"nodes": visited}, [], [s[:-1] for s in stack]
+
+
+def _decided_by_count(opens: list, groups: int) -> float:
+    """The share of the groups' 2^DEPTH leaves below no open node (brute force over leaves)."""
+    leaves = [tuple((k >> i) & 1 for i in reversed(range(DEPTH))) for k in range(2 ** DEPTH)]
+    below = sum(any(leaf[:len(n)] == n for gg, n, _ in opens if gg == g) for g in range(groups) for leaf in leaves)
+    return 1.0 - below / (groups * 2 ** DEPTH)
+
+
+@pytest.mark.parametrize("explore", [_explore, _explore_pruned])
+def test_tree_job_decided_share_is_the_share_of_leaves_below_no_open_node(explore):
+    """decided_share, with two tasks in flight, equals the share of leaves that no open node
+    (pool or in flight) covers, counted leaf by leaf; it never falls and ends at 1 (pruned
+    subtrees count as decided)."""
+    job = TreeJob("t", explore, None, [_Node(()), _Node(())], 3, {"nodes": 0})
+    assert job.decided_share([]) == 0.0
+    shares = []
+    while job.pending():
+        held = [job.take(1) for _ in range(min(2, job.pending()))]
+        tokens = [t for t, _ in held]
+        shares.append(job.decided_share(tokens))
+        assert shares[-1] == pytest.approx(_decided_by_count(job.open_nodes(tokens), 2), abs=1e-15)
+        for token, payload in held:
+            job.merge(token, explore(None, payload))
+    assert shares == sorted(shares) and shares[0] == 0.0
+    assert job.decided_share([]) == 1.0
+
+
+def test_progress_lines_of_a_tree_job_say_the_share_decided_and_short_tasks_leave_no_running_line():
+    """Serial engine, a line after every merge: each line of the tree job carries its decided
+    share, the last one 100 %; tasks shorter than the period write no "a task running" line
+    (before, the in-task poll took every line once a period had passed since the last one)."""
+    import io
+
+    from hpcwedge.progress import Progress
+    buf = io.StringIO()
+    eng = Engine(progress=Progress(stream=buf), progress_every_s=0.0, tick_every_s=0.0)
+    eng.run(TreeJob("t", _explore, None, [_Node(())], 3, {"nodes": 0}))
+    lines = buf.getvalue().splitlines()
+    assert lines and all("% of the tree decided" in line for line in lines)
+    assert "100 % of the tree decided" in lines[-1]
+    buf2 = io.StringIO()
+    eng = Engine(progress=Progress(stream=buf2), progress_every_s=0.05, tick_every_s=0.0)
+    run_tasks(_short_sum, None, list(range(60)), engine=eng, kind="short")
+    lines = buf2.getvalue().splitlines()
+    assert lines and not any("a task running" in line for line in lines)
+    assert all("tasks done" in line for line in lines)
+
+
+def _short_sum(ctx, payload):
+    """A short task (~4 ms) that ticks (cancel.task_tick) as it runs."""
+    for _ in range(4):
+        cancel.task_tick()
+        time.sleep(0.001)
+    return {"sum": payload}
+
+
 # ---------------------------------------------------------------- continuations
 
 STEPS = 30

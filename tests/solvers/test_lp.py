@@ -305,3 +305,36 @@ def test_image_point_agrees_with_the_lp_in_x_on_the_all_contact_pattern():
         assert holds == (lp_feasible(rows, 0.0)[0] == Status.FEASIBLE), seed
         seen[holds] += 1
     assert min(seen.values()) >= 2, seen
+
+
+def _waits_during(fn, *args, **kwargs) -> int:
+    """How many times dense.interruptible's waiting thread woke while fn(*args) ran (a poll
+    registered for the call)."""
+    from hpcwedge import dense
+    woke = []
+    poll = lambda: woke.append(1)       # noqa: E731
+    dense.on_wait(poll)
+    try:
+        fn(*args, **kwargs)
+    finally:
+        dense._polls.remove(poll)
+    return len(woke)
+
+
+def test_image_point_and_the_null_projection_serve_waits_during_their_long_calls():
+    """image_point's SVD and pattern_lp._null_projection's QR go through dense.dense_call: on
+    matrices of ~2 million entries (0.3-2 s each here) the waiting thread wakes several times,
+    so a signal or a stopping task is served within a step (scipy's wrappers, used before,
+    keep the GIL for the whole call). Their answers stand: a point of the constraints, and a
+    vector in the null space of A_S^T."""
+    from hpcwedge.solvers.lp import image_point
+    from hpcwedge.solvers.pattern_lp import _null_projection
+    rng = np.random.default_rng(3)
+    G = rng.standard_normal((1400, 1400))
+    assert _waits_during(image_point, np.zeros((0, 1400)), G) >= 2
+    x = image_point(np.zeros((0, 1400)), G)
+    assert x is not None and (G @ x).min() > -1e-9 and abs((G @ x).sum() - 1.0) < 1e-9
+    A, y = rng.standard_normal((1800, 1200)), rng.standard_normal(1800)
+    assert _waits_during(_null_projection, A, y) >= 2
+    z = _null_projection(A, y)
+    assert np.abs(A.T @ z).max() < 1e-9 * np.abs(y).max() and np.linalg.norm(z) > 0.1
