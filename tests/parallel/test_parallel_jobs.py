@@ -87,13 +87,16 @@ DEPTH = 5
 
 def _explore(ctx, payload):
     """Visit at most `budget` nodes below the given one, depth first; leaves with an odd path
-    sum are flagged; the rest is handed back open, each with its parent's path as witness."""
+    sum are flagged; the rest is handed back open, each with its parent's path as witness.
+    ctx: None, or a path sum at which a node is closed unvisited (an infeasible subtree)."""
     group, node, budget, witness = payload
     assert witness is None or witness == node[:-1]
     stack, found, flagged, visited = [node], [], [], 0
     while stack and visited < budget:
         n = stack.pop()
         visited += 1
+        if ctx is not None and sum(n) >= ctx:
+            continue
         if n.depth == DEPTH:
             found.append(n)
             if sum(n) % 2:
@@ -126,22 +129,6 @@ def test_tree_job_finds_every_leaf_for_any_budget_and_resumes_mid_way():
     assert all(sorted(f) == [x for x in leaves if sum(x) % 2] for f in out.flagged)
 
 
-def _explore_pruned(ctx, payload):
-    """_explore, but a node whose path has three 1s is closed unvisited (infeasible)."""
-    group, node, budget, witness = payload
-    stack, found, visited = [node], [], 0
-    while stack and visited < budget:
-        n = stack.pop()
-        visited += 1
-        if sum(n) >= 3:
-            continue
-        if n.depth == DEPTH:
-            found.append(n)
-        else:
-            stack += [_Node(n + (1,)), _Node(n + (0,))]
-    return found, stack, {"nodes": visited}, [], [s[:-1] for s in stack]
-
-
 def _decided_by_count(opens: list, groups: int) -> float:
     """The share of the groups' 2^DEPTH leaves below no open node (brute force over leaves)."""
     leaves = [tuple((k >> i) & 1 for i in reversed(range(DEPTH))) for k in range(2 ** DEPTH)]
@@ -149,12 +136,12 @@ def _decided_by_count(opens: list, groups: int) -> float:
     return 1.0 - below / (groups * 2 ** DEPTH)
 
 
-@pytest.mark.parametrize("explore", [_explore, _explore_pruned])
-def test_tree_job_decided_share_is_the_share_of_leaves_below_no_open_node(explore):
+@pytest.mark.parametrize("prune", [None, 3])
+def test_tree_job_decided_share_is_the_share_of_leaves_below_no_open_node(prune):
     """decided_share, with two tasks in flight, equals the share of leaves that no open node
     (pool or in flight) covers, counted leaf by leaf; it never falls and ends at 1 (pruned
     subtrees count as decided)."""
-    job = TreeJob("t", explore, None, [_Node(()), _Node(())], 3, {"nodes": 0})
+    job = TreeJob("t", _explore, prune, [_Node(()), _Node(())], 3, {"nodes": 0})
     assert job.decided_share([]) == 0.0
     shares = []
     while job.pending():
@@ -163,7 +150,7 @@ def test_tree_job_decided_share_is_the_share_of_leaves_below_no_open_node(explor
         shares.append(job.decided_share(tokens))
         assert shares[-1] == pytest.approx(_decided_by_count(job.open_nodes(tokens), 2), abs=1e-15)
         for token, payload in held:
-            job.merge(token, explore(None, payload))
+            job.merge(token, _explore(prune, payload))
     assert shares == sorted(shares) and shares[0] == 0.0
     assert job.decided_share([]) == 1.0
 
