@@ -231,7 +231,11 @@ class Engine:
         if (self.progress is not None and 0 < self.progress_every_s <= now - self._last_note
                 and now - self._task_started >= self.progress_every_s):
             self._last_note = now
-            self.progress.note(f"{self._current.name}: a task running (1 rank, {self.elapsed():.0f} s)")
+            job = self._current
+            if isinstance(job, TreeJob):       # the job's line, as the task leaves it open
+                self.progress.note(self._job_line(job, now, f"; a task running for {now - self._task_started:.0f} s"))
+            else:
+                self.progress.note(f"{job.name}: a task running (1 rank, {self.elapsed():.0f} s)")
         return False
 
     # ---- running jobs
@@ -414,20 +418,25 @@ class Engine:
                                 f"open tasks after {job.counters.get('tasks', 0)} tasks")
         if self.progress is None or now - last < self.progress_every_s:
             return last
+        self.progress.note(self._job_line(job, now))
+        return now
+
+    def _job_line(self, job, now: float, running: str = "") -> str:
+        """The progress line of `job`: its tasks, what job.progress() adds, a tree job's share
+        decided, and the time left at this session's rate; `running` ends it (a long task)."""
         from hpcwedge.progress import eta
         done = job.counters.get("tasks", 0)
         left = decided = ""
         t0, done0, share0 = self._job_start
-        if isinstance(job, TaskJob):           # a fixed list of tasks: the time left at this session's rate
+        if isinstance(job, TaskJob):           # a fixed list of tasks
             left = eta(now - t0, done - done0, len(job.payloads) - done0)
         elif isinstance(job, TreeJob):         # the share of the trees decided, and its rate
             share = job.decided_share(self._in_flight_tokens())
             decided = f", {100 * share:.3g} % of the tree decided"
             left = eta(now - t0, share - share0, 1.0 - share0)
-        self.progress.note(f"{job.name}: {done} tasks done, {job.pending()} pending, "
-                           f"{len(self._inflight)} running{job.progress()}{decided} ({self.size} rank(s), "
-                           f"{self.elapsed():.0f} s{left})")
-        return now
+        return (f"{job.name}: {done} tasks done, {job.pending()} pending, "
+                f"{len(self._inflight)} running{job.progress()}{decided} ({self.size} rank(s), "
+                f"{self.elapsed():.0f} s{left}{running})")
 
     def _note_use(self, name: str) -> None:
         """After a job that ran progress_every_s or longer under mpirun: how busy its workers were."""

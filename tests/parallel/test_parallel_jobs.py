@@ -176,6 +176,29 @@ def test_progress_lines_of_a_tree_job_say_the_share_decided_and_short_tasks_leav
     assert all("tasks done" in line for line in lines)
 
 
+def _slow_explore(ctx, payload):
+    """_explore after ~0.1 s of ticking (cancel.task_tick): a long tree task."""
+    for _ in range(20):
+        cancel.task_tick()
+        time.sleep(0.005)
+    return _explore(ctx, payload)
+
+
+def test_a_long_tree_task_prints_the_jobs_line_with_its_share_while_it_runs():
+    """Serial engine, one tree task of ~0.1 s, a period of 0.02 s: the lines written inside
+    the task are the job's own (its share decided), ending with how long the task has run."""
+    import io
+
+    from hpcwedge.progress import Progress
+    buf = io.StringIO()
+    eng = Engine(progress=Progress(stream=buf), progress_every_s=0.02, tick_every_s=0.0)
+    out = eng.run(TreeJob("t", _slow_explore, None, [_Node(())], 64, {"nodes": 0}))
+    assert len(out.found[0]) == 2 ** DEPTH
+    inside = [line for line in buf.getvalue().splitlines() if "; a task running for " in line]
+    assert len(inside) >= 2 and all("t: 0 tasks done, 0 pending, 1 running, 0 % of the tree decided" in line
+                                    for line in inside)
+
+
 def _short_sum(ctx, payload):
     """A short task (~4 ms) that ticks (cancel.task_tick) as it runs."""
     for _ in range(4):
