@@ -19,7 +19,9 @@ Every row is one `hpcwedge run` route (pipeline.run_scene) in its own process
              `undecided` counts work, not doubt about the answer)
 An enumeration cut by --limit is run once more as `probe` (the same tree, PatternTree with
 `hpcwedge run`'s options, explored in budgets of PROBE_BUDGET nodes until 0.8 * --limit wall
-seconds have passed): how far it got (nodes, SOCPs, patterns so far). --quick: 4 x 8 only.
+seconds have passed): how far it got (nodes, SOCPs, patterns so far, and `decided`: the share of
+the 2^m patterns below no open subtree, an open subtree at depth d weighing 2^-d, as the run's
+progress line). --quick: 4 x 8 only.
 Counts are the same on every machine; seconds are CPU seconds of the worker
 (2 shared cores: read them as +-2x). --label tags the rows (e.g. "before" / "after" a change);
 the rows already in <out>.json of other labels, tasks or bodies are kept (--probe-only: the
@@ -90,8 +92,8 @@ def worker(task: str, levels: int, ring: int, mu: float) -> dict:
 def probe(levels: int, ring: int, mu: float, seconds: float) -> dict:
     """An enumeration's tree (symmetry off, the tree options of `hpcwedge run`) explored
     depth first in budgets of PROBE_BUDGET nodes until `seconds` have passed (wall clock: the
-    run is killed by wall clock): its counts so far, its CPU seconds and whether it finished
-    (the counts do not depend on the budget)."""
+    run is killed by wall clock): its counts so far, the share of the tree decided, its CPU
+    seconds and whether it finished (the counts do not depend on the budget)."""
     from hpcwedge.contact.build import contact_problem
     from hpcwedge.contact.problem import parametrize
     from hpcwedge.patterns.tree import BnBStats, PatternTree
@@ -107,6 +109,7 @@ def probe(levels: int, ring: int, mu: float, seconds: float) -> dict:
         stack += list(zip(out.open, out.open_x))[::-1]
     return {"m": prob.m, "nodes": stats.nodes, "socps": stats.solves, "skipped": stats.skipped,
             "undecided": stats.undecided, "patterns": found, "finished": not stack,
+            "decided": 1.0 - sum(math.ldexp(1.0, -node.depth) for node, _ in stack),
             "seconds": time.process_time() - c, "wall_in_process": time.perf_counter() - t}
 
 
@@ -175,7 +178,7 @@ def line(r: dict) -> str:
 
 #: the CSV's columns
 COLUMNS = ["label", "task", "body", "levels", "ring", "m", "mu", "status", "patterns", "nodes", "socps", "skipped",
-           "socps_per_pattern", "lps", "bound_solves", "undecided", "finished", "mu_c", "certified", "seconds",
+           "socps_per_pattern", "lps", "bound_solves", "undecided", "finished", "decided", "mu_c", "certified", "seconds",
            "wall"]
 
 

@@ -13,11 +13,11 @@ def test_probe_counts_what_the_run_counts():
     run's nodes, SOCPs and patterns; cut after a fraction of a second it has fewer nodes."""
     run = bench_near_critical.worker("enumerate", 2, 5, 1.0)
     probe = bench_near_critical.probe(2, 5, 1.0, 600.0)
-    assert probe["finished"] and run["patterns"] == probe["patterns"] == 131
+    assert probe["finished"] and run["patterns"] == probe["patterns"] == 131 and probe["decided"] == 1.0
     assert (probe["nodes"], probe["socps"]) == (run["nodes"], run["socps"])
     assert run["socps_per_pattern"] == run["socps"] / 131
     cut = bench_near_critical.probe(2, 5, 1.0, 0.05)
-    assert not cut["finished"] and 0 < cut["nodes"] < run["nodes"]
+    assert not cut["finished"] and 0 < cut["nodes"] < run["nodes"] and 0.0 <= cut["decided"] < 1.0
 
 
 def test_global_row_on_a_curved_neck():
