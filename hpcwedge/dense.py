@@ -30,6 +30,12 @@ def on_wait(poll) -> None:
         _polls.append(poll)
 
 
+def run_polls() -> None:
+    """Call every poll registered with `on_wait` (what a waiting thread does after each step)."""
+    for poll in _polls:
+        poll()
+
+
 def interruptible(fn, *args, **kwargs):
     """fn(*args, **kwargs) in a daemon thread, this one waiting in steps (module doc): for one
     long call that releases the GIL (numpy's LAPACK calls; not scipy.linalg's, see
@@ -46,8 +52,7 @@ def interruptible(fn, *args, **kwargs):
     thread.start()
     while thread.is_alive():
         thread.join(WAIT_STEP_S)
-        for poll in _polls:
-            poll()
+        run_polls()
     if "error" in box:
         raise box["error"]
     return box["value"]

@@ -239,6 +239,19 @@ def rank_pids(launcher_pid: int, ranks: int, timeout: float = 30.0,
     raise AssertionError(f"mpirun {launcher_pid}: ranks not found")
 
 
+def children(pid: int) -> list[int]:
+    """The pids of the processes whose parent is pid (from /proc)."""
+    out = []
+    for d in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{d}/stat") as f:
+                if int(f.read().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.append(int(d))
+        except (OSError, ValueError, IndexError):
+            pass
+    return out
+
+
 def cpu_seconds(pid: int) -> float:
     """utime + stime of a process, from /proc/PID/stat."""
     with open(f"/proc/{pid}/stat") as f:

@@ -152,7 +152,7 @@ def test_readme_map_names_every_module_once():
 #: no cycle. The parallel engine sits below everything that knows of wedging.
 LAYERS = [
     ["version", "errors"],
-    ["nodesets", "exact", "environment", "files", "progress", "dense"],
+    ["nodesets", "exact", "environment", "files", "progress", "dense", "forked"],
     ["parallel"],
     ["models"],
     ["scene"],

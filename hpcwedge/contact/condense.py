@@ -1,6 +1,8 @@
 """Static condensation (Schur complement) of a Model onto its contact DOFs, in local frames.
 
-The only module that imports petsc4py. `condense` is serial (PETSc.COMM_SELF);
+K_ii is factored by contact/factor.py (PETSc). `condense` is serial (PETSc.COMM_SELF; from
+CHILD_MIN_DOFS interior DOFs on in a forked child process, so that a signal is served while
+PETSc factors);
 `condense_distributed` is the same condensation collective over an MPI communicator
 (K_ii an MPIAIJ matrix, rows split between the ranks, each rank assembling only its own rows
 of a continuum model, factored by parallel MUMPS).
@@ -12,26 +14,22 @@ with supports applied (fixed DOFs dropped), c = contact DOFs (node-major), i = t
 DOFs, T = model.local_map(). A model with contact patches (model.tie, models/patch.py) is
 condensed in its reduced DOFs: K = Q^T K Q with Q = model.tie.T, the slave DOFs dropped and
 the feet's rotation DOFs (ids n_dofs, n_dofs + 1, ...) added to i. `interior_response` reads the condensation backwards
-(u_i = -K_ii^-1 K_ic u_c) with the same factorisation routine (`_factored`).
+(u_i = -K_ii^-1 K_ic u_c) with the same factorisation routine (factor.factored).
 """
 from __future__ import annotations
 
-import os
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
+from hpcwedge import forked
+from hpcwedge.contact.factor import factored, petsc, petsc_matrix, singular, solver_name  # noqa: F401
 from hpcwedge.models.matrix import RIGID_RTOL as RIGID_RTOL_K
 from hpcwedge.models.matrix import SYM_RTOL, StiffnessFile
 from hpcwedge.models.record import Model, check_contact_free
 from hpcwedge.models.rigid import orthonormalise
 
-#: a pivot |p| <= NULL_PIVOT_RTOL * ||A|| (MUMPS, after scaling) or <= NULL_PIVOT_RTOL * row sum
-#: (PETSc native LU) is taken as zero: K_ii singular. A K_ii that ill-conditioned would leave
-#: fewer than ~4 correct digits in K_local anyway.
-NULL_PIVOT_RTOL = 1e-12
 #: ||K_local N_local|| <= RIGID_RTOL ||K_local|| is required of the result (free bodies)
 RIGID_RTOL = 1e-7
 
@@ -127,7 +125,7 @@ def load_petsc(path: str, comm=None, rows: tuple[int, int] | None = None) -> sp.
     """A PETSc binary matrix read by PETSc's MatLoad, collective over the mpi4py communicator
     `comm` (None: this process alone): this rank's rows [rows[0], rows[1]) (default all) as CSR
     (rows[1] - rows[0], N), global columns. The ranks' row ranges must be consecutive."""
-    PETSc = _petsc()
+    PETSc = petsc()
     viewer = PETSc.Viewer().createBinary(path, "r", comm=PETSc.COMM_SELF if comm is None else comm)
     A = PETSc.Mat().create(comm=viewer.getComm())
     try:
@@ -176,8 +174,8 @@ def _check_loaded(B: sp.csr_matrix, model: Model, comm) -> None:
     scale = comm.allreduce(float(np.abs(B.data).max()) if B.nnz else 0.0, op=_mpi_max())
     if scale == 0:
         raise ValueError("model.K: all zero")
-    PETSc = _petsc()
-    A = _petsc_matrix(PETSc, B, comm, symmetrise=False)
+    PETSc = petsc()
+    A = petsc_matrix(PETSc, B, comm, symmetrise=False)
     try:
         symmetric = A.isSymmetric(SYM_RTOL * scale)
     finally:
@@ -218,11 +216,6 @@ def to_local(model: Model, sp_: DofSplit, S: np.ndarray) -> tuple[np.ndarray, np
     return KL, N
 
 
-def _singular(model: Model, detail: str) -> ValueError:
-    return ValueError(f"condense: the stiffness of the non-contact DOFs (K_ii) is singular ({detail}): "
-                      "the body is a mechanism apart from its contact nodes (add bars/elements or supports)")
-
-
 def schur_dense(model: Model) -> tuple[np.ndarray, np.ndarray]:
     """(K_local, N_local) by dense numpy linear algebra (independent check of condense; small models)."""
     sp_ = split_dofs(model)
@@ -232,38 +225,9 @@ def schur_dense(model: Model) -> tuple[np.ndarray, np.ndarray]:
     A = Kii.toarray()
     lam = np.linalg.eigvalsh(0.5 * (A + A.T))
     if lam[0] <= 1e-14 * lam[-1]:
-        raise _singular(model, f"smallest/largest eigenvalue {lam[0] / lam[-1]:.2e}")
+        raise singular(model, f"smallest/largest eigenvalue {lam[0] / lam[-1]:.2e}")
     X = np.linalg.solve(A, Kic.toarray())
     return to_local(model, sp_, Kcc - Kic.T.toarray() @ X)
-
-
-def _petsc():
-    import sys
-
-    import petsc4py
-    # -no_signal_handler: PETSc's handler would take SIGPIPE (and SIGHUP, SIGSEGV, ...) from
-    # Python: a progress reader gone (`hpcwedge run ... 2>&1 | head`) ended the run with
-    # PETSc's status 59, no result and the output lock left behind; the signals a run
-    # answers (SIGTERM, SIGUSR1, SIGINT) are the engine's. The command line is not PETSc's.
-    args = ["-no_signal_handler"]
-    if "mpi4py.MPI" in sys.modules:
-        # under mpirun only the master condenses: PETSc's world must be this rank
-        # alone (PetscInitialize is collective over its world)
-        from mpi4py import MPI
-        petsc4py.init(args, comm=MPI.COMM_SELF)
-    else:
-        # a serial run: PETSc starts MPI as a singleton that never talks to another process;
-        # Open MPI's default message layer first probes UCX's devices for it (MPI_Init 0.28 s
-        # here against 0.08 s with ob1). A user's own choice of the layer stands.
-        os.environ.setdefault("OMPI_MCA_pml", "ob1")
-        petsc4py.init(args)
-    from petsc4py import PETSc
-    return PETSc
-
-
-def solver_name() -> str:
-    """'mumps' if this PETSc has MUMPS, else 'petsc' (native sparse LU)."""
-    return "mumps" if _petsc().Sys.hasExternalPackage("mumps") else "petsc"
 
 
 def condense(model: Model, solver: str | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -315,18 +279,36 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
 
 #: contact columns per MatMatSolve (bounds the two dense n_i x COLUMN_BLOCK work arrays)
 COLUMN_BLOCK = 64
-#: PETSc error codes that mean "zero pivot / empty row" in a factorisation
-_ZERO_PIVOT_ERRORS = {71, 73, 81}   # MAT_LU_ZRPVT, ARG_WRONGSTATE (missing diagonal), MAT_CH_ZRPVT
-
-
+#: from this many interior DOFs on, a serial condensation factors K_ii in a forked child
+#: process (`_here_or_forked`; block2d refine 40, 33,000 DOFs: ~0.5 s to factor, ~0.05 s to fork)
+CHILD_MIN_DOFS = 20_000
 def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solver: str | None,
                      comm=None, symmetrise: bool = False) -> np.ndarray:
     """K_ci K_ii^-1 K_ic (p, p), global node-major contact DOFs, on every rank of `comm`.
     Kic (n_loc, p), Kii (n_loc, n_i): this rank's rows (all rows serially); symmetrise: factor
-    0.5 (K_ii + K_ii^T) (see `_factored`)."""
+    0.5 (K_ii + K_ii^T) (see factor.factored). Serially from CHILD_MIN_DOFS interior DOFs on, in a
+    forked child process (`_here_or_forked`)."""
+    if comm is None:
+        return _here_or_forked(_kci_kii_inv_kic_here, Kic, Kii, model, solver, None, symmetrise)
+    return _kci_kii_inv_kic_here(Kic, Kii, model, solver, comm, symmetrise)
+
+
+def _here_or_forked(fn, a, Kii, *args):
+    """fn(a, Kii, *args) in this process, or for a K_ii of CHILD_MIN_DOFS rows or more in a
+    forked child (forked.in_child: PETSc's factorisation keeps the interpreter's lock, so a
+    signal waited for it; there it is served within a step), where a fork is safe (no MPI or
+    PETSc started here: a serial run condenses before anything else). The same bits either way."""
+    if Kii.shape[0] >= CHILD_MIN_DOFS and forked.can_fork():
+        return forked.in_child(fn, a, Kii, *args, what="condense")
+    return fn(a, Kii, *args)
+
+
+def _kci_kii_inv_kic_here(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solver: str | None,
+                          comm=None, symmetrise: bool = False) -> np.ndarray:
+    """`_kci_kii_inv_kic` in this process."""
     p = Kic.shape[1]
     probe = Kic[:, 0].toarray().ravel()
-    with _factored(Kii, model, solver, probe=probe, comm=comm, symmetrise=symmetrise) as solve:
+    with factored(Kii, model, solver, probe=probe, comm=comm, symmetrise=symmetrise) as solve:
         P = np.zeros((p, p))
         KicT = Kic.T.tocsr()
         for lo in range(0, p, COLUMN_BLOCK):
@@ -351,139 +333,12 @@ def interior_response(model: Model, uc: np.ndarray, solver: str | None = None) -
     _, Kic, Kii = _blocks(model, sp_)
     U = np.asarray(uc, dtype=float)
     B = -(Kic @ U.reshape(len(sp_.contact), -1))
-    if sp_.interior.size == 0:
-        X = B
-    else:
-        with _factored(Kii, model, solver, probe=B[:, 0]) as solve:
-            X = np.hstack([solve(B[:, lo:lo + COLUMN_BLOCK]) for lo in range(0, B.shape[1], COLUMN_BLOCK)])
+    X = B if sp_.interior.size == 0 else _here_or_forked(_kii_inv, B, Kii, model, solver)
     return X.ravel() if U.ndim == 1 else X
 
 
-@contextmanager
-def _factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.ndarray, comm=None,
-              symmetrise: bool = False):
-    """Factor K_ii once with PETSc (MUMPS or native LU, see `condense`) and yield
-    solve(B (n_loc, q) dense) -> the same rows of K_ii^-1 B. Collective over the mpi4py
-    communicator `comm` (None: PETSc.COMM_SELF): Kii (n_loc, n) is this rank's block of
-    consecutive rows (all n rows serially; ranks in order), B and the result likewise.
-    `probe` (n_loc,): a right-hand side solved once to detect a failed factorisation.
-    symmetrise: factor 0.5 (K_ii + K_ii^T) (PETSc transpose and add: exactly symmetric, for
-    rows that are symmetric up to rounding only, e.g. `_distributed_blocks` with patches).
-    Every PETSc object is destroyed on exit."""
-    if solver not in (None, "mumps", "petsc"):
-        raise ValueError(f"condense: unknown solver {solver!r} (mumps, petsc)")
-    PETSc = _petsc()
-    comm = PETSc.COMM_SELF if comm is None else comm
-    nloc, n = Kii.shape
-    A = _petsc_matrix(PETSc, Kii, comm, symmetrise)
-    ksp = PETSc.KSP().create(comm=comm)
-    objs = [A, ksp]
-    try:
-        pc, use_mumps = _choose_factorisation(PETSc, ksp, A, solver)
-        F = _factorise(PETSc, ksp, pc, use_mumps, model, n)
-        _solve_probe(ksp, A, probe, model, objs)
-        yield _dense_solver(PETSc, F, nloc, n, comm)
-    finally:
-        for o in objs:
-            o.destroy()
+def _kii_inv(B: np.ndarray, Kii: sp.csr_matrix, model: Model, solver: str | None) -> np.ndarray:
+    """K_ii^-1 B (n_i, q), B (n_i, q) dense, serially."""
+    with factored(Kii, model, solver, probe=B[:, 0]) as solve:
+        return np.hstack([solve(B[:, lo:lo + COLUMN_BLOCK]) for lo in range(0, B.shape[1], COLUMN_BLOCK)])
 
-
-def _petsc_matrix(PETSc, Kii: sp.csr_matrix, comm, symmetrise: bool):
-    """This rank's rows of K_ii as an assembled PETSc AIJ matrix on `comm`; symmetrise:
-    replaced by 0.5 (A + A^T)."""
-    Kii = sp.csr_matrix(Kii)
-    Kii.sort_indices()
-    nloc, n = Kii.shape
-    A = PETSc.Mat().createAIJ(size=((nloc, n), (nloc, n)), csr=(Kii.indptr.astype(PETSc.IntType),
-                                                Kii.indices.astype(PETSc.IntType), Kii.data), comm=comm)
-    A.assemble()
-    if symmetrise:
-        At = PETSc.Mat()
-        A.transpose(At)                      # into a new matrix (A.transpose() is in place)
-        A.axpy(1.0, At, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
-        At.destroy()
-        A.scale(0.5)
-    return A
-
-
-def _choose_factorisation(PETSc, ksp, A, solver: str | None):
-    """Set up `ksp` as a direct solve of A (see `condense` for the choice of solver); returns
-    (its PC, whether MUMPS factors)."""
-    ksp.setOperators(A)
-    ksp.setType("preonly")
-    pc = ksp.getPC()
-    use_mumps = solver == "mumps" or (solver is None and PETSc.Sys.hasExternalPackage("mumps"))
-    # MUMPS: symmetric LDL^T (SYM = 2, with pivoting) when K_ii is exactly symmetric (as the
-    # truss / Q4 assemblies guarantee): half the factor memory and ~35% less time than LU
-    # (block2d refine 200, 8e5 DOFs). Otherwise, and natively, LU.
-    symmetric = use_mumps and A.isSymmetric(0.0)
-    pc.setType("cholesky" if symmetric else "lu")
-    if use_mumps:
-        pc.setFactorSolverType("mumps")
-        pc.setFactorSetUpSolverType()
-        F = pc.getFactorMatrix()
-        F.setMumpsIcntl(24, 1)                 # detect null pivots ...
-        F.setMumpsCntl(3, NULL_PIVOT_RTOL)     # ... |pivot| <= tol * ||A_pre||
-    else:
-        pc.setFactorSolverType("petsc")
-        pc.setFactorOrdering("nd")
-        pc.setFactorPivot(zeropivot=NULL_PIVOT_RTOL)
-    return pc, use_mumps
-
-
-def _factorise(PETSc, ksp, pc, use_mumps: bool, model: Model, n: int):
-    """Factor K_ii (ksp.setUp) and return the factor; ValueError if K_ii is singular (a zero
-    or null pivot), RuntimeError for another PETSc or MUMPS failure."""
-    try:
-        ksp.setUp()
-    except PETSc.Error as e:
-        if e.ierr in _ZERO_PIVOT_ERRORS:
-            raise _singular(model, f"PETSc error {e.ierr}: zero pivot or empty row in the factorisation") from None
-        raise RuntimeError(f"condense: PETSc error {e.ierr} while factoring K_ii ({n} DOFs)") from None
-    F = pc.getFactorMatrix()
-    if use_mumps:
-        info = F.getMumpsInfog(1)
-        if info == -10:
-            raise _singular(model, "MUMPS INFOG(1) = -10")
-        if info == -2 and F.getMumpsInfog(2) == 0:
-            raise _singular(model, "no stiffness at all, MUMPS INFOG(1) = -2")
-        if info < 0:
-            raise RuntimeError(f"condense: MUMPS failed, INFOG(1) = {info}, INFOG(2) = {F.getMumpsInfog(2)}")
-        nnull = F.getMumpsInfog(28)
-        if nnull > 0:
-            raise _singular(model, f"{nnull} null pivot(s) found by MUMPS")
-    return F
-
-
-def _solve_probe(ksp, A, probe: np.ndarray, model: Model, objs: list) -> None:
-    """Solve A x = probe once; ValueError (singular K_ii) if the factorisation failed. Its two
-    vectors are appended to `objs`, for the caller to destroy."""
-    # petsc4py 3.18 has no PCGetFailedReason: a failed factorisation shows as a KSP
-    # solve that diverges with DIVERGED_PC_FAILED (native LU flags small pivots this way)
-    b, x = A.createVecLeft(), A.createVecRight()
-    objs += [b, x]
-    b.setArray(np.asarray(probe, dtype=float))
-    ksp.solve(b, x)
-    reason = ksp.getConvergedReason()
-    if reason < 0:
-        raise _singular(model, f"factorisation failed, KSP reason {reason}")
-
-
-def _dense_solver(PETSc, F, nloc: int, n: int, comm):
-    """solve(B (n_loc, q) dense) -> this rank's rows of K_ii^-1 B, by MatMatSolve with the factor F."""
-    def solve(B: np.ndarray) -> np.ndarray:
-        q = B.shape[1]
-        Bm = PETSc.Mat().createDense(((nloc, n), (None, q)), array=np.asfortranarray(B, dtype=float),
-                                     comm=comm)
-        Xm = PETSc.Mat().createDense(((nloc, n), (None, q)), comm=comm)
-        try:
-            Xm.setUp()
-            Bm.assemble()
-            Xm.assemble()
-            F.matSolve(Bm, Xm)
-            return np.array(Xm.getDenseArray())
-        finally:
-            Bm.destroy()
-            Xm.destroy()
-
-    return solve

@@ -3,13 +3,15 @@ import dataclasses
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 from model_cases import make_model
-from mpi_helpers import MPIRUN, ROOT, env, needs_mpirun
+from mpi_helpers import MPIRUN, ROOT, all_gone, children, env, needs_mpirun
 
 from hpcwedge.contact.condense import condense, condense_distributed, schur_dense, split_dofs
 from hpcwedge.models import block2d, plug2d, plug3d, truss_model, vgroove_bar
@@ -310,3 +312,75 @@ def test_serial_petsc_starts_mpi_with_the_ob1_layer_unless_the_user_chose(user, 
     assert pml == expected
     K, _ = condense(plug3d(levels=2, ring=3))
     assert size == pytest.approx(float(abs(K).sum()), rel=1e-12)
+
+
+def test_a_forked_condensation_gives_the_bits_of_one_made_here_and_its_errors():
+    """Above CHILD_MIN_DOFS a serial process that has not started PETSc factors K_ii in a forked
+    child (forked.in_child): K_local bit for bit as condensed in the process itself, and
+    interior_response too; a singular K_ii's error comes back the same. Run in a fresh
+    interpreter, as a serial run is (the suite's own process has PETSc started)."""
+    code = """
+import json, sys
+import numpy as np
+from hpcwedge.contact import condense as C
+from hpcwedge.models import block2d, plug3d
+m = block2d(3, 2, 6)
+C.CHILD_MIN_DOFS = 0
+uc = np.linspace(-1.0, 1.0, 2 * len(m.contact_nodes))
+K1, N1 = C.condense(m)
+u1 = C.interior_response(m, uc)
+try:
+    C.condense(plug3d(1, 5))
+    err1 = None
+except ValueError as e:
+    err1 = str(e)
+forked = "petsc4py.PETSc" not in sys.modules
+C.CHILD_MIN_DOFS = 10 ** 9
+K2, N2 = C.condense(m)
+u2 = C.interior_response(m, uc)
+try:
+    C.condense(plug3d(1, 5))
+    err2 = None
+except ValueError as e:
+    err2 = str(e)
+print(json.dumps([forked, "petsc4py.PETSc" in sys.modules, K1.tobytes() == K2.tobytes(),
+                  N1.tobytes() == N2.tobytes(), u1.tobytes() == u2.tobytes(), err1, err2]))
+"""
+    out = subprocess.run([sys.executable, "-c", code], env=env(), capture_output=True, text=True, timeout=300,
+                         stdin=subprocess.DEVNULL)
+    assert out.returncode == 0, out.stderr
+    forked, here, same_k, same_n, same_u, err1, err2 = json.loads(out.stdout.strip().splitlines()[-1])
+    assert forked and here                 # the first calls ran in children, the last ones here
+    assert same_k and same_n and same_u
+    assert err1 == err2 and err1.startswith("condense: the stiffness of the non-contact DOFs (K_ii) is singular")
+
+
+def test_sigterm_during_a_long_condensation_ends_the_run_within_2_s(tmp_path):
+    """`hpcwedge run` of a block2d of 290,000 DOFs, signalled while the forked child factors K_ii
+    (seconds of PETSc that keep the interpreter's lock: before, a SIGTERM waited up to 30 s for
+    them): exit 75 within 2 s with its one line, and the child gone."""
+    scene = tmp_path / "big.toml"
+    scene.write_text('name = "big"\ndim = 2\n[model]\nkind = "block2d"\nrows = 5\ncols = 2\nrefine = 120\n'
+                     '[friction]\nmu = [0.65]\n[compute]\nmu_c = "none"\n')
+    p = subprocess.Popen([sys.executable, "-m", "hpcwedge", "run", str(scene), "-o", str(tmp_path / "r.h5")],
+                         env=env(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        deadline = time.monotonic() + 120
+        kids = []
+        while not kids and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+            kids = children(p.pid)
+        assert kids, "no child process seen while condensing"
+        start = time.monotonic()
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(timeout=60) == 75
+        assert time.monotonic() - start < 2.0
+        err = p.stderr.read()
+        assert err.splitlines()[-1].startswith("[hpcwedge] SIGTERM: "), err
+        assert "Traceback" not in err, err
+        assert all_gone(kids)
+    finally:
+        p.kill()
+        p.wait()
+

@@ -1,0 +1,125 @@
+"""hpcwedge.forked: a long call in a forked child while the caller waits in steps, serving
+signals; what the child returns or raises comes back; a child given up on is killed."""
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from mpi_helpers import all_gone, alive, children, env
+
+from hpcwedge import dense, forked
+
+
+def test_in_child_returns_and_raises_what_fn_does():
+    a = np.random.default_rng(0).standard_normal((50, 40))
+    out = forked.in_child(np.multiply, a, 3.0)
+    assert out.tobytes() == np.multiply(a, 3.0).tobytes()
+    with pytest.raises(ZeroDivisionError):
+        forked.in_child(divmod, 1, 0)
+    with pytest.raises(ValueError, match="^condense: a bad K$"):
+        forked.in_child(_raise, ValueError("condense: a bad K"))
+
+
+def _raise(e):
+    raise e
+
+
+def _kill_self():
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+class _Unpicklable(Exception):
+    def __reduce__(self):
+        raise TypeError("no pickling")
+
+
+def test_an_exception_pickle_cannot_take_comes_back_as_a_runtime_error_naming_it():
+    with pytest.raises(RuntimeError, match="^_Unpicklable: lost$"):
+        forked.in_child(_raise, _Unpicklable("lost"))
+
+
+def test_a_child_that_dies_is_one_runtime_error():
+    with pytest.raises(RuntimeError, match=r"^condense: its child process ended without an answer \(killed by SIGKILL\)$"):
+        forked.in_child(_kill_self, what="condense")
+    with pytest.raises(RuntimeError, match=r"\(exit status 3\)$"):
+        forked.in_child(os._exit, 3)
+
+
+def test_a_poll_that_raises_gives_the_call_up_and_kills_the_child(monkeypatch):
+    """The registered polls run every step (the engine's task_tick); one that raises ends the
+    wait within a step or two and leaves no child behind."""
+    t0 = time.monotonic()
+
+    def poll():
+        if time.monotonic() - t0 > 0.3:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(dense, "_polls", [poll])
+    with pytest.raises(KeyboardInterrupt):
+        forked.in_child(time.sleep, 60.0)
+    assert time.monotonic() - t0 < 5.0
+    assert not [p for p in multiprocessing.active_children() if p.name == "hpcwedge-forked"]
+
+
+def test_no_fork_once_mpi_or_petsc_is_started(monkeypatch):
+    assert forked.can_fork() == ("mpi4py.MPI" not in sys.modules and "petsc4py.PETSc" not in sys.modules)
+    for name in ("mpi4py.MPI", "petsc4py.PETSc"):
+        with monkeypatch.context() as mp:
+            mp.setitem(sys.modules, name, object())
+            assert not forked.can_fork()
+
+
+def test_the_child_ignores_the_runs_signals_and_dies_with_its_parent():
+    """SIGTERM to the child's process group (SLURM signals every process of a step) is the
+    parent's to answer; a kill -9 of the parent takes the child with it (PR_SET_PDEATHSIG)."""
+    code = ("import os, time\n"
+            "from hpcwedge import forked\n"
+            "def work():\n"
+            "    print('child', os.getpid(), flush=True)\n"
+            "    time.sleep(60)\n"
+            "forked.in_child(work)\n")
+    p = subprocess.Popen([sys.executable, "-c", code], env=env(), stdout=subprocess.PIPE, text=True,
+                         stdin=subprocess.DEVNULL)
+    try:
+        child = int(p.stdout.readline().split()[1])
+        os.kill(child, signal.SIGTERM)
+        os.kill(child, signal.SIGUSR1)
+        time.sleep(0.3)
+        assert alive(child)
+        p.kill()
+        p.wait()
+        assert all_gone([child])
+    finally:
+        p.kill()
+        p.wait()
+
+
+def test_a_signal_is_served_while_the_child_works():
+    """The caller's SIGTERM handler (outside a task the engine's raises at once) runs within a
+    step although the child computes for a minute; no child is left."""
+    code = ("import signal, time\n"
+            "from hpcwedge import forked\n"
+            "def stop(signum, frame):\n"
+            "    raise SystemExit(75)\n"
+            "signal.signal(signal.SIGTERM, stop)\n"
+            "print('ready', flush=True)\n"
+            "forked.in_child(time.sleep, 60.0)\n")
+    p = subprocess.Popen([sys.executable, "-c", code], env=env(), stdout=subprocess.PIPE, text=True,
+                         stdin=subprocess.DEVNULL)
+    try:
+        assert p.stdout.readline().strip() == "ready"
+        time.sleep(0.3)
+        kids = children(p.pid)
+        assert len(kids) == 1
+        start = time.monotonic()
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(timeout=30) == 75
+        assert time.monotonic() - start < 2.0
+        assert all_gone(kids)
+    finally:
+        p.kill()
+        p.wait()
+
