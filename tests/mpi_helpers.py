@@ -239,6 +239,23 @@ def rank_pids(launcher_pid: int, ranks: int, timeout: float = 30.0,
     raise AssertionError(f"mpirun {launcher_pid}: ranks not found")
 
 
+def python_child(code: str) -> subprocess.Popen:
+    """`python -c code` with the suite's environment, stdin closed, its stdout a text pipe."""
+    return subprocess.Popen([sys.executable, "-c", code], env=env(), stdout=subprocess.PIPE, text=True,
+                            stdin=subprocess.DEVNULL)
+
+
+def stopped_by_sigterm(imports: str, call: str) -> str:
+    """The code of a process whose SIGTERM handler exits 75 (as the engine's outside a task),
+    that prints 'ready' and then runs `call` (after `imports`)."""
+    return (f"import signal\n{imports}\n"
+            "def stop(signum, frame):\n"
+            "    raise SystemExit(75)\n"
+            "signal.signal(signal.SIGTERM, stop)\n"
+            "print('ready', flush=True)\n"
+            f"{call}\n")
+
+
 def children(pid: int) -> list[int]:
     """The pids of the processes whose parent is pid (from /proc)."""
     out = []

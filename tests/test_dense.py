@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 import scipy.linalg as sla
-from mpi_helpers import env
+from mpi_helpers import python_child, stopped_by_sigterm
 
 from hpcwedge import dense
 
@@ -47,15 +47,7 @@ def test_null_space_spans_scipys_and_counts_its_rank_alike():
 def test_a_signal_is_served_during_a_long_call():
     """A process blocked in one long call (a 60 s sleep through interruptible) ends on SIGTERM
     within seconds: the Python handler runs in the waiting thread."""
-    code = ("import signal, time\n"
-            "from hpcwedge import dense\n"
-            "def stop(signum, frame):\n"
-            "    raise SystemExit(75)\n"
-            "signal.signal(signal.SIGTERM, stop)\n"
-            "print('ready', flush=True)\n"
-            "dense.interruptible(time.sleep, 60.0)\n")
-    p = subprocess.Popen([sys.executable, "-c", code], env=env(), stdout=subprocess.PIPE, text=True,
-                         stdin=subprocess.DEVNULL)
+    p = python_child(stopped_by_sigterm("import time\nfrom hpcwedge import dense", "dense.interruptible(time.sleep, 60.0)"))
     try:
         assert p.stdout.readline().strip() == "ready"
         start = time.monotonic()

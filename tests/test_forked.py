@@ -3,13 +3,12 @@ signals; what the child returns or raises comes back; a child given up on is kil
 import multiprocessing
 import os
 import signal
-import subprocess
 import sys
 import time
 
 import numpy as np
 import pytest
-from mpi_helpers import all_gone, alive, children, env
+from mpi_helpers import all_gone, alive, children, python_child, stopped_by_sigterm
 
 from hpcwedge import dense, forked
 
@@ -81,8 +80,7 @@ def test_the_child_ignores_the_runs_signals_and_dies_with_its_parent():
             "    print('child', os.getpid(), flush=True)\n"
             "    time.sleep(60)\n"
             "forked.in_child(work)\n")
-    p = subprocess.Popen([sys.executable, "-c", code], env=env(), stdout=subprocess.PIPE, text=True,
-                         stdin=subprocess.DEVNULL)
+    p = python_child(code)
     try:
         child = int(p.stdout.readline().split()[1])
         os.kill(child, signal.SIGTERM)
@@ -100,15 +98,7 @@ def test_the_child_ignores_the_runs_signals_and_dies_with_its_parent():
 def test_a_signal_is_served_while_the_child_works():
     """The caller's SIGTERM handler (outside a task the engine's raises at once) runs within a
     step although the child computes for a minute; no child is left."""
-    code = ("import signal, time\n"
-            "from hpcwedge import forked\n"
-            "def stop(signum, frame):\n"
-            "    raise SystemExit(75)\n"
-            "signal.signal(signal.SIGTERM, stop)\n"
-            "print('ready', flush=True)\n"
-            "forked.in_child(time.sleep, 60.0)\n")
-    p = subprocess.Popen([sys.executable, "-c", code], env=env(), stdout=subprocess.PIPE, text=True,
-                         stdin=subprocess.DEVNULL)
+    p = python_child(stopped_by_sigterm("import time\nfrom hpcwedge import forked", "forked.in_child(time.sleep, 60.0)"))
     try:
         assert p.stdout.readline().strip() == "ready"
         time.sleep(0.3)
