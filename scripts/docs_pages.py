@@ -612,7 +612,8 @@ def bench_near_critical() -> str:
         if r.get("certified") is not None:
             answer += ", certified" if r["certified"] else ", not certified"
         if r.get("finished") is False:
-            answer += " (probe: not finished)"
+            answer += (" (probe: not finished)" if r.get("decided") is None
+                       else f" (probe: not finished, {100 * r['decided']:.3g} % of the tree decided)")
         mu = r.get("mu")
         rows.append([r.get("label", "–"), r.get("task", "–"), r.get("body", "–"),
                      f"{r.get('levels', '?')} × {r.get('ring', '?')}", _g(r, "m"), "global" if mu is None else f"{mu:.6g}",

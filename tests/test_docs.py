@@ -277,6 +277,16 @@ def test_near_critical_rows_before_then_after(tmp_path, monkeypatch):
     assert "| 100 | 100 |" in lines[2] and "| 40 | 100 |" in lines[3] and lines[2].endswith("| 1 pattern |")
 
 
+def test_near_critical_probe_rows_say_how_much_of_the_tree_is_decided(tmp_path, monkeypatch):
+    row = {"task": "probe", "body": "plug3d", "levels": 6, "ring": 8, "m": 48, "mu": 0.19, "status": "ok",
+           "wall": 10.0, "seconds": 9.0, "nodes": 100, "socps": 100, "undecided": 0, "patterns": 1, "finished": False}
+    _results(tmp_path, monkeypatch, "bench_near_critical.json",
+             {"records": [dict(row, label="before"), dict(row, label="current", decided=0.0293627)]})
+    lines = docs_pages.bench_near_critical().splitlines()
+    assert lines[2].endswith("| 1 pattern (probe: not finished) |")
+    assert lines[3].endswith("| 1 pattern (probe: not finished, 2.94 % of the tree decided) |")
+
+
 def test_highs_lp_table_with_one_file_missing(tmp_path, monkeypatch):
     """With only the "before" file, its rows render and the missing files are named."""
     _results(tmp_path, monkeypatch, "bench_highs_lp_before.json",

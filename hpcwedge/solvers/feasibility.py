@@ -14,7 +14,7 @@ method.
   3. Still unsure: LPs on polyhedral pyramids of the friction cones with
      k = 16, 64, 256 facets per node — inner (inscribed: feasible ⇒ feasible,
      its x verified on the circular cones) and outer (circumscribed:
-     infeasible ⇒ infeasible).
+     infeasible ⇒ infeasible), PYRAMID_BUDGET_S seconds for all of them.
   4. Still unsure: UNDECIDED (callers keep the subtree / report the pattern as
      undecided; nothing is pruned on doubt).
 
@@ -23,6 +23,7 @@ Solver options are a value (`SolverOptions`) handed down by the caller.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +35,11 @@ from hpcwedge.solvers.socp import pattern_attempts, verified
 
 #: facets per node of the polyhedral pyramids, tried in turn
 PYRAMID_SIDES = (16, 64, 256)
+#: seconds the pyramid LPs of one decision may take in all (then UNDECIDED, counted as
+#: "pyramid_budget_spent"): at m = 64 the 256-facet pyramid is an LP of 16,384 dense rows that
+#: HiGHS worked on for minutes (plug3d 8 x 8 near mu^c; the curved neck 8 x 8's settling tree),
+#: and an undecided node only keeps its subtree
+PYRAMID_BUDGET_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -125,15 +131,21 @@ def decide(rows: Rows | ConeRows, mu: float, options: SolverOptions = DEFAULT_OP
             # before the retries in the null space of the equalities: sum r_n vanishes there
             count(counts, "eq_infeasible")
             return Decision(Status.INFEASIBLE)
+    deadline = time.monotonic() + PYRAMID_BUDGET_S
     for sides in pyramid_sides:
         task_tick()              # a fine pyramid's LPs take up to a second or so: a stop acts here
-        status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, LP_OPTIONS, counts=counts)
+        if time.monotonic() >= deadline:
+            count(counts, "pyramid_budget_spent")
+            break
+        status, x = lp_feasible(pyramid_rows(rows, sides, inner=True), mu, LP_OPTIONS, counts=counts,
+                                deadline=deadline)
         count(counts, "lp_calls")
         x = verified(rows, mu, x) if status == Status.FEASIBLE else None
         if x is not None:
             count(counts, "pyramid_inner_feasible")
             return Decision(Status.FEASIBLE, x)
-        status, _ = lp_feasible(pyramid_rows(rows, sides, inner=False), mu, LP_OPTIONS, counts=counts)
+        status, _ = lp_feasible(pyramid_rows(rows, sides, inner=False), mu, LP_OPTIONS, counts=counts,
+                                deadline=deadline)
         count(counts, "lp_calls")
         if status == Status.INFEASIBLE:
             count(counts, "pyramid_outer_infeasible")

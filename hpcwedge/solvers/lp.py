@@ -197,10 +197,11 @@ def highs_lp(A: np.ndarray, lower: np.ndarray, upper: np.ndarray, col_lower: np.
 
 
 def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str = "simplex",
-                counts: dict | None = None) -> tuple[Status, np.ndarray | None]:
+                counts: dict | None = None, deadline: float | None = None) -> tuple[Status, np.ndarray | None]:
     """Feasibility of {rows(mu) x (>=,==) 0, sum r_n = 1}: (status, x or None), by
     HiGHS (`method`, LP_METHODS: "simplex", dual simplex, which returns a vertex; "ipm";
-    options: HiGHS's names), each call at most LP_TIME_LIMIT_S (then UNDECIDED).
+    options: HiGHS's names), each call at most LP_TIME_LIMIT_S (then UNDECIDED), and none
+    past `deadline` (time.monotonic(); None: no deadline): UNDECIDED.
 
     The equalities are eliminated first (x = Z y, Z = rows.Z, mu-independent and
     computed once per rows): HiGHS solves an LP of half the size without equality rows
@@ -228,11 +229,11 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
     B = A[~E] @ Z
     bn = np.linalg.norm(B, axis=1)
     keep = bn > ZERO_ROW_RTOL
-    status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], options, method)
-    if status == Status.UNDECIDED and method == "simplex":
+    status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], options, method, deadline=deadline)
+    if status == Status.UNDECIDED and method == "simplex" and _before(deadline):
         count(counts, "lp_primal")      # the dual simplex gave up ("Unknown"): the primal one
         status, y = _highs(B[keep] / bn[keep, None], n[None, :], Z.shape[1], {**(options or {}), **PRIMAL},
-                           method)
+                           method, deadline=deadline)
     if status == Status.INFEASIBLE:
         return status, None
     if status == Status.FEASIBLE:
@@ -240,22 +241,33 @@ def lp_feasible(rows: Rows, mu: float, options: dict | None = None, method: str 
         worst = max(np.abs(A[E] @ x).max(initial=0.0), (-(A[~E] @ x)).max(initial=0.0), abs(rows.norm @ x - 1.0))
         if point_accepted(worst, x, rows.norm):
             return status, x
+    if not _before(deadline):
+        return Status.UNDECIDED, None
     count(counts, "lp_x_space")
-    status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method, watched=True)
+    status, x = _highs(A[~E], np.vstack([A[E], rows.norm[None, :]]), A.shape[1], options, method, watched=True,
+                       deadline=deadline)
     return status, x
 
 
+def _before(deadline: float | None) -> bool:
+    return deadline is None or time.monotonic() < deadline
+
+
 def _highs(A_ge: np.ndarray, A_eq: np.ndarray, d: int, options: dict | None,
-           method: str, watched: bool = False) -> tuple[Status, np.ndarray | None]:
-    """{A_ge v >= 0, A_eq v = e_last (the last row is the normalisation)}, v free in R^d.
+           method: str, watched: bool = False, deadline: float | None = None) -> tuple[Status, np.ndarray | None]:
+    """{A_ge v >= 0, A_eq v = e_last (the last row is the normalisation)}, v free in R^d, in at
+    most LP_TIME_LIMIT_S and not past `deadline` (then UNDECIDED).
     watched: run by highs_run_watched (the x-space LP: at m = 320 a dense cold solve of ~30 s
     whose presolve has no interrupt point; a SIGTERM waited 18 s for it)."""
+    limit = LP_TIME_LIMIT_S if deadline is None else min(LP_TIME_LIMIT_S, deadline - time.monotonic())
+    if limit <= 0:
+        return Status.UNDECIDED, None
     b_eq = np.zeros(A_eq.shape[0])
     b_eq[-1] = 1.0
     k = A_ge.shape[0]
     lower = np.concatenate([np.zeros(k), b_eq])
     upper = np.concatenate([np.full(k, np.inf), b_eq])
-    h = highs_instance({**LP_METHODS[method], **(options or {})}, LP_TIME_LIMIT_S, polled=not watched)
+    h = highs_instance({**LP_METHODS[method], **(options or {})}, limit, polled=not watched)
     h.passModel(highs_lp(np.vstack([A_ge, A_eq]), lower, upper, np.full(d, -np.inf), np.full(d, np.inf)))
     status = highs_run_watched(h) if watched else highs_run(h)
     return status, np.array(h.getSolution().col_value) if status == Status.FEASIBLE else None

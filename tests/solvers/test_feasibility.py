@@ -3,6 +3,9 @@ and bound == brute force over all 2^m partitions by the SOCP == an independent
 route (a different formulation, in (u, r) with K u = r, and a different solver:
 HiGHS on inscribed / circumscribed pyramids of the friction cones); the policy's
 answers are verified; the pyramid fallback; the 2D dispatch is the LP; options."""
+import math
+import time
+
 import numpy as np
 import pytest
 from instances import random_partial_rows, random_problem, random_problem_3d
@@ -132,3 +135,34 @@ def test_solver_options_are_values():
         if tight.status == Status.FEASIBLE:
             assert violation(rows, 1.5, tight.x) <= VERIFY_TOL
     assert decide(rows, 1.5).status == plain.status       # nothing left behind by the tight calls
+
+
+def _pyramid_node():
+    """rows and mu of a plug3d 2 x 4 tree node (1 deg taper, 1e-6 above its mu^c) that every
+    Clarabel attempt leaves undecided and the 16-facet inscribed pyramid decides feasible."""
+    from hpcwedge.contact.build import contact_problem
+    from hpcwedge.patterns.tree import Subtree
+    from hpcwedge.scene.parse import parse_scene
+    mu = math.tan(math.radians(1.0)) * (1 + 1e-6)
+    prob = contact_problem(parse_scene({"name": "p", "dim": 3, "friction": {"mu": [mu]},
+                                        "model": {"kind": "plug3d", "levels": 2, "ring": 4, "taper_deg": 1.0}}))
+    zu, zr = Subtree(6, 214, 8).masks(prob.m)
+    return pattern_rows(parametrize(prob), prob.m, zu, zr), mu
+
+
+def test_the_pyramid_lps_stop_at_their_budget(monkeypatch):
+    """PYRAMID_BUDGET_S bounds the fallback (at m = 64 one 256-facet pyramid LP ran for minutes):
+    with the budget spent the decision is UNDECIDED (the caller keeps the subtree) without an
+    LP, counted; within it the pyramid decides. lp_feasible past its deadline runs no HiGHS."""
+    import hpcwedge.solvers.feasibility as feasibility
+    rows, mu = _pyramid_node()
+    counts = {}
+    assert decide(rows, mu, counts=counts).status == Status.FEASIBLE
+    assert counts["pyramid_inner_feasible"] == 1
+    monkeypatch.setattr(feasibility, "PYRAMID_BUDGET_S", 0.0)
+    counts = {}
+    assert decide(rows, mu, counts=counts).status == Status.UNDECIDED
+    assert counts["pyramid_budget_spent"] == 1 and "lp_calls" not in counts
+    inner = pyramid_rows(rows, 16, inner=True)
+    assert lp_feasible(inner, mu, deadline=time.monotonic() - 1.0) == (Status.UNDECIDED, None)
+    assert lp_feasible(inner, mu, deadline=time.monotonic() + 60.0)[0] == Status.FEASIBLE
