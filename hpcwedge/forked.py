@@ -39,12 +39,18 @@ def can_fork() -> bool:
 def in_child(fn, *args, what: str = "a call", **kwargs):
     """fn(*args, **kwargs) in a forked child while this process waits (module doc); fn's
     exception is raised here. RuntimeError naming `what` if the child ends without an answer
-    (killed, out of memory). Call only where `can_fork()`."""
+    (killed, out of memory). Where the fork itself fails (OSError: no memory or process slot
+    for it), the call runs here. Call only where `can_fork()`."""
     ctx = multiprocessing.get_context("fork")
     recv, send = ctx.Pipe(duplex=False)
     child = ctx.Process(target=_child, args=(send, os.getpid(), fn, args, kwargs), daemon=True,
                         name="hpcwedge-forked")
-    child.start()
+    try:
+        child.start()
+    except OSError:                              # no fork to be had (memory, process limits)
+        recv.close()
+        send.close()
+        return fn(*args, **kwargs)
     send.close()
     try:
         while not recv.poll(WAIT_STEP_S):

@@ -71,6 +71,14 @@ def test_no_fork_once_mpi_or_petsc_is_started(monkeypatch):
             assert not forked.can_fork()
 
 
+def test_a_fork_that_fails_runs_the_call_here(monkeypatch):
+    """No memory or process slot for the child (fork's OSError): the call runs in this process."""
+    def no_fork(self):
+        raise OSError(12, "Cannot allocate memory")
+    monkeypatch.setattr(multiprocessing.get_context("fork").Process, "start", no_fork)
+    assert forked.in_child(os.getpid) == os.getpid()
+
+
 def test_the_child_ignores_the_runs_signals_and_dies_with_its_parent():
     """SIGTERM to the child's process group (SLURM signals every process of a step) is the
     parent's to answer; a kill -9 of the parent takes the child with it (PR_SET_PDEATHSIG)."""
