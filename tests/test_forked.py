@@ -121,3 +121,71 @@ def test_a_signal_is_served_while_the_child_works():
         p.kill()
         p.wait()
 
+
+
+# in_spawned: the same contract through a fresh interpreter (the master of an MPI run)
+
+def test_in_spawned_returns_and_raises_what_fn_does():
+    a = np.random.default_rng(1).standard_normal((300, 200))
+    assert forked.in_spawned(np.multiply, a, 3.0).tobytes() == np.multiply(a, 3.0).tobytes()
+    assert forked.in_spawned(os.getppid) == os.getpid()
+    with pytest.raises(ZeroDivisionError):
+        forked.in_spawned(divmod, 1, 0)
+    with pytest.raises(RuntimeError, match="^_Unpicklable: lost$"):
+        forked.in_spawned(_raise_unpicklable)
+    with pytest.raises(RuntimeError, match=r"^condense: its child process ended without an answer \(exit status 3\)$"):
+        forked.in_spawned(os._exit, 3, what="condense")
+
+
+def test_a_spawned_child_is_no_rank_and_has_this_processs_blas_threads(monkeypatch):
+    """The MPI launcher's variables stay behind (the child's PETSc must not join the run's MPI
+    job); the BLAS thread variables carry this process's limit (threadpoolctl), so the child
+    computes the same bits."""
+    from threadpoolctl import threadpool_limits
+    monkeypatch.setenv("OMPI_COMM_WORLD_RANK", "0")
+    monkeypatch.setenv("PMIX_RANK", "0")
+    monkeypatch.setenv("HPCWEDGE_KEEP", "yes")
+    with threadpool_limits(limits=1):
+        got = forked.in_spawned(_getenvs, ["OMPI_COMM_WORLD_RANK", "PMIX_RANK", "HPCWEDGE_KEEP",
+                                           "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"])
+    assert got == [None, None, "yes", "1", "1"]
+
+
+def _raise_unpicklable():
+    raise _Unpicklable("lost")
+
+
+def _getenvs(names):
+    return [os.environ.get(n) for n in names]
+
+
+def test_a_spawned_child_is_given_up_on_a_poll_and_served_signals_reach_the_caller(monkeypatch):
+    """A poll that raises ends the wait within a step or two and kills the child; a real SIGTERM
+    to the caller is served within 2 s while the child sleeps, and the child is gone."""
+    t0 = time.monotonic()
+
+    def poll():
+        if time.monotonic() - t0 > 0.5:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(dense, "_polls", [poll])
+    with pytest.raises(KeyboardInterrupt):
+        forked.in_spawned(time.sleep, 60.0)
+    assert time.monotonic() - t0 < 5.0
+    p = python_child(stopped_by_sigterm("import time\nfrom hpcwedge import forked", "forked.in_spawned(time.sleep, 60.0)"))
+    try:
+        assert p.stdout.readline().strip() == "ready"
+        deadline = time.monotonic() + 30
+        while not children(p.pid) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        kids = children(p.pid)
+        assert len(kids) == 1
+        time.sleep(0.5)
+        os.kill(kids[0], signal.SIGTERM)             # ignored by the child: the caller answers
+        start = time.monotonic()
+        p.send_signal(signal.SIGTERM)
+        assert p.wait(timeout=30) == 75
+        assert time.monotonic() - start < 2.0
+        assert all_gone(kids)
+    finally:
+        p.kill()
+        p.wait()

@@ -1,8 +1,8 @@
 """Static condensation (Schur complement) of a Model onto its contact DOFs, in local frames.
 
 K_ii is factored by contact/factor.py (PETSc). `condense` is serial (PETSc.COMM_SELF; from
-CHILD_MIN_DOFS interior DOFs on in a forked child process, so that a signal is served while
-PETSc factors);
+CHILD_MIN_DOFS interior DOFs on in a child process, so that a signal is served while PETSc
+factors);
 `condense_distributed` is the same condensation collective over an MPI communicator
 (K_ii an MPIAIJ matrix, rows split between the ranks, each rank assembling only its own rows
 of a continuum model, factored by parallel MUMPS).
@@ -279,15 +279,14 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
 
 #: contact columns per MatMatSolve (bounds the two dense n_i x COLUMN_BLOCK work arrays)
 COLUMN_BLOCK = 64
-#: from this many interior DOFs on, a serial condensation factors K_ii in a forked child
-#: process (`_here_or_forked`; block2d refine 40, 33,000 DOFs: ~0.5 s to factor, ~0.05 s to fork)
+#: from this many interior DOFs on, a serial condensation factors K_ii in a child process (`_here_or_forked`; block2d refine 40, 33,000 DOFs: ~0.5 s to factor, ~0.05 s to fork)
 CHILD_MIN_DOFS = 20_000
 def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solver: str | None,
                      comm=None, symmetrise: bool = False) -> np.ndarray:
     """K_ci K_ii^-1 K_ic (p, p), global node-major contact DOFs, on every rank of `comm`.
     Kic (n_loc, p), Kii (n_loc, n_i): this rank's rows (all rows serially); symmetrise: factor
     0.5 (K_ii + K_ii^T) (see factor.factored). Serially from CHILD_MIN_DOFS interior DOFs on, in a
-    forked child process (`_here_or_forked`)."""
+    child process (`_here_or_forked`)."""
     if comm is None:
         return _here_or_forked(_kci_kii_inv_kic_here, Kic, Kii, model, solver, None, symmetrise)
     return _kci_kii_inv_kic_here(Kic, Kii, model, solver, comm, symmetrise)
@@ -295,11 +294,14 @@ def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solve
 
 def _here_or_forked(fn, a, Kii, *args):
     """fn(a, Kii, *args) in this process, or for a K_ii of CHILD_MIN_DOFS rows or more in a
-    forked child (forked.in_child: PETSc's factorisation keeps the interpreter's lock, so a
-    signal waited for it; there it is served within a step), where a fork is safe (no MPI or
-    PETSc started here: a serial run condenses before anything else). The same bits either way."""
+    child process (PETSc's factorisation keeps the interpreter's lock, so a signal waited for
+    it; there it is served within a step): forked where that is safe (forked.in_child: no MPI
+    or PETSc started here, as in a serial run, which condenses before anything else), else a
+    fresh interpreter (forked.in_spawned: the master of an MPI run). The same bits either way."""
     if Kii.shape[0] >= CHILD_MIN_DOFS and forked.can_fork():
         return forked.in_child(fn, a, Kii, *args, what="condense")
+    if Kii.shape[0] >= CHILD_MIN_DOFS and forked.can_spawn():
+        return forked.in_spawned(fn, a, Kii, *args, what="condense")
     return fn(a, Kii, *args)
 
 

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 from model_cases import make_model
-from mpi_helpers import MPIRUN, ROOT, all_gone, children, env, needs_mpirun
+from mpi_helpers import MPIRUN, ROOT, alive, all_gone, children, env, launch, needs_mpirun, rank_pids
 
 from hpcwedge.contact.condense import condense, condense_distributed, schur_dense, split_dofs
 from hpcwedge.models import block2d, plug2d, plug3d, truss_model, vgroove_bar
@@ -314,9 +314,10 @@ def test_serial_petsc_starts_mpi_with_the_ob1_layer_unless_the_user_chose(user, 
     assert size == pytest.approx(float(abs(K).sum()), rel=1e-12)
 
 
-def test_a_forked_condensation_gives_the_bits_of_one_made_here_and_its_errors():
+def test_a_condensation_in_a_child_gives_the_bits_of_one_made_here_and_its_errors():
     """Above CHILD_MIN_DOFS a serial process that has not started PETSc factors K_ii in a forked
-    child (forked.in_child): K_local bit for bit as condensed in the process itself, and
+    child (forked.in_child), one that has (an MPI run's master) in a spawned interpreter
+    (forked.in_spawned): K_local bit for bit as condensed in the process itself, and
     interior_response too; a singular K_ii's error comes back the same. Run in a fresh
     interpreter, as a serial run is (the suite's own process has PETSc started)."""
     code = """
@@ -327,8 +328,15 @@ from hpcwedge.models import block2d, plug3d
 m = block2d(3, 2, 6)
 uc = np.linspace(-1.0, 1.0, 2 * len(m.contact_nodes))
 out = []
-for limit in (0, 10 ** 9):              # in children (PETSc not started here), then here
+routes = []
+spawned = C.forked.in_spawned
+def counted(*args, **kwargs):
+    routes[-1] += 1
+    return spawned(*args, **kwargs)
+C.forked.in_spawned = counted
+for limit in (0, 10 ** 9, 0):           # forked (PETSc not started here), here, spawned
     C.CHILD_MIN_DOFS = limit
+    routes.append(0)
     K, N = C.condense(m)
     u = C.interior_response(m, uc)
     try:
@@ -337,24 +345,31 @@ for limit in (0, 10 ** 9):              # in children (PETSc not started here), 
     except ValueError as e:
         err = str(e)
     out.append([K.tobytes().hex(), N.tobytes().hex(), u.tobytes().hex(), err, "petsc4py.PETSc" in sys.modules])
-print(json.dumps(out))
+print(json.dumps([out, routes]))
 """
     out = subprocess.run([sys.executable, "-c", code], env=env(), capture_output=True, text=True, timeout=300,
                          stdin=subprocess.DEVNULL)
     assert out.returncode == 0, out.stderr
-    forked, here = json.loads(out.stdout.strip().splitlines()[-1])
-    assert not forked[-1] and here[-1]     # the first calls ran in children, the last ones here
-    assert forked[:4] == here[:4]
+    (forked, here, spawned), routes = json.loads(out.stdout.strip().splitlines()[-1])
+    assert not forked[-1] and here[-1]     # the first calls ran in forked children, then here
+    assert routes == [0, 0, 3]             # the last ones in spawned children
+    assert forked[:4] == here[:4] == spawned[:4]
     assert forked[3].startswith("condense: the stiffness of the non-contact DOFs (K_ii) is singular")
+
+
+def _big_block2d(tmp_path):
+    """A block2d of 290,000 DOFs (seconds of condensation; below run.condense's distributed size)."""
+    scene = tmp_path / "big.toml"
+    scene.write_text('name = "big"\ndim = 2\n[model]\nkind = "block2d"\nrows = 5\ncols = 2\nrefine = 120\n'
+                     '[friction]\nmu = [0.65]\n[compute]\nmu_c = "none"\n')
+    return scene
 
 
 def test_sigterm_during_a_long_condensation_ends_the_run_within_2_s(tmp_path):
     """`hpcwedge run` of a block2d of 290,000 DOFs, signalled while the forked child factors K_ii
     (seconds of PETSc that keep the interpreter's lock: before, a SIGTERM waited up to 30 s for
     them): exit 75 within 2 s with its one line, and the child gone."""
-    scene = tmp_path / "big.toml"
-    scene.write_text('name = "big"\ndim = 2\n[model]\nkind = "block2d"\nrows = 5\ncols = 2\nrefine = 120\n'
-                     '[friction]\nmu = [0.65]\n[compute]\nmu_c = "none"\n')
+    scene = _big_block2d(tmp_path)
     p = subprocess.Popen([sys.executable, "-m", "hpcwedge", "run", str(scene), "-o", str(tmp_path / "r.h5")],
                          env=env(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                          text=True)
@@ -377,3 +392,42 @@ def test_sigterm_during_a_long_condensation_ends_the_run_within_2_s(tmp_path):
         p.kill()
         p.wait()
 
+
+@pytest.mark.mpi
+@needs_mpirun
+def test_sigterm_while_an_mpi_master_condenses_ends_it_within_2_s(tmp_path):
+    """mpirun -n 2 on the same block2d: the master condenses alone, in a spawned interpreter
+    (MPI and PETSc are started in it, so no fork); SIGTERM to every rank (as SLURM sends it)
+    once that child runs: the master exits within 2 s (before, it waited for PETSc: 8 s
+    measured on refine 160), mpirun exits 75, the master's one line, no traceback, no child."""
+    p = launch(2, "run", str(_big_block2d(tmp_path)), "-o", str(tmp_path / "r.h5"))
+    try:
+        ranks = rank_pids(p.pid, 2)
+        deadline = time.monotonic() + 120
+        kids = []
+        while not kids and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+            kids = [k for k in children(ranks[0]) if _is_spawned_child(k)]
+        assert kids, "no spawned child seen while the master condensed"
+        start = time.monotonic()
+        for pid in ranks.values():
+            os.kill(pid, signal.SIGTERM)
+        while alive(ranks[0]) and time.monotonic() - start < 60:
+            time.sleep(0.01)
+        assert time.monotonic() - start < 2.0
+        _, err = p.communicate(timeout=60)
+        assert p.returncode == 75, err
+        assert "[hpcwedge] SIGTERM: checkpoint written to" in err, err
+        assert "Traceback" not in err, err
+        assert all_gone(kids)
+    finally:
+        p.kill()
+        p.wait()
+
+
+def _is_spawned_child(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return b"hpcwedge.forked" in f.read()
+    except OSError:
+        return False
