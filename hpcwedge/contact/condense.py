@@ -225,7 +225,7 @@ def schur_dense(model: Model) -> tuple[np.ndarray, np.ndarray]:
     A = Kii.toarray()
     lam = np.linalg.eigvalsh(0.5 * (A + A.T))
     if lam[0] <= 1e-14 * lam[-1]:
-        raise singular(model, f"smallest/largest eigenvalue {lam[0] / lam[-1]:.2e}")
+        raise singular(f"smallest/largest eigenvalue {lam[0] / lam[-1]:.2e}")
     X = np.linalg.solve(A, Kic.toarray())
     return to_local(model, sp_, Kcc - Kic.T.toarray() @ X)
 
@@ -274,22 +274,24 @@ def condense_distributed(model: Model, comm=None, solver: str | None = None) -> 
         Kcc, Kic, Kii, symmetrise = _distributed_blocks(model, sp_, lo, hi)
     if n == 0:
         return to_local(model, sp_, Kcc)
-    return to_local(model, sp_, Kcc - _kci_kii_inv_kic(Kic, Kii, model, solver, comm, symmetrise))
+    return to_local(model, sp_, Kcc - _kci_kii_inv_kic(Kic, Kii, solver, comm, symmetrise))
 
 
 #: contact columns per MatMatSolve (bounds the two dense n_i x COLUMN_BLOCK work arrays)
 COLUMN_BLOCK = 64
-#: from this many interior DOFs on, a serial condensation factors K_ii in a child process (`_here_or_forked`; block2d refine 40, 33,000 DOFs: ~0.5 s to factor, ~0.05 s to fork)
+#: from this many interior DOFs on, a condensation on one process factors K_ii in a child
+#: process (`_here_or_forked`; block2d refine 40, 33,000 DOFs: ~0.5 s to factor, ~0.05 s to
+#: fork, ~1 s to start an interpreter)
 CHILD_MIN_DOFS = 20_000
-def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solver: str | None,
+def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, solver: str | None,
                      comm=None, symmetrise: bool = False) -> np.ndarray:
     """K_ci K_ii^-1 K_ic (p, p), global node-major contact DOFs, on every rank of `comm`.
     Kic (n_loc, p), Kii (n_loc, n_i): this rank's rows (all rows serially); symmetrise: factor
     0.5 (K_ii + K_ii^T) (see factor.factored). Serially from CHILD_MIN_DOFS interior DOFs on, in a
     child process (`_here_or_forked`)."""
     if comm is None:
-        return _here_or_forked(_kci_kii_inv_kic_here, Kic, Kii, model, solver, None, symmetrise)
-    return _kci_kii_inv_kic_here(Kic, Kii, model, solver, comm, symmetrise)
+        return _here_or_forked(_kci_kii_inv_kic_here, Kic, Kii, solver, None, symmetrise)
+    return _kci_kii_inv_kic_here(Kic, Kii, solver, comm, symmetrise)
 
 
 def _here_or_forked(fn, a, Kii, *args):
@@ -305,12 +307,12 @@ def _here_or_forked(fn, a, Kii, *args):
     return fn(a, Kii, *args)
 
 
-def _kci_kii_inv_kic_here(Kic: sp.csr_matrix, Kii: sp.csr_matrix, model: Model, solver: str | None,
+def _kci_kii_inv_kic_here(Kic: sp.csr_matrix, Kii: sp.csr_matrix, solver: str | None,
                           comm=None, symmetrise: bool = False) -> np.ndarray:
     """`_kci_kii_inv_kic` in this process."""
     p = Kic.shape[1]
     probe = Kic[:, 0].toarray().ravel()
-    with factored(Kii, model, solver, probe=probe, comm=comm, symmetrise=symmetrise) as solve:
+    with factored(Kii, solver, probe=probe, comm=comm, symmetrise=symmetrise) as solve:
         P = np.zeros((p, p))
         KicT = Kic.T.tocsr()
         for lo in range(0, p, COLUMN_BLOCK):
@@ -335,12 +337,12 @@ def interior_response(model: Model, uc: np.ndarray, solver: str | None = None) -
     _, Kic, Kii = _blocks(model, sp_)
     U = np.asarray(uc, dtype=float)
     B = -(Kic @ U.reshape(len(sp_.contact), -1))
-    X = B if sp_.interior.size == 0 else _here_or_forked(_kii_inv, B, Kii, model, solver)
+    X = B if sp_.interior.size == 0 else _here_or_forked(_kii_inv, B, Kii, solver)
     return X.ravel() if U.ndim == 1 else X
 
 
-def _kii_inv(B: np.ndarray, Kii: sp.csr_matrix, model: Model, solver: str | None) -> np.ndarray:
+def _kii_inv(B: np.ndarray, Kii: sp.csr_matrix, solver: str | None) -> np.ndarray:
     """K_ii^-1 B (n_i, q), B (n_i, q) dense, serially."""
-    with factored(Kii, model, solver, probe=B[:, 0]) as solve:
+    with factored(Kii, solver, probe=B[:, 0]) as solve:
         return np.hstack([solve(B[:, lo:lo + COLUMN_BLOCK]) for lo in range(0, B.shape[1], COLUMN_BLOCK)])
 

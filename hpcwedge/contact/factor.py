@@ -11,7 +11,6 @@ from contextlib import contextmanager
 import numpy as np
 import scipy.sparse as sp
 
-from hpcwedge.models.record import Model
 
 #: a pivot |p| <= NULL_PIVOT_RTOL * ||A|| (MUMPS, after scaling) or <= NULL_PIVOT_RTOL * row sum
 #: (PETSc native LU) is taken as zero: K_ii singular. A K_ii that ill-conditioned would leave
@@ -21,7 +20,7 @@ NULL_PIVOT_RTOL = 1e-12
 _ZERO_PIVOT_ERRORS = {71, 73, 81}   # MAT_LU_ZRPVT, ARG_WRONGSTATE (missing diagonal), MAT_CH_ZRPVT
 
 
-def singular(model: Model, detail: str) -> ValueError:
+def singular(detail: str) -> ValueError:
     """The error of a singular K_ii (a mechanism apart from the contact nodes); detail: how it showed."""
     return ValueError(f"condense: the stiffness of the non-contact DOFs (K_ii) is singular ({detail}): "
                       "the body is a mechanism apart from its contact nodes (add bars/elements or supports)")
@@ -59,7 +58,7 @@ def solver_name() -> str:
 
 
 @contextmanager
-def factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.ndarray, comm=None,
+def factored(Kii: sp.csr_matrix, solver: str | None, probe: np.ndarray, comm=None,
               symmetrise: bool = False):
     """Factor K_ii once with PETSc (MUMPS or native LU, see condense.condense) and yield
     solve(B (n_loc, q) dense) -> the same rows of K_ii^-1 B. Collective over the mpi4py
@@ -79,8 +78,8 @@ def factored(Kii: sp.csr_matrix, model: Model, solver: str | None, probe: np.nda
     objs = [A, ksp]
     try:
         pc, use_mumps = _choose_factorisation(PETSc, ksp, A, solver)
-        F = _factorise(PETSc, ksp, pc, use_mumps, model, n)
-        _solve_probe(ksp, A, probe, model, objs)
+        F = _factorise(PETSc, ksp, pc, use_mumps, n)
+        _solve_probe(ksp, A, probe, objs)
         yield _dense_solver(PETSc, F, nloc, n, comm)
     finally:
         for o in objs:
@@ -130,31 +129,31 @@ def _choose_factorisation(PETSc, ksp, A, solver: str | None):
     return pc, use_mumps
 
 
-def _factorise(PETSc, ksp, pc, use_mumps: bool, model: Model, n: int):
+def _factorise(PETSc, ksp, pc, use_mumps: bool, n: int):
     """Factor K_ii (ksp.setUp) and return the factor; ValueError if K_ii is singular (a zero
     or null pivot), RuntimeError for another PETSc or MUMPS failure."""
     try:
         ksp.setUp()
     except PETSc.Error as e:
         if e.ierr in _ZERO_PIVOT_ERRORS:
-            raise singular(model, f"PETSc error {e.ierr}: zero pivot or empty row in the factorisation") from None
+            raise singular(f"PETSc error {e.ierr}: zero pivot or empty row in the factorisation") from None
         raise RuntimeError(f"condense: PETSc error {e.ierr} while factoring K_ii ({n} DOFs)") from None
     F = pc.getFactorMatrix()
     if use_mumps:
         info = F.getMumpsInfog(1)
         if info == -10:
-            raise singular(model, "MUMPS INFOG(1) = -10")
+            raise singular("MUMPS INFOG(1) = -10")
         if info == -2 and F.getMumpsInfog(2) == 0:
-            raise singular(model, "no stiffness at all, MUMPS INFOG(1) = -2")
+            raise singular("no stiffness at all, MUMPS INFOG(1) = -2")
         if info < 0:
             raise RuntimeError(f"condense: MUMPS failed, INFOG(1) = {info}, INFOG(2) = {F.getMumpsInfog(2)}")
         nnull = F.getMumpsInfog(28)
         if nnull > 0:
-            raise singular(model, f"{nnull} null pivot(s) found by MUMPS")
+            raise singular(f"{nnull} null pivot(s) found by MUMPS")
     return F
 
 
-def _solve_probe(ksp, A, probe: np.ndarray, model: Model, objs: list) -> None:
+def _solve_probe(ksp, A, probe: np.ndarray, objs: list) -> None:
     """Solve A x = probe once; ValueError (singular K_ii) if the factorisation failed. Its two
     vectors are appended to `objs`, for the caller to destroy."""
     # petsc4py 3.18 has no PCGetFailedReason: a failed factorisation shows as a KSP
@@ -165,7 +164,7 @@ def _solve_probe(ksp, A, probe: np.ndarray, model: Model, objs: list) -> None:
     ksp.solve(b, x)
     reason = ksp.getConvergedReason()
     if reason < 0:
-        raise singular(model, f"factorisation failed, KSP reason {reason}")
+        raise singular(f"factorisation failed, KSP reason {reason}")
 
 
 def _dense_solver(PETSc, F, nloc: int, n: int, comm):
