@@ -1,15 +1,27 @@
 """K_ii factored once with PETSc (MUMPS or its native LU) and solved for dense right-hand sides
 (`factored`): the only module that imports petsc4py (`petsc`). condense.py forms the Schur
-complement with it; a serial run's factorisation runs in a forked child (condense's
-`CHILD_MIN_DOFS`), as PETSc keeps the interpreter's lock for the whole call.
+complement with it.
+
+petsc4py keeps the interpreter's lock for a whole PETSc call, so no signal handler runs until
+it returns. A factorisation on one process runs in a child process (condense's
+`CHILD_MIN_DOFS`). A collective one (over an MPI communicator) cannot: there the two long
+calls, KSPSetUp (the factorisation) and MatMatSolve, are made through ctypes, which lets go of
+the lock, in a thread while this one waits in steps (dense.interruptible: `_released`). A call
+given up on runs on in the background with its objects kept alive, and is never destroyed
+under it; the run that gave it up is ending (an MPI run's master aborts the job).
 """
 from __future__ import annotations
 
+import ctypes
+import functools
 import os
+import sys
 from contextlib import contextmanager
 
 import numpy as np
 import scipy.sparse as sp
+
+from hpcwedge import dense
 
 
 #: a pivot |p| <= NULL_PIVOT_RTOL * ||A|| (MUMPS, after scaling) or <= NULL_PIVOT_RTOL * row sum
@@ -29,14 +41,25 @@ def singular(detail: str) -> ValueError:
 def petsc():
     """petsc4py's PETSc module, initialised for this process on first use (without PETSc's
     signal handlers; under mpirun on this rank alone)."""
-    import sys
-
     import petsc4py
     # -no_signal_handler: PETSc's handler would take SIGPIPE (and SIGHUP, SIGSEGV, ...) from
     # Python: a progress reader gone (`hpcwedge run ... 2>&1 | head`) ended the run with
     # PETSc's status 59, no result and the output lock left behind; the signals a run
     # answers (SIGTERM, SIGUSR1, SIGINT) are the engine's. The command line is not PETSc's.
     args = ["-no_signal_handler"]
+    # petsc4py routes PETSc's printing through Python when sys.stdout or sys.stderr is not
+    # the original stream at its start (the command line wraps stderr; a worker's stdout is
+    # /dev/null), without taking the interpreter's lock: a `_released` call that printed
+    # would crash. Started with the original streams, PETSc writes to the file descriptors.
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = sys.__stdout__, sys.__stderr__
+    try:
+        return _initialised(petsc4py, args)
+    finally:
+        sys.stdout, sys.stderr = saved
+
+
+def _initialised(petsc4py, args: list):
     if "mpi4py.MPI" in sys.modules:
         # under mpirun only the master condenses: PETSc's world must be this rank
         # alone (PetscInitialize is collective over its world)
@@ -76,14 +99,59 @@ def factored(Kii: sp.csr_matrix, solver: str | None, probe: np.ndarray, comm=Non
     A = petsc_matrix(PETSc, Kii, comm, symmetrise)
     ksp = PETSc.KSP().create(comm=comm)
     objs = [A, ksp]
+    released = comm is not PETSc.COMM_SELF and _library() is not None
     try:
         pc, use_mumps = _choose_factorisation(PETSc, ksp, A, solver)
-        F = _factorise(PETSc, ksp, pc, use_mumps, n)
+        F = _factorise(PETSc, ksp, pc, use_mumps, n, released)
         _solve_probe(ksp, A, probe, objs)
-        yield _dense_solver(PETSc, F, nloc, n, comm)
+        yield _dense_solver(PETSc, F, nloc, n, comm, released)
     finally:
-        for o in objs:
+        _destroy(objs)
+
+
+#: PETSc objects of a `_released` call given up on while it still runs: never destroyed
+_IN_USE: list = []
+
+
+def _destroy(objs: list) -> None:
+    """Destroy the PETSc objects, but none that a released call given up on still uses."""
+    for o in objs:
+        if not any(o is u for u in _IN_USE):
             o.destroy()
+
+
+@functools.cache
+def _library():
+    """The PETSc shared library petsc4py loaded (ctypes), or None where it cannot be found
+    (not Linux: then every call is made through petsc4py)."""
+    try:
+        with open("/proc/self/maps") as f:
+            paths = {line.split()[-1] for line in f if "/libpetsc" in line}
+    except OSError:
+        return None
+    for path in sorted(paths):
+        if ".so" in os.path.basename(path):
+            return ctypes.CDLL(path)
+    return None
+
+
+def _released(name: str, *objects) -> int:
+    """PETSc's C function `name` on the objects (petsc4py objects, passed by handle), in a thread
+    while this one waits in steps serving signals (module doc). Returns PETSc's error code."""
+    fn = getattr(_library(), name)
+    fn.restype = ctypes.c_int
+    fn.argtypes = [ctypes.c_void_p] * len(objects)
+    finished = []
+
+    def call() -> int:
+        ierr = fn(*(o.handle for o in objects))
+        finished.append(True)
+        return ierr
+    try:
+        return dense.interruptible(call)
+    finally:
+        if not finished:
+            _IN_USE.extend(objects)
 
 
 def petsc_matrix(PETSc, Kii: sp.csr_matrix, comm, symmetrise: bool):
@@ -129,15 +197,21 @@ def _choose_factorisation(PETSc, ksp, A, solver: str | None):
     return pc, use_mumps
 
 
-def _factorise(PETSc, ksp, pc, use_mumps: bool, n: int):
-    """Factor K_ii (ksp.setUp) and return the factor; ValueError if K_ii is singular (a zero
-    or null pivot), RuntimeError for another PETSc or MUMPS failure."""
-    try:
-        ksp.setUp()
-    except PETSc.Error as e:
-        if e.ierr in _ZERO_PIVOT_ERRORS:
-            raise singular(f"PETSc error {e.ierr}: zero pivot or empty row in the factorisation") from None
-        raise RuntimeError(f"condense: PETSc error {e.ierr} while factoring K_ii ({n} DOFs)") from None
+def _factorise(PETSc, ksp, pc, use_mumps: bool, n: int, released: bool = False):
+    """Factor K_ii (KSPSetUp; released: through `_released`) and return the factor; ValueError
+    if K_ii is singular (a zero or null pivot), RuntimeError for another PETSc or MUMPS failure."""
+    if released:
+        ierr = _released("KSPSetUp", ksp)
+    else:
+        try:
+            ksp.setUp()
+            ierr = 0
+        except PETSc.Error as e:
+            ierr = e.ierr
+    if ierr in _ZERO_PIVOT_ERRORS:
+        raise singular(f"PETSc error {ierr}: zero pivot or empty row in the factorisation")
+    if ierr:
+        raise RuntimeError(f"condense: PETSc error {ierr} while factoring K_ii ({n} DOFs)")
     F = pc.getFactorMatrix()
     if use_mumps:
         info = F.getMumpsInfog(1)
@@ -167,8 +241,9 @@ def _solve_probe(ksp, A, probe: np.ndarray, objs: list) -> None:
         raise singular(f"factorisation failed, KSP reason {reason}")
 
 
-def _dense_solver(PETSc, F, nloc: int, n: int, comm):
-    """solve(B (n_loc, q) dense) -> this rank's rows of K_ii^-1 B, by MatMatSolve with the factor F."""
+def _dense_solver(PETSc, F, nloc: int, n: int, comm, released: bool = False):
+    """solve(B (n_loc, q) dense) -> this rank's rows of K_ii^-1 B, by MatMatSolve with the factor
+    F (released: through `_released`)."""
     def solve(B: np.ndarray) -> np.ndarray:
         q = B.shape[1]
         Bm = PETSc.Mat().createDense(((nloc, n), (None, q)), array=np.asfortranarray(B, dtype=float),
@@ -178,10 +253,12 @@ def _dense_solver(PETSc, F, nloc: int, n: int, comm):
             Xm.setUp()
             Bm.assemble()
             Xm.assemble()
-            F.matSolve(Bm, Xm)
+            if not released:
+                F.matSolve(Bm, Xm)
+            elif ierr := _released("MatMatSolve", F, Bm, Xm):
+                raise RuntimeError(f"condense: PETSc error {ierr} while solving with the factor of K_ii")
             return np.array(Xm.getDenseArray())
         finally:
-            Bm.destroy()
-            Xm.destroy()
+            _destroy([Bm, Xm])
 
     return solve

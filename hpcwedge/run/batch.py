@@ -60,7 +60,8 @@ def run_batch(scene_path: str, output: str, resume: bool = False, quiet: bool = 
     from the list) once the handlers are in (replay_early)."""
     comm = world()
     if comm is not None and comm.rank != 0:
-        sys.stdout = open(os.devnull, "w")      # workers print nothing; the master reports
+        with open(os.devnull, "w") as null:     # workers print nothing; the master reports
+            os.dup2(null.fileno(), 1)
         condense_on_ranks(None, comm)
         serve(comm, WORKER_MODULES)
         return 0
