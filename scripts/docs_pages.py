@@ -582,18 +582,20 @@ def bench_global_scale() -> str:
 
 
 def bench_stop_latency() -> str:
-    """results/bench_stop_latency.json: SIGTERM at N moments of each serial global run
-    (scripts/bench_stop_latency.py): the seconds to the exit, the exits and the resume."""
+    """results/bench_stop_latency.json: SIGTERM at N moments of each global run or long
+    condensation, serial or under mpirun (scripts/bench_stop_latency.py): the seconds to the
+    exit, the exits and the resume."""
     recs = _records("bench_stop_latency.json")
     if recs is None:
         return not_measured("bench_stop_latency.json")
     rows = []
     for r in recs:
-        resumed = "–" if r.get("resume_same") is None else "same mu^c" if r["resume_same"] else "**differs**"
+        resumed = "–" if r.get("resume_same") is None else "same answer" if r["resume_same"] else "**differs**"
         served = f"{_g(r, 'exit_75')} / {_g(r, 'exit_0')}" + ("" if r.get("all_served") else " (**not all served**)")
-        rows.append([r.get("case", "–"), _g(r, "full_s"), f"{len(r.get('stops') or []):,}", served,
+        rows.append([r.get("case", "–"), _g(r, "ranks") if "ranks" in r else "1", _g(r, "full_s"),
+                     f"{len(r.get('stops') or []):,}", served,
                      _g(r, "median_latency_s"), _g(r, "worst_latency_s"), _g(r, "over_target"), resumed])
-    return table(["case", "run s", "stops", "exit 75 / 0 (finished)", "median s to exit", "worst s to exit",
+    return table(["case", "ranks", "run s", "stops", "exit 75 / 0 (finished)", "median s to exit", "worst s to exit",
                   "over 2 s", "resumed"], rows)
 
 
