@@ -37,7 +37,7 @@ from hpcwedge.parallel.worker import serve
 from hpcwedge.progress import Progress
 from hpcwedge.results.hdf5 import result_state, write_result
 from hpcwedge.results.record import Result
-from hpcwedge.run.pipeline import run_scene
+from hpcwedge.run.pipeline import noted_condensation, run_scene
 from hpcwedge.run.stages import Condensed
 from hpcwedge.scene.parse import Scene, changed_settings, load_scene
 
@@ -68,7 +68,7 @@ def run_batch(scene_path: str, output: str, resume: bool = False, quiet: bool = 
     return Batch(output, resume, quiet, comm).run(scene_path, [] if early_stops is None else early_stops)
 
 
-def condense_on_ranks(scene: Scene | None, comm) -> Condensed | None:
+def condense_on_ranks(scene: Scene | None, comm, progress: Progress | None = None) -> Condensed | None:
     """The collective start-up of an MPI run, called by every rank before the engine's work:
     the master passes the scene (None: no run, the workers are released), the workers None.
     Every rank builds the model from the scene the master broadcasts and condenses it with
@@ -77,7 +77,8 @@ def condense_on_ranks(scene: Scene | None, comm) -> Condensed | None:
     None (then the pipeline condenses on the master alone, as serially, and reports any error
     in the scene or model there). A singular K_ii is found on every rank alike: SceneError on
     the master, None on the workers. Ranks never wait on each other for ever: a model that
-    fails to build on any rank sends everyone on."""
+    fails to build on any rank sends everyone on. progress (the master's): where the
+    condensation of a large model is announced (pipeline.noted_condensation)."""
     if comm.rank == 0 and scene is not None and (not scene.plan().condense or scene.condense == "serial"):
         scene = None
     scene = comm.bcast(scene, root=0)
@@ -93,7 +94,8 @@ def condense_on_ranks(scene: Scene | None, comm) -> Condensed | None:
     if scene.condense == "auto" and model.n_dofs < DISTRIBUTED_MIN_DOFS:
         return None
     try:
-        problem = contact_problem(scene, model, comm)
+        with noted_condensation(model, progress, f", over {comm.size} ranks"):
+            problem = contact_problem(scene, model, comm)
     except UserError:
         if comm.rank == 0:
             raise
@@ -195,7 +197,7 @@ class Batch:
         written), the pipeline, the result written, the checkpoint removed."""
         engine, condensed = self.engine, None
         if engine.comm is not None:
-            condensed = condense_on_ranks(scene, engine.comm)
+            condensed = condense_on_ranks(scene, engine.comm, self.progress)
             engine.serving = True                # the workers have gone on to serve tasks
         result = run_scene(scene, self.progress, engine=engine, condensed=condensed)
         try:

@@ -21,6 +21,8 @@ one face of a few branching nodes, at one mu).
 """
 from __future__ import annotations
 
+import contextlib
+
 import time
 from dataclasses import replace
 from functools import cache as once
@@ -114,7 +116,7 @@ def _run_plan(scene: Scene, progress: Progress, engine: Engine, condensed: Conde
     """run_scene under its thread policy: condense, then the plan's steps, their records filed."""
     t0 = time.perf_counter()
     plan = scene.plan()
-    condensed = condensed or condense(scene)
+    condensed = condensed or condense(scene, progress)
     result = Result(scene=scene, m=condensed.problem.m, runs=[Run(mu=mu) for mu in scene.mu],
                     model=condensed.model, problem=condensed.problem,
                     timings={"condense": 0.0, "enumerate": 0.0, "mu_c": 0.0})
@@ -191,16 +193,37 @@ def _context(scene: Scene, plan: Plan, problem: ContactProblem, engine: Engine, 
 
 # ---------------------------------------------------------------------------- the stages
 
-def condense(scene: Scene) -> Condensed:
+#: a model of this many DOFs or more says on stderr when its condensation starts and ends
+#: (block2d refine 120, 290,000 DOFs: ~4 s; refine 160, 514,242 DOFs: 15-30 s on 2 cores)
+NOTE_CONDENSE_MIN_DOFS = 100_000
+
+
+def condense(scene: Scene, progress: Progress | None = None) -> Condensed:
     """The condense stage: the scene's model built and condensed (build.build_model,
     build.contact_problem), or a raw K read (no model, 0 s). (Under mpirun the batch may have
-    condensed it over the ranks first: batch.condense_on_ranks.)"""
+    condensed it over the ranks first: batch.condense_on_ranks.) progress: where a large
+    model's condensation is announced (`noted_condensation`)."""
     if not scene.plan().condense:
         return Condensed(None, contact_problem(scene))
     t = time.perf_counter()
     model = build_model(scene)
-    problem = contact_problem(scene, model)
+    with noted_condensation(model, progress):
+        problem = contact_problem(scene, model)
     return Condensed(model, problem, time.perf_counter() - t)
+
+
+@contextlib.contextmanager
+def noted_condensation(model, progress: Progress | None, where: str = ""):
+    """A line when the condensation of a model of NOTE_CONDENSE_MIN_DOFS DOFs or more starts
+    (its size; where: how it is spread) and one when it ends (its seconds); nothing for smaller
+    models or without progress."""
+    if progress is None or model is None or model.n_dofs < NOTE_CONDENSE_MIN_DOFS:
+        yield
+        return
+    progress.note(f"condense: {model.n_dofs:,} DOFs onto {len(model.contact_nodes):,} contact nodes{where}")
+    t = time.perf_counter()
+    yield
+    progress.note(f"condense: done ({time.perf_counter() - t:.1f} s)")
 
 
 def rays(ctx: Context) -> list[Rays]:

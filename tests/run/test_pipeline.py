@@ -1,6 +1,7 @@
 """Whole pipeline: analytic mu^c of the built-ins, stage skipping, global mu^c
 below the listed mu, and float against exact arithmetic on real models."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -345,6 +346,26 @@ def test_condense_stage_record():
     assert raw.model is None and raw.seconds == 0.0 and raw.problem.m == 1
     built = condense(scene({"kind": "plug2d", "rows": 2}))
     assert built.model is not None and built.problem.m == 4 and built.seconds > 0
+
+
+def test_a_large_models_condensation_is_announced_and_a_small_ones_is_not(monkeypatch):
+    """From NOTE_CONDENSE_MIN_DOFS DOFs on, one line when the condensation starts (DOFs,
+    contact nodes) and one when it ends (seconds); below, none (the same condensation)."""
+    import io
+
+    from hpcwedge.progress import Progress
+    from hpcwedge.run import pipeline
+    body = scene({"kind": "block2d", "rows": 3, "cols": 2, "refine": 2})
+    quiet = io.StringIO()
+    small = pipeline.condense(body, Progress(stream=quiet))
+    assert quiet.getvalue() == ""
+    monkeypatch.setattr(pipeline, "NOTE_CONDENSE_MIN_DOFS", small.model.n_dofs)
+    said = io.StringIO()
+    large = pipeline.condense(body, Progress(stream=said))
+    lines = said.getvalue().splitlines()
+    assert lines[0] == f"[hpcwedge] condense: {small.model.n_dofs:,} DOFs onto {small.problem.m} contact nodes", lines
+    assert re.fullmatch(r"\[hpcwedge\] condense: done \(\d+\.\d s\)", lines[1]) and len(lines) == 2, lines
+    assert np.array_equal(large.problem.K, small.problem.K)
 
 
 def test_stats_keys_of_a_patterns_run():
