@@ -84,10 +84,13 @@ def run(scene: str, out: str, stop_at: float | None = None, resume: bool = False
 
 
 def mu_c_of(path: str) -> float | None:
+    """The result's global mu^c; None when it has none (not computed: stored as NaN)."""
+    import math
+
     import h5py
     with h5py.File(path, "r") as f:
         v = f.attrs.get("mu_c")
-        return None if v is None else float(v)
+        return None if v is None or math.isnan(float(v)) else float(v)
 
 
 def measure(name: str, n_stops: int, folder: str) -> dict:
