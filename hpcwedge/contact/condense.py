@@ -283,6 +283,10 @@ COLUMN_BLOCK = 64
 #: process (`_here_or_forked`; block2d refine 40, 33,000 DOFs: ~0.5 s to factor, ~0.05 s to
 #: fork, ~1 s to start an interpreter)
 CHILD_MIN_DOFS = 20_000
+#: where a fork is not safe (an MPI run's master), from this many interior DOFs on in a spawned
+#: interpreter instead: it costs ~0.6-1.2 s to start (numpy, scipy, PETSc), about what
+#: factoring ~30,000 DOFs takes; from here on the factorisation alone takes ~2 s or more
+SPAWN_MIN_DOFS = 80_000
 def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, solver: str | None,
                      comm=None, symmetrise: bool = False) -> np.ndarray:
     """K_ci K_ii^-1 K_ic (p, p), global node-major contact DOFs, on every rank of `comm`.
@@ -295,14 +299,15 @@ def _kci_kii_inv_kic(Kic: sp.csr_matrix, Kii: sp.csr_matrix, solver: str | None,
 
 
 def _here_or_forked(fn, a, Kii, *args):
-    """fn(a, Kii, *args) in this process, or for a K_ii of CHILD_MIN_DOFS rows or more in a
-    child process (PETSc's factorisation keeps the interpreter's lock, so a signal waited for
-    it; there it is served within a step): forked where that is safe (forked.in_child: no MPI
-    or PETSc started here, as in a serial run, which condenses before anything else), else a
-    fresh interpreter (forked.in_spawned: the master of an MPI run). The same bits either way."""
+    """fn(a, Kii, *args) in this process, or for a large K_ii in a child process (PETSc's
+    factorisation keeps the interpreter's lock, so a signal waited for it; there it is served
+    within a step): forked from CHILD_MIN_DOFS rows on where that is safe (forked.in_child: no
+    MPI or PETSc started here, as in a serial run, which condenses before anything else), else
+    a fresh interpreter from SPAWN_MIN_DOFS rows on (forked.in_spawned: the master of an MPI
+    run). The same bits either way."""
     if Kii.shape[0] >= CHILD_MIN_DOFS and forked.can_fork():
         return forked.in_child(fn, a, Kii, *args, what="condense")
-    if Kii.shape[0] >= CHILD_MIN_DOFS and forked.can_spawn():
+    if Kii.shape[0] >= SPAWN_MIN_DOFS and forked.can_spawn():
         return forked.in_spawned(fn, a, Kii, *args, what="condense")
     return fn(a, Kii, *args)
 

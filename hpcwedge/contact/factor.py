@@ -3,12 +3,13 @@
 complement with it.
 
 petsc4py keeps the interpreter's lock for a whole PETSc call, so no signal handler runs until
-it returns. A factorisation on one process runs in a child process (condense's
-`CHILD_MIN_DOFS`). A collective one (over an MPI communicator) cannot: there the two long
-calls, KSPSetUp (the factorisation) and MatMatSolve, are made through ctypes, which lets go of
-the lock, in a thread while this one waits in steps (dense.interruptible: `_released`). A call
-given up on runs on in the background with its objects kept alive, and is never destroyed
-under it; the run that gave it up is ending (an MPI run's master aborts the job).
+it returns. A large factorisation on one process runs in a child process (condense's
+`CHILD_MIN_DOFS`, `SPAWN_MIN_DOFS`). A collective one (over an MPI communicator) cannot:
+there the two long calls, KSPSetUp (the factorisation) and MatMatSolve, are made through
+ctypes, which lets go of the lock, in a thread while this one waits in steps
+(dense.interruptible: `_released`). A call given up on runs on in the background with its
+objects kept alive, and is never destroyed under it; the run that gave it up is ending (an MPI
+run's master aborts the job).
 """
 from __future__ import annotations
 

@@ -316,7 +316,7 @@ def test_serial_petsc_starts_mpi_with_the_ob1_layer_unless_the_user_chose(user, 
 
 def test_a_condensation_in_a_child_gives_the_bits_of_one_made_here_and_its_errors():
     """Above CHILD_MIN_DOFS a serial process that has not started PETSc factors K_ii in a forked
-    child (forked.in_child), one that has (an MPI run's master) in a spawned interpreter
+    child (forked.in_child), above SPAWN_MIN_DOFS one that has (an MPI run's master) in a spawned interpreter
     (forked.in_spawned): K_local bit for bit as condensed in the process itself, and
     interior_response too; a singular K_ii's error comes back the same. Run in a fresh
     interpreter, as a serial run is (the suite's own process has PETSc started)."""
@@ -335,7 +335,7 @@ def counted(*args, **kwargs):
     return spawned(*args, **kwargs)
 C.forked.in_spawned = counted
 for limit in (0, 10 ** 9, 0):           # forked (PETSc not started here), here, spawned
-    C.CHILD_MIN_DOFS = limit
+    C.CHILD_MIN_DOFS = C.SPAWN_MIN_DOFS = limit
     routes.append(0)
     K, N = C.condense(m)
     u = C.interior_response(m, uc)
