@@ -86,8 +86,10 @@ def in_child(fn, *args, what: str = "a call", **kwargs):
 
 
 def _ended(code: int | None) -> str:
+    """How a child ended, for the error line (a SIGKILL is most often the kernel's, out of memory)."""
     if code is not None and code < 0:
-        return f"killed by {signal.Signals(-code).name}"
+        name = signal.Signals(-code).name
+        return f"killed by {name}" + (", as the kernel does when memory runs out" if name == "SIGKILL" else "")
     return f"exit status {code}"
 
 
