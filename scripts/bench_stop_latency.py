@@ -69,7 +69,10 @@ def run(scene: str, out: str, stop_at: float | None = None, resume: bool = False
     else:
         cmd = ["bash", MPIRUN_SCRIPT, "-n", str(ranks)] + ([] if resume else ["--no-resume"]) + [scene, out]
     t0 = time.monotonic()
-    p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # os.environ, not the C environment: an MPI started in this process (PETSc's singleton)
+    # adds variables there that make a child's mpirun fail at once
+    p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                         env=dict(os.environ))
     sent = None
     if stop_at is not None:
         try:
