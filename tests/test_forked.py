@@ -59,10 +59,11 @@ def test_a_poll_that_raises_gives_the_call_up_and_kills_the_child(monkeypatch, c
         if time.monotonic() - t0 > 0.5:
             raise KeyboardInterrupt
     monkeypatch.setattr(dense, "_polls", [poll])
+    before = set(children(os.getpid()))     # the suite's own (an MPI singleton's helper, ...)
     with pytest.raises(KeyboardInterrupt):
         getattr(forked, call)(time.sleep, 60.0)
     assert time.monotonic() - t0 < 5.0
-    assert not children(os.getpid())
+    assert set(children(os.getpid())) <= before
 
 
 def test_no_fork_once_mpi_or_petsc_is_started(monkeypatch):
