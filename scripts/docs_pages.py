@@ -599,6 +599,17 @@ def bench_stop_latency() -> str:
                   "over 2 s", "resumed"], rows)
 
 
+def bench_condense_routes() -> str:
+    """results/bench_condense_routes.json: a serial condensation in the process, in a forked
+    child and in a spawned interpreter (scripts/bench_condense_routes.py): seconds and bits."""
+    recs = _records("bench_condense_routes.json")
+    if recs is None:
+        return not_measured("bench_condense_routes.json")
+    rows = [[_g(r, "refine"), _g(r, "n_dofs"), r.get("route", "–"), _g(r, "seconds"), _g(r, "over_here_s"),
+             "yes" if r.get("same_bits") else "**no**"] for r in recs]
+    return table(["block2d refine", "DOFs", "route", "seconds", "over in-process s", "K_local bits as in-process"], rows)
+
+
 def bench_near_critical() -> str:
     """results/bench_near_critical.json: the 3D tree near the critical mu (scripts/bench_near_critical.py),
     one row per record, grouped by search and body, "before" above "after"."""
@@ -749,6 +760,8 @@ BENCHMARKS: dict = {
                            ".venv/bin/python scripts/bench_global_scale.py [--limit 300]"),
     "bench_stop_latency": (bench_stop_latency, "results/bench_stop_latency.json",
                            ".venv/bin/python scripts/bench_stop_latency.py"),
+    "bench_condense_routes": (bench_condense_routes, "results/bench_condense_routes.json",
+                              "PYTHONPATH=. .venv/bin/python scripts/bench_condense_routes.py"),
     "bench_near_critical": (bench_near_critical, "results/bench_near_critical.json",
                             ".venv/bin/python scripts/bench_near_critical.py"),
     "bench_highs_lp": (bench_highs_lp, ", ".join(f"results/{f}" for f, _ in HIGHS_LP_FILES),
