@@ -70,7 +70,7 @@ def in_child(fn, *args, what: str = "a call", **kwargs):
         while not recv.poll(WAIT_STEP_S):
             run_polls()
         try:
-            kind, value = recv.recv()
+            kind, value = pickle.loads(recv.recv_bytes())
         except EOFError:
             child.join()
             raise RuntimeError(f"{what}: its child process ended without an answer "
@@ -95,24 +95,36 @@ def _ended(code: int | None) -> str:
 
 def _child(send, parent: int, fn, args, kwargs) -> None:
     """The child's side of `in_child`: signals left to the parent, fn's value or exception sent."""
+    _leave_signals_to(parent)
+    send.send_bytes(_answer(lambda: fn(*args, **kwargs)))
+    send.close()
+
+
+def _leave_signals_to(parent: int) -> None:
+    """In a child: ignore the run's signals (the parent answers them) and die with the parent
+    (Linux PR_SET_PDEATHSIG; elsewhere the parent's kill only); exit at once if it is gone."""
     for s in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1):
         signal.signal(s, signal.SIG_IGN)
     try:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):            # not Linux: the parent's kill in in_child only
+    except (OSError, AttributeError):
         pass
     if os.getppid() != parent:                   # the parent died before prctl took effect
         os._exit(1)
+
+
+def _answer(call) -> bytes:
+    """call()'s ("value", v) or ("error", exception), pickled; an exception or value pickle
+    cannot take comes back as a RuntimeError line."""
     try:
-        out = ("value", fn(*args, **kwargs))
+        out = ("value", call())
     except BaseException as e:                   # noqa: BLE001  (handed to the parent)
         out = ("error", e)
     try:
-        send.send(out)
-    except Exception as e:                       # noqa: BLE001  (an exception pickle cannot take)
-        send.send(("error", RuntimeError(f"{type(out[1]).__name__}: {out[1]}" if out[0] == "error"
-                                         else f"the result could not be sent back: {e}")))
-    send.close()
+        return pickle.dumps(out, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as e:                       # noqa: BLE001
+        return pickle.dumps(("error", RuntimeError(f"{type(out[1]).__name__}: {out[1]}" if out[0] == "error"
+                                                   else f"the result could not be sent back: {e}")))
 
 
 #: environment variables by which an MPI launcher (Open MPI, PMIx, MPICH/Hydra, Intel MPI)
@@ -200,27 +212,15 @@ def _spawned() -> None:
     """The spawned child's side of `in_spawned`: signals left to the parent (argv[2]), the call
     read from stdin, its value or exception written to stdout (fd 1; anything a library prints
     goes to stderr instead)."""
-    for s in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1):
-        signal.signal(s, signal.SIG_IGN)
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
-    if os.getppid() != int(sys.argv[2]):
-        os._exit(1)
+    _leave_signals_to(int(sys.argv[2]))
     answer = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)
     sys.stdout = sys.stderr
-    try:
-        fn, args, kwargs = pickle.load(sys.stdin.buffer)
-        out = ("value", fn(*args, **kwargs))
-    except BaseException as e:                   # noqa: BLE001  (handed to the parent)
-        out = ("error", e)
-    try:
-        data = pickle.dumps(out, protocol=pickle.HIGHEST_PROTOCOL)
-    except Exception as e:                       # noqa: BLE001  (an exception pickle cannot take)
-        data = pickle.dumps(("error", RuntimeError(f"{type(out[1]).__name__}: {out[1]}" if out[0] == "error"
-                                                   else f"the result could not be sent back: {e}")))
+    data = _answer(lambda: _call(*pickle.load(sys.stdin.buffer)))
     answer.write(data)
     answer.flush()
     os._exit(0)
+
+
+def _call(fn, args, kwargs):
+    return fn(*args, **kwargs)
