@@ -177,7 +177,8 @@ def worker_mpirun(rows: int, mu: float, workers: int = 2) -> dict:
         extra = ["--allow-run-as-root"] if os.geteuid() == 0 else []
         t0 = time.perf_counter()
         subprocess.run([mpirun, *extra, "--oversubscribe", "-n", str(workers + 1), "-x", "PYTHONPATH",
-                        sys.executable, "-m", "hpcwedge", "run", scene, "-o", out, "-q"], check=True)
+                        sys.executable, "-m", "hpcwedge", "run", scene, "-o", out, "-q"], check=True,
+                       env=dict(os.environ))     # Python's environment: a PETSc started here adds OMPI_* to C's
         wall = time.perf_counter() - t0
         res = read_result(out, with_rays=False).to_dict(with_rays=False)
         with h5py.File(out, "r") as f:

@@ -636,6 +636,45 @@ def bench_near_critical() -> str:
                   "undecided", "answer"], rows)
 
 
+#: the files of bench_tree_cores' table (scripts/bench_tree_pruning.py's runs)
+TREE_CORE_FILES = ("bench_tree_pruning_neck_4x8.json", "bench_tree_pruning_neck_6x8.json", "bench_tree_pruning.json")
+
+
+def _full_depth(by_depth: dict) -> str:
+    """The depth down to which every tree node was feasible (the tree full binary there)."""
+    first = min((int(d) for d, (_, inf) in by_depth.items() if inf), default=None)
+    return "–" if first is None else str(first - 1)
+
+
+def bench_tree_cores() -> str:
+    """results/bench_tree_pruning*.json: how many fixings the 3D tree's relaxation needs before
+    it prunes (scripts/bench_tree_pruning.py; --neck: the curved neck's settling tree)."""
+    rows = []
+    for name in TREE_CORE_FILES:
+        for r in _records(name) or []:
+            c, s = r.get("counts", {}), r.get("core_summary") or {}
+            core = (f"{s['mean_core']:.1f} of {s['mean_fixings']:.1f} ({s['least_core']}–{s['largest_core']}; "
+                    f"{s['nodes']} nodes)" if s else "–")
+            nogood = c.get("nogood_total", 0) / max(c.get("infeasible", 1), 1)
+            fixed = c.get("fixed_total", 0) / max(c.get("infeasible", 1), 1)
+            rows.append([r.get("body", f"plug3d-{r.get('levels')}x{r.get('ring')}"), _g(r, "m"), f"{r['mu']:.6g}",
+                         _g(r, "nodes"), f"{c.get('feasible', 0):,} / {c.get('infeasible', 0):,}",
+                         _full_depth(r.get("feasible_infeasible_by_depth") or {}) if "feasible_infeasible_by_depth" in r
+                         else "–", core, f"{nogood:.1f} of {fixed:.1f}", f"{c.get('nogood_would_prune', 0):,}",
+                         _spread(r.get("nodes_by_first_branching") or {})])
+    if not rows:
+        return not_measured(*TREE_CORE_FILES)
+    return table(["tree", "m", "mu", "nodes", "SOCPs feasible / infeasible", "every node feasible to depth",
+                  "minimal core: mean fixings of a pruned node (range; sample)",
+                  "Farkas support: mean fixings", "SOCPs a global nogood store prunes",
+                  "nodes from each first branching"], rows)
+
+
+def _spread(by_first: dict) -> str:
+    """The least and largest tree over the first branching nodes ("–": not measured)."""
+    return f"{min(by_first.values()):,}–{max(by_first.values()):,}" if by_first else "–"
+
+
 #: the files of bench_highs_lp's table and how each is labelled
 HIGHS_LP_FILES = (("bench_highs_lp_before.json", "before"), ("bench_highs_lp_final.json", "after"),
                   ("bench_highs_lp.json", "latest run"))
@@ -764,6 +803,9 @@ BENCHMARKS: dict = {
                               "PYTHONPATH=. .venv/bin/python scripts/bench_condense_routes.py"),
     "bench_near_critical": (bench_near_critical, "results/bench_near_critical.json",
                             ".venv/bin/python scripts/bench_near_critical.py"),
+    "bench_tree_cores": (bench_tree_cores, ", ".join(f"results/{f}" for f in TREE_CORE_FILES),
+                         "PYTHONPATH=. .venv/bin/python scripts/bench_tree_pruning.py [--neck --levels 4 --ring 8"
+                         " --cores 80 --out results/bench_tree_pruning_neck_4x8]"),
     "bench_highs_lp": (bench_highs_lp, ", ".join(f"results/{f}" for f, _ in HIGHS_LP_FILES),
                        ".venv/bin/python scripts/bench_highs_lp.py [--checkout DIR --out results/bench_highs_lp_before]"),
     "bench_matrix": (bench_matrix, "results/bench_matrix.json", ".venv/bin/python scripts/bench_matrix.py"),

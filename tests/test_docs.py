@@ -232,7 +232,8 @@ def test_faults_table_from_a_campaign_file(tmp_path, monkeypatch):
 
 
 #: the tables that must render while their results are missing or have fewer columns
-TOLERANT = ("bench_global_scale", "bench_near_critical", "bench_highs_lp", "bench_matrix", "bench_scale", "bench_3d")
+TOLERANT = ("bench_global_scale", "bench_near_critical", "bench_highs_lp", "bench_matrix", "bench_scale", "bench_3d",
+            "bench_tree_cores")
 
 
 @pytest.mark.parametrize("name", TOLERANT)
@@ -285,6 +286,24 @@ def test_near_critical_probe_rows_say_how_much_of_the_tree_is_decided(tmp_path, 
     lines = docs_pages.bench_near_critical().splitlines()
     assert lines[2].endswith("| 1 pattern (probe: not finished) |")
     assert lines[3].endswith("| 1 pattern (probe: not finished, 2.94 % of the tree decided) |")
+
+
+def test_tree_cores_rows_with_and_without_cores(tmp_path, monkeypatch):
+    """A neck record with its depths and cores, and a plug3d record of an earlier run without
+    them: "every node feasible to depth" is the depth before the first infeasible node."""
+    neck = {"body": "neck-4x8-s0", "m": 32, "mu": 0.3698, "nodes": 1945,
+            "counts": {"feasible": 961, "infeasible": 972, "nogood_total": 10300, "fixed_total": 10790,
+                       "nogood_would_prune": 4},
+            "feasible_infeasible_by_depth": {"0": [1, 0], "5": [32, 0], "6": [62, 2], "7": [110, 14]},
+            "core_summary": {"nodes": 80, "mean_fixings": 11.64, "mean_core": 9.76, "least_core": 6, "largest_core": 15},
+            "nodes_by_first_branching": {"0": 1893, "1": 3467, "2": 1945}}
+    plug = {"levels": 4, "ring": 8, "m": 32, "mu": 0.2, "nodes": 16367,
+            "counts": {"feasible": 8184, "infeasible": 8183, "nogood_total": 0, "fixed_total": 0}}
+    _results(tmp_path, monkeypatch, "bench_tree_pruning_neck_4x8.json", {"records": [neck]})
+    _results(tmp_path, monkeypatch, "bench_tree_pruning.json", {"records": [plug]})
+    lines = docs_pages.bench_tree_cores().splitlines()
+    assert lines[2] == "| neck-4x8-s0 | 32 | 0.3698 | 1,945 | 961 / 972 | 5 | 9.8 of 11.6 (6–15; 80 nodes) | 10.6 of 11.1 | 4 | 1,893–3,467 |"
+    assert lines[3] == "| plug3d-4x8 | 32 | 0.2 | 16,367 | 8,184 / 8,183 | – | – | 0.0 of 0.0 | 0 | – |"
 
 
 def test_highs_lp_table_with_one_file_missing(tmp_path, monkeypatch):

@@ -23,3 +23,42 @@ def test_nogoods_hold_only_at_infeasible_nodes():
         assert sum(rec["nogood_sizes_contact_gap"].values()) == c["infeasible"]
         assert c["nogood_held_at_feasible"] == 0 and c["nogood_total"] < c["fixed_total"]
         assert mu < 1.0 or c["nogood_would_prune"] > 0
+
+
+def test_neck_settling_tree_and_minimal_cores():
+    """The curved neck 2 x 5 (m = 10), mu^c asked of `hpcwedge run` (test_tree.py's brute-force
+    value): the settling tree at mu^c (1 + 1e-9) finds brute force's patterns there; every
+    infeasible node shrinks to a core of its own fixings that no feasible pattern (brute force
+    over all 1,024) extends, and that is minimal: without any one fixing it is feasible. The tree
+    again from each first branching node: the rule's own first choice gives the same tree."""
+    import numpy as np
+
+    from hpcwedge.solvers.feasibility import decide
+    from hpcwedge.solvers.rows import Status, pattern_rows
+    from instances import curved_neck, scene_param
+
+    rec = bench_tree_pruning.measure(2, 5, None, 0, neck=True, cores=1000, roots=True)
+    p, m = scene_param(curved_neck(2, 5, 0))
+    assert m == 10 and abs(rec["mu"] - 0.4593401459998697 * (1 + 1e-9)) <= 1e-9 * 0.46
+    feasible = brute_3d(p, m, rec["mu"])
+    assert rec["finished"] and {c for c, _ in rec["found"]} == feasible
+    c = rec["counts"]
+    assert len(rec["cores"]) == c["infeasible"] > 0
+    assert sum(f + i for f, i in rec["feasible_infeasible_by_depth"].values()) == c["feasible"] + c["infeasible"]
+
+    def infeasible(contact, gap):
+        zu, zr = np.zeros(m, bool), np.zeros(m, bool)
+        zu[contact], zr[gap] = True, True
+        return decide(pattern_rows(p, m, zu, zr), rec["mu"]).status == Status.INFEASIBLE
+
+    for core in rec["cores"]:
+        cc, cg = core["core_contact"], core["core_gap"]
+        assert set(cc) <= set(core["contact"]) and set(cg) <= set(core["gap"])
+        assert not any(all(bits >> i & 1 for i in cc) and not any(bits >> i & 1 for i in cg) for bits in feasible)
+        assert infeasible(cc, cg)
+        assert not any(infeasible([j for j in cc if j != i], cg) for i in cc)
+        assert not any(infeasible(cc, [j for j in cg if j != i]) for i in cg)
+    by_root = rec["nodes_by_first_branching"]
+    assert len(by_root) == m and rec["nodes"] in by_root.values() and min(by_root.values()) > m
+    s = rec["core_summary"]
+    assert s["least_core"] <= s["mean_core"] <= s["mean_fixings"]
