@@ -675,6 +675,26 @@ def _spread(by_first: dict) -> str:
     return f"{min(by_first.values()):,}–{max(by_first.values()):,}" if by_first else "–"
 
 
+def bench_eta() -> str:
+    """results/bench_eta.json: the time left that a tree job's progress lines told against what
+    was left (scripts/bench_eta.py): per case and estimate, the lines, the median ratio, the
+    share within a factor of 2 and the share that told less than half."""
+    recs = _records("bench_eta.json", "summary")
+    if recs is None:
+        return not_measured("bench_eta.json")
+    job_s = {}
+    for r in _records("bench_eta.json") or []:
+        job_s[r["case"]] = max(job_s.get(r["case"], 0.0), r.get("job_s") or 0.0)
+    rows = [[r["case"], f"{job_s[r['case']]:.0f}" if r["case"] in job_s else "–", r["estimate"], _g(r, "lines"),
+             _g(r, "median_ratio"), _share(r, "within_2x"), _share(r, "below_half")] for r in recs]
+    return table(["case", "tree job s", "time left at", "lines", "median told / left", "within 2×",
+                  "told < half"], rows)
+
+
+def _share(r: dict, key: str) -> str:
+    return "–" if r.get(key) is None else f"{100 * r[key]:.0f} %"
+
+
 #: the files of bench_highs_lp's table and how each is labelled
 HIGHS_LP_FILES = (("bench_highs_lp_before.json", "before"), ("bench_highs_lp_final.json", "after"),
                   ("bench_highs_lp.json", "latest run"))
@@ -809,6 +829,7 @@ BENCHMARKS: dict = {
     "bench_highs_lp": (bench_highs_lp, ", ".join(f"results/{f}" for f, _ in HIGHS_LP_FILES),
                        ".venv/bin/python scripts/bench_highs_lp.py [--checkout DIR --out results/bench_highs_lp_before]"),
     "bench_matrix": (bench_matrix, "results/bench_matrix.json", ".venv/bin/python scripts/bench_matrix.py"),
+    "bench_eta": (bench_eta, "results/bench_eta.json", "PYTHONPATH=. .venv/bin/python scripts/bench_eta.py"),
     "bench_3d": (bench_3d, ", ".join(f"results/{f}" for f, _ in BENCH_3D_FILES),
                  "PYTHONPATH=. .venv/bin/python scripts/bench_3d.py [--levels 3 --ring 4]"),
     "bench_scale": (bench_scale, "results/bench_scale.json", "PYTHONPATH=. .venv/bin/python scripts/bench_scale.py --quick"),

@@ -281,6 +281,8 @@ BAD_SCENES = [
     (_t(PLUG, tail="[compute]\nmu_cc = 1"), "compute.mu_cc"),
     (_t(PLUG, tail="[run]\ncheckpoint_every_s = nan"), "run.checkpoint_every_s"),
     (_t(PLUG, tail="[run]\ncheckpoint_every_s = -inf"), "run.checkpoint_every_s"),
+    (_t(PLUG, tail="[run]\nprogress_every_s = 0"), "run.progress_every_s"),
+    (_t(PLUG, tail='[run]\nprogress_every_s = "10"'), "run.progress_every_s"),
     (_t(PLUG, tail="[run]\ntask_budget = true"), "run.task_budget"),
     (_t(PLUG, tail="[run]\nface_split = 9"), "run.face_split"),
     (_t(PLUG, tail="[run]\ncondense = 1"), "run.condense"),

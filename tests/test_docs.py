@@ -233,7 +233,7 @@ def test_faults_table_from_a_campaign_file(tmp_path, monkeypatch):
 
 #: the tables that must render while their results are missing or have fewer columns
 TOLERANT = ("bench_global_scale", "bench_near_critical", "bench_highs_lp", "bench_matrix", "bench_scale", "bench_3d",
-            "bench_tree_cores")
+            "bench_tree_cores", "bench_eta")
 
 
 @pytest.mark.parametrize("name", TOLERANT)
@@ -304,6 +304,18 @@ def test_tree_cores_rows_with_and_without_cores(tmp_path, monkeypatch):
     lines = docs_pages.bench_tree_cores().splitlines()
     assert lines[2] == "| neck-4x8-s0 | 32 | 0.3698 | 1,945 | 961 / 972 | 5 | 9.8 of 11.6 (6–15; 80 nodes) | 10.6 of 11.1 | 4 | 1,893–3,467 |"
     assert lines[3] == "| plug3d-4x8 | 32 | 0.2 | 16,367 | 8,184 / 8,183 | – | – | 0.0 of 0.0 | 0 | – |"
+
+
+def test_eta_table_rows(tmp_path, monkeypatch):
+    """One row per case and estimate, the case's tree job seconds from its lines."""
+    _results(tmp_path, monkeypatch, "bench_eta.json",
+             {"records": [{"case": "neck-6x8-global", "job_s": 121.4}, {"case": "neck-6x8-global", "job_s": 121.4}],
+              "summary": [{"case": "neck-6x8-global", "estimate": "told", "lines": 20, "median_ratio": 0.91,
+                           "within_2x": 0.85, "below_half": 0.05},
+                          {"case": "neck-6x8-global", "estimate": "since start", "lines": 0}]})
+    lines = docs_pages.bench_eta().splitlines()
+    assert lines[2] == "| neck-6x8-global | 121 | told | 20 | 0.91 | 85 % | 5 % |"
+    assert lines[3] == "| neck-6x8-global | 121 | since start | 0 | – | – | – |"
 
 
 def test_highs_lp_table_with_one_file_missing(tmp_path, monkeypatch):

@@ -12,7 +12,8 @@ import pytest
 from mpi_helpers import command, env, needs_mpirun
 
 from hpcwedge.errors import UserError
-from hpcwedge.progress import GB, MemoryGuard, MemoryLimit, Progress, eta, rss_bytes
+from hpcwedge.progress import (GB, SHARE_GROWTH_MIN, MemoryGuard, MemoryLimit, Progress, ShareClock, eta, left_text,
+                               rss_bytes)
 from hpcwedge.scene.parse import parse_scene
 from hpcwedge.scene.values import SceneError
 
@@ -116,6 +117,75 @@ def test_progress_lines_give_the_time_left():
     pr = Progress(stream=buf, every=0.0).stage("rays mu=0.65")
     pr({"done": 2, "total": 6, "rays": 10, "bytes": 100, "elapsed": 4.0})
     assert "2/6 constraints" in buf.getvalue() and "about 8 s left" in buf.getvalue()
+
+
+def test_time_left_units():
+    assert left_text(None) == "" and left_text(119.4) == ", about 119 s left"
+    assert left_text(150.0) == ", about 2 min left" and left_text(7199.0) == ", about 120 min left"
+    assert left_text(3 * 3600.0) == ", about 3 h left"
+
+
+def test_share_clock_is_exact_on_a_steady_rate():
+    """A share that grows 1 % a second from 0.2 at t = 100 has 80 s left at any sample."""
+    clock = ShareClock(100.0, 0.2)
+    for t in (101.0, 105.0, 130.0, 150.0):
+        share = 0.2 + 0.01 * (t - 100.0)
+        assert clock.left(t, share) == pytest.approx(100.0 - (t - 100.0) - 20.0)
+
+
+def test_share_clock_follows_the_recent_rate():
+    """A tree whose easy part closes first: 0 -> 0.8 in 10 s, then 0.001 a second. At t = 60
+    (share 0.85) 150 s are left; the rate since the start says 10.6 s, the window's rate (the
+    last half of the time, t = 30 .. 60, all in the slow part) says 150 s."""
+    def share(t):
+        return 0.08 * t if t <= 10.0 else 0.8 + 0.001 * (t - 10.0)
+
+    clock = ShareClock(0.0, 0.0)
+    for t in range(1, 60):
+        clock.left(float(t), share(t))
+    since_start = 60.0 * (1.0 - share(60)) / share(60)
+    assert since_start == pytest.approx(10.59, abs=0.01)
+    assert clock.left(60.0, share(60)) == pytest.approx(150.0)
+    # early on, the window (at least 20 s) reaches back to the start: the rate so far
+    early = ShareClock(0.0, 0.0)
+    early.left(5.0, share(5))
+    assert early.left(12.0, share(12)) == pytest.approx(12.0 * (1.0 - share(12)) / share(12))
+
+
+def test_share_clock_says_nothing_before_the_share_moved():
+    """No time left while the share has grown less than SHARE_GROWTH_MIN since the start, or
+    not at all over the window (samples at uneven times, one repeated)."""
+    clock = ShareClock(0.0, 0.5)
+    assert clock.left(5.0, 0.5 + 0.5 * SHARE_GROWTH_MIN) is None
+    assert clock.left(10.0, 0.6) == pytest.approx(40.0)
+    assert clock.left(10.0, 0.6) == pytest.approx(40.0)
+    assert clock.left(100.0, 0.6) is None                  # stalled over the last 50 s
+    assert ShareClock(0.0, 0.0).left(0.0, 0.5) is None      # no time passed
+
+
+def test_progress_every_s_sets_the_lines_of_a_batch_log(tmp_path):
+    """`run.progress_every_s` sets how often a batch run (stderr a pipe) prints its line: the
+    3D pattern search of plug3d 3 x 6 (a few seconds) gives several at 0.3 s, with the share
+    of the tree decided, and the time left once 1 % is decided; at the default 10 s none."""
+    import re
+    lines = {}
+    for every in (0.3, None):
+        scene = tmp_path / f"s{every}.toml"
+        run = "" if every is None else f"[run]\nprogress_every_s = {every}\nsymmetry = false\n"
+        scene.write_text('name = "p"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = 3\nring = 6\n'
+                         '[friction]\nmu = [0.65]\n[compute]\nmu_c = "none"\n'
+                         + (run or "[run]\nsymmetry = false\n"))
+        p = subprocess.run(command(None, "run", str(scene), "-o", str(tmp_path / "r.h5")), env=env(),
+                           capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+        assert p.returncode == 0, p.stderr
+        lines[every] = [ln for ln in p.stderr.splitlines() if "% of the tree decided" in ln]
+    assert len(lines[0.3]) >= 3 and lines[None] == []
+    shares = [float(re.search(r"([\d.]+) % of the tree decided", ln).group(1)) for ln in lines[0.3]]
+    assert shares == sorted(shares)
+    # the first task opens the tree's top levels: no time left told until 1 % is decided
+    assert shares[0] < 100 * SHARE_GROWTH_MIN and shares[-1] > 50
+    assert all("left" not in ln for ln, s in zip(lines[0.3], shares) if s < 100 * SHARE_GROWTH_MIN)
+    assert any("left" in ln for ln, s in zip(lines[0.3], shares) if 100 * SHARE_GROWTH_MIN <= s < 99)
 
 
 def test_guard_on_3d_pattern_stage(tmp_path):

@@ -40,6 +40,7 @@ from hpcwedge.parallel.jobs import TaskJob, TreeJob
 from hpcwedge.parallel.schedule import MasterClock, cut, utilisation
 from hpcwedge.parallel.signals import SignalState
 from hpcwedge.parallel.worker import run_batch
+from hpcwedge.progress import ShareClock, eta, left_text
 
 #: exit status of `hpcwedge run` after SIGTERM/SIGINT: the checkpoint is written, rerun with --resume
 EXIT_INTERRUPTED = 75
@@ -120,6 +121,7 @@ class Engine:
         self.job_id = 0                  # the current job's (workers hold one job's context)
         #: (when, tasks done, share of the trees decided) as the current job started
         self._job_start = (time.monotonic(), 0, 0.0)
+        self._share_clock = ShareClock(*self._job_start[::2])
         self._task_started = time.monotonic()     # the serial engine's current task
         self._batched = [0.0, 0]         # the current job's tasks: seconds, units of work (schedule.py)
         self._sent_at: dict = {}         # rank -> when its unbatched task was sent (its seconds)
@@ -259,6 +261,7 @@ class Engine:
             self._current, self._inflight, self._batched = job, {}, [0.0, 0]
             self._job_start = (time.monotonic(), job.counters.get("tasks", 0),
                                job.decided_share([]) if isinstance(job, TreeJob) else 0.0)
+            self._share_clock = ShareClock(self._job_start[0], self._job_start[2])
             self.checkpoints.restored.pop(job.name, None)
             if self.signals.stop_reason():
                 raise Interrupted(self.signals.stop_reason())
@@ -423,17 +426,17 @@ class Engine:
 
     def _job_line(self, job, now: float, running: str = "") -> str:
         """The progress line of `job`: its tasks, what job.progress() adds, a tree job's share
-        decided, and the time left at this session's rate; `running` ends it (a long task)."""
-        from hpcwedge.progress import eta
+        decided, and the time left (a task list: at this session's rate; a tree: at its share's
+        recent rate, progress.ShareClock); `running` ends it (a long task)."""
         done = job.counters.get("tasks", 0)
         left = decided = ""
-        t0, done0, share0 = self._job_start
+        t0, done0, _ = self._job_start
         if isinstance(job, TaskJob):           # a fixed list of tasks
             left = eta(now - t0, done - done0, len(job.payloads) - done0)
-        elif isinstance(job, TreeJob):         # the share of the trees decided, and its rate
+        elif isinstance(job, TreeJob):         # the share of the trees decided, and its recent rate
             share = job.decided_share(self._in_flight_tokens())
             decided = f", {100 * share:.3g} % of the tree decided"
-            left = eta(now - t0, share - share0, 1.0 - share0)
+            left = left_text(self._share_clock.left(now, share) if share < 1.0 else None)
         return (f"{job.name}: {done} tasks done, {job.pending()} pending, "
                 f"{len(self._inflight)} running{job.progress()}{decided} ({self.size} rank(s), "
                 f"{self.elapsed():.0f} s{left}{running})")

@@ -170,6 +170,7 @@ class Batch:
         for this scene and its input files already (--resume of a finished run; the workers
         released)."""
         engine, ckpt = self.engine, self.ckpt
+        engine.progress_every_s = self.progress.every = scene.progress_every_s
         if engine.use_checkpoint(ckpt, scene.hash, scene.text, scene.checkpoint_every_s, self.resume,
                                  inputs=scene.input_digests, changed_settings=changed_settings):
             done = engine.checkpoints

@@ -42,7 +42,7 @@ MU_C_METHODS = ("accurate", "bisection")
 #: run.condense: where the condensation runs under mpirun (run/batch.py, condense.condense_distributed)
 CONDENSE_MODES = ("auto", "serial", "distributed")
 #: the run settings, in the order a note on changed settings names them
-SETTINGS = ("run.max_memory_gb", "run.checkpoint_every_s")
+SETTINGS = ("run.max_memory_gb", "run.checkpoint_every_s", "run.progress_every_s")
 
 
 @dataclass(frozen=True)
@@ -108,6 +108,8 @@ KEYS: tuple[Key, ...] = (
     Key("compute", "exact_fallback_max_m", "integer", 10, "≥ 0", "contact nodes",
         "2D: a float run with decisions too close to call is redone exactly up to this m (0: never)."),
     Key("run", "checkpoint_every_s", "number", 60.0, "> 0", "s", "Period of the master's checkpoint `RESULT.h5.ckpt`."),
+    Key("run", "progress_every_s", "number", 10.0, "> 0", "s",
+        "Period of the progress lines on stderr when it is no terminal (a batch log; `-q`: none)."),
     Key("run", "task_budget", "integer", 64, "≥ 1", "tree nodes",
         "Sign-pattern tree nodes per task before a subtree is handed back."),
     Key("run", "symmetry", "boolean", True, "", "",

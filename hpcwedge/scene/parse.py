@@ -73,6 +73,7 @@ class Scene:
     exact_fallback_max_m: int   # a 2D float enumeration too close to call is redone exactly up to this m
     # [run]
     checkpoint_every_s: float
+    progress_every_s: float     # the period of progress lines in a batch log (progress.Progress)
     task_budget: int            # tree nodes per sign-pattern task (parallel/)
     symmetry: bool              # use the node symmetries of K (symmetry.py)
     screens: bool               # 3D tree, LP screens before deep SOCPs (screens.py)
@@ -266,8 +267,9 @@ def _run(given) -> dict:
     """The [run] table with its defaults, checked: {key: value}, Scene's fields."""
     _unknown(given, set(RUN_DEFAULTS), "run.")
     run = {**RUN_DEFAULTS, **given}
-    if not _positive(run["checkpoint_every_s"]):
-        raise SceneError(f"run.checkpoint_every_s: must be a finite number > 0, got {run['checkpoint_every_s']!r}")
+    for key in ("checkpoint_every_s", "progress_every_s"):
+        if not _positive(run[key]):
+            raise SceneError(f"run.{key}: must be a finite number > 0, got {run[key]!r}")
     if not _whole(run["task_budget"], 1):
         raise SceneError(f"run.task_budget: must be a whole number >= 1, got {run['task_budget']!r}")
     for key in ("symmetry", "screens"):
@@ -283,7 +285,8 @@ def _run(given) -> dict:
         raise SceneError(f"run.max_memory_gb: \"auto\" or a number of GB > 0, got {v!r}")
     if run["condense"] not in CONDENSE_MODES:
         raise SceneError(f"run.condense: one of {', '.join(CONDENSE_MODES)}, got {run['condense']!r}")
-    return {**run, "checkpoint_every_s": float(run["checkpoint_every_s"])}
+    return {**run, "checkpoint_every_s": float(run["checkpoint_every_s"]),
+            "progress_every_s": float(run["progress_every_s"])}
 
 
 def _positive(v) -> bool:

@@ -11,7 +11,8 @@ TEXT = 'name = "s"\ndim = 2\n[model]\nkind = "plug2d"\n[friction]\nmu = [0.5, 1.
 #: another valid value of every [compute] and [run] key
 OTHER = {"enumerate": "rays", "mu_c": "global", "mu_c_method": "bisection", "mu_c_tol": 1e-5, "mu_max": 50.0,
          "exact": True, "exact_fallback_max_m": 3, "checkpoint_every_s": 2.0, "task_budget": 5,
-         "symmetry": False, "face_split": 2, "condense": "serial", "max_memory_gb": 8, "screens": True}
+         "symmetry": False, "face_split": 2, "condense": "serial", "max_memory_gb": 8, "screens": True,
+         "progress_every_s": 60.0}
 
 
 def _toml(v) -> str:
@@ -22,7 +23,8 @@ def test_defaults_and_settings_come_from_the_table():
     assert COMPUTE_DEFAULTS == {k.name: k.default for k in keys.KEYS if k.table == "compute"}
     assert list(RUN_DEFAULTS) == [k.name for k in keys.KEYS if k.table == "run"]
     assert set(OTHER) == set(COMPUTE_DEFAULTS) | set(RUN_DEFAULTS)
-    assert [k.path for k in keys.KEYS if k.setting] == ["run.checkpoint_every_s", "run.max_memory_gb"]
+    assert [k.path for k in keys.KEYS if k.setting] == ["run.checkpoint_every_s", "run.progress_every_s",
+                                                         "run.max_memory_gb"]
     assert {k.path for k in keys.KEYS if k.setting} == set(keys.SETTINGS)
     assert keys.table("model.plug3d")["ring"].values == "≥ 3"        # models.library.WHOLE_MINIMUM
     assert keys.table("compute")["mu_c"].path == "compute.mu_c" and keys.table("scene")["dim"].path == "dim"
@@ -56,6 +58,7 @@ def test_the_same_scene_is_an_equal_record():
     assert changed_settings(TEXT, TEXT.replace("[0.5, 1.0]", "[1.0, 0.5]")) == []
     both = TEXT.replace("0.1", "30.0\nmax_memory_gb = 64")
     assert changed_settings(TEXT, both) == ["run.max_memory_gb", "run.checkpoint_every_s"]
+    assert changed_settings(TEXT, TEXT + "progress_every_s = 1\n") == ["run.progress_every_s"]
     assert changed_settings(TEXT, TEXT.replace("0.5,", "0.6,")) is None
     assert changed_settings(TEXT, TEXT.replace('"s"', '"t"')) is None
     assert changed_settings(TEXT, "name = ") is None                  # not TOML
@@ -72,4 +75,4 @@ def test_every_key_but_the_settings_changes_the_record(key):
     base = TEXT.replace("checkpoint_every_s = 0.1\n", "")
     line = f"{key} = {_toml(OTHER[key])}\n"
     other = base + line if key in RUN_DEFAULTS else f"{base}[compute]\n{line}"
-    assert changed_settings(base, other) == ([f"run.{key}"] if key in ("checkpoint_every_s", "max_memory_gb") else None)
+    assert changed_settings(base, other) == ([f"run.{key}"] if f"run.{key}" in keys.SETTINGS else None)
