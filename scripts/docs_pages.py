@@ -691,6 +691,28 @@ def bench_eta() -> str:
                   "told < half"], rows)
 
 
+#: the files of bench_sparse_form's table (scripts/bench_sparse_form.py's runs)
+SPARSE_FORM_FILES = ("bench_sparse_form_6x8.json", "bench_sparse_form.json")
+
+
+def bench_sparse_form() -> str:
+    """results/bench_sparse_form*.json: the node SOCP in the product's condensed form against the
+    uncondensed sparse truss (scripts/bench_sparse_form.py): per body the medians and agreement."""
+    rows = []
+    for name in SPARSE_FORM_FILES:
+        recs = _records(name)
+        if not recs:
+            continue
+        s, r = _load(name).get("summary", {}), recs[0]
+        rows.append([r.get("body", "–"), _g(r, "m"), _g(r, "full_dofs"), f"{r['mu']:.3g}", f"{s.get('agree', 0)} of {s.get('nodes', 0)}",
+                     _g(s, "ours_nnz_median"), _g(s, "sparse_nnz_median"), _g(s, "ours_ms_median"),
+                     _g(s, "sparse_ms_median"), _g(s, "sparse_setup_ms_median")])
+    if not rows:
+        return not_measured(*SPARSE_FORM_FILES)
+    return table(["body", "m", "truss DOFs", "mu", "same decision", "nonzeros, condensed", "nonzeros, sparse",
+                  "ms per solve, condensed (kept solver)", "ms per solve, sparse", "+ sparse setup ms"], rows)
+
+
 def _share(r: dict, key: str) -> str:
     return "–" if r.get(key) is None else f"{100 * r[key]:.0f} %"
 
@@ -830,6 +852,8 @@ BENCHMARKS: dict = {
                        ".venv/bin/python scripts/bench_highs_lp.py [--checkout DIR --out results/bench_highs_lp_before]"),
     "bench_matrix": (bench_matrix, "results/bench_matrix.json", ".venv/bin/python scripts/bench_matrix.py"),
     "bench_eta": (bench_eta, "results/bench_eta.json", "PYTHONPATH=. .venv/bin/python scripts/bench_eta.py"),
+    "bench_sparse_form": (bench_sparse_form, ", ".join(f"results/{f}" for f in SPARSE_FORM_FILES),
+                          "PYTHONPATH=. .venv/bin/python scripts/bench_sparse_form.py [--levels 6 --out results/bench_sparse_form_6x8]"),
     "bench_3d": (bench_3d, ", ".join(f"results/{f}" for f, _ in BENCH_3D_FILES),
                  "PYTHONPATH=. .venv/bin/python scripts/bench_3d.py [--levels 3 --ring 4]"),
     "bench_scale": (bench_scale, "results/bench_scale.json", "PYTHONPATH=. .venv/bin/python scripts/bench_scale.py --quick"),

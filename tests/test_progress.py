@@ -12,7 +12,7 @@ import pytest
 from mpi_helpers import command, env, needs_mpirun
 
 from hpcwedge.errors import UserError
-from hpcwedge.progress import (GB, SHARE_GROWTH_MIN, MemoryGuard, MemoryLimit, Progress, ShareClock, eta, left_text,
+from hpcwedge.progress import (GB, SHARE_GROWTH_MIN, SHARE_WINDOW_MIN_S, MemoryGuard, MemoryLimit, Progress, ShareClock, eta, left_text,
                                rss_bytes)
 from hpcwedge.scene.parse import parse_scene
 from hpcwedge.scene.values import SceneError
@@ -135,8 +135,8 @@ def test_share_clock_is_exact_on_a_steady_rate():
 
 def test_share_clock_follows_the_recent_rate():
     """A tree whose easy part closes first: 0 -> 0.8 in 10 s, then 0.001 a second. At t = 60
-    (share 0.85) 150 s are left; the rate since the start says 10.6 s, the window's rate (the
-    last half of the time, t = 30 .. 60, all in the slow part) says 150 s."""
+    (share 0.85) 150 s are left; the rate since the start says 10.6 s, the window's rate (its
+    last 20 s, SHARE_WINDOW_MIN_S, all in the slow part) says 150 s."""
     def share(t):
         return 0.08 * t if t <= 10.0 else 0.8 + 0.001 * (t - 10.0)
 
@@ -145,7 +145,7 @@ def test_share_clock_follows_the_recent_rate():
         clock.left(float(t), share(t))
     since_start = 60.0 * (1.0 - share(60)) / share(60)
     assert since_start == pytest.approx(10.59, abs=0.01)
-    assert clock.left(60.0, share(60)) == pytest.approx(150.0)
+    assert SHARE_WINDOW_MIN_S <= 40.0 and clock.left(60.0, share(60)) == pytest.approx(150.0)
     # early on, the window (at least 20 s) reaches back to the start: the rate so far
     early = ShareClock(0.0, 0.0)
     early.left(5.0, share(5))
@@ -159,7 +159,7 @@ def test_share_clock_says_nothing_before_the_share_moved():
     assert clock.left(5.0, 0.5 + 0.5 * SHARE_GROWTH_MIN) is None
     assert clock.left(10.0, 0.6) == pytest.approx(40.0)
     assert clock.left(10.0, 0.6) == pytest.approx(40.0)
-    assert clock.left(100.0, 0.6) is None                  # stalled over the last 50 s
+    assert clock.left(100.0, 0.6) is None                  # stalled over the window
     assert ShareClock(0.0, 0.0).left(0.0, 0.5) is None      # no time passed
 
 
