@@ -283,7 +283,7 @@ def _show_checkpoint(args) -> int:
             nodes = job["counters"].get("nodes", 0)
             mus = ", ".join(f"{v:g}" for v in job["mu"])
             what = (f"{job['found']} pattern(s) found, {job['open']} open subtree(s), "
-                    f"{nodes:,} tree nodes (mu {mus})")
+                    f"{nodes:,} tree nodes, {100 * job['decided']:.3g} % of the tree decided (mu {mus})")
         else:
             what = f"{job['done']} of {job['tasks']} {job['kind']} task(s) done"
         print(f"  {job['name']}: {what}; {state}")

@@ -99,10 +99,15 @@ class SubtreeJob(TreeJob):
 
 def describe_saved(attrs, data) -> dict | None:
     """What `show` says of a saved SubtreeJob (parallel.checkpoint.checkpoint_summary's
-    describe): its mu values, patterns found and subtrees open; None for other jobs."""
+    describe): its mu values, patterns found, subtrees open and the share of its trees decided
+    (TreeJob.decided_share: every mu's tree has one root, at depth 0; the tasks in flight were
+    saved as open); None for other jobs."""
     if attrs["kind"] != SubtreeJob.kind:
         return None
-    return {"mu": [float(v) for v in data["mus"]], "found": len(data["found_mu"]), "open": len(data["open_mu"])}
+    mus = [float(v) for v in data["mus"]]
+    left = float(np.ldexp(1.0, -np.asarray(data["open_depth"], dtype=np.int64)).sum()) if len(data["open_depth"]) else 0.0
+    return {"mu": mus, "found": len(data["found_mu"]), "open": len(data["open_mu"]),
+            "decided": min(1.0, max(0.0, 1.0 - left / len(mus))) if mus else 1.0}
 
 
 @dataclass

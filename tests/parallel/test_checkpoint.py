@@ -176,6 +176,10 @@ def _show_of_checkpoint(out: str) -> dict:
     if "found" in job:
         assert (job["found"], job["open"]) == (len(data["found_mu"]), len(data["open_mu"]))
         assert f"{job['found']} pattern(s) found, {job['open']} open subtree(s)" in text
+        # the share decided as the run's progress line had it: 1 - the open subtrees' 2^-depth per tree
+        share = 1.0 - sum(2.0 ** -int(d) for d in data["open_depth"]) / len(data["mus"])
+        assert job["decided"] == pytest.approx(share, abs=1e-15) and 0.0 <= job["decided"] <= 1.0
+        assert f"tree nodes, {100 * job['decided']:.3g} % of the tree decided (mu " in text
     else:
         assert job["done"] == len(data["done"]) and f"{job['done']} of {job['tasks']}" in text
     alone = os.path.join(os.path.dirname(out), "alone", "r.h5")     # a result not written yet
