@@ -19,8 +19,8 @@ AUTO_FRACTION = 0.8
 DD_GROWTH = 3.0
 #: a tree job's time left is told at the rate its decided share grew over the recent part of
 #: the session: the last SHARE_WINDOW of the time since the job started, at least
-#: SHARE_WINDOW_MIN_S (`ShareClock`). scripts/bench_eta.py (4 searches, 190 lines): the median
-#: told / left 0.40-0.49 at 0.2, 0.39-0.42 at the last half, 0.04-0.41 at the rate since the start
+#: SHARE_WINDOW_MIN_S (`ShareClock`). scripts/bench_eta.py (3 searches of 7-160 lines): the median
+#: told / left 0.34-0.47 at 0.2, 0.38-0.41 at the last half, 0.04-0.40 at the rate since the start
 SHARE_WINDOW = 0.2
 SHARE_WINDOW_MIN_S = 20.0
 #: ... and only once the share has grown this much in the job: before, a tree whose first tasks
