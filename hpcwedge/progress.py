@@ -17,12 +17,18 @@ AUTO_FRACTION = 0.8
 #: a DD step copies the live rays and adds new ones: the guard asks for room for
 #: this many times the rays' current bytes before the next step
 DD_GROWTH = 3.0
-#: a tree job's time left is told at the rate its decided share grew over the recent part of
-#: the session: the last SHARE_WINDOW of the time since the job started, at least
-#: SHARE_WINDOW_MIN_S (`ShareClock`). scripts/bench_eta.py (3 searches of 7-160 lines): the median
-#: told / left 0.34-0.47 at 0.2, 0.38-0.41 at the last half, 0.04-0.40 at the rate since the start
+#: a tree job's time left is told from how its decided share grew over the recent part of the
+#: session: the last SHARE_WINDOW of the time since the job started, at least SHARE_WINDOW_MIN_S
+#: (`ShareClock`), fitted as s = a + c tau^(1 - SHARE_DECAY) (tau: seconds since the job started; a
+#: rate that falls as tau^-SHARE_DECAY, as a tree's does while the search goes deeper).
+#: scripts/bench_eta.py (4 searches of 7-159 lines), median told / left 0.43-1.39 with
+#: (0.2, 0.7); 0.32-0.48 with (0.2, 0), a steady rate, as before; 0.04-0.39 at the rate since the
+#: start. Decay 0.9 told up to 12x too much, the last half (0.5, 0.7) 0.29 on one search
 SHARE_WINDOW = 0.2
+SHARE_DECAY = 0.7
 SHARE_WINDOW_MIN_S = 20.0
+#: the longest time left a ShareClock tells (seconds): a share that all but stalled
+SHARE_LEFT_MAX_S = 1e8
 #: ... and only once the share has grown this much in the job: before, a tree whose first tasks
 #: opened its top levels has decided next to nothing (the curved neck m = 32 at 1 s: 3e-5 of
 #: it, "about 11 h left" with 5 s to go)
@@ -204,29 +210,38 @@ def left_text(seconds: float | None) -> str:
 
 
 class ShareClock:
-    """The time a share in [0, 1] that grows to 1 (a tree job's decided share) still needs, at
-    the rate it grew over the recent window: the last `window` of the time since the first
-    sample, at least `min_s` seconds (all of it before then). A tree's share grows fast while
-    the easy subtrees close and slowly in the hard ones, so the rate since the start tells too
-    little time (plug3d 6 x 8 at 1.1 mu^c, 92 % decided: "about 30 s left" with ~10 min to go).
+    """The time a share in [0, 1] that grows to 1 (a tree job's decided share) still needs:
+    s = a + c tau^q (q = 1 - decay, tau the seconds since t0) through the sample now and the
+    last one at or before the window's start (the last `window` of tau, at least `min_s`
+    seconds; the first sample if none), extrapolated to s = 1. decay = 0 is the steady rate
+    over the window. A tree's share grows fast while the easy subtrees close and ever slower in
+    the hard ones, so a steady rate tells too little time (plug3d 6 x 8 at 1.1 mu^c, 92 %
+    decided: "about 30 s left" at the rate since the start, with ~10 min to go).
 
     ShareClock(t0, share0) starts it (seconds, any clock); left(t, share) records a sample and
-    returns the seconds left, or None while the share has grown less than SHARE_GROWTH_MIN
-    since the start, or did not grow over the window."""
+    returns the seconds left (at most SHARE_LEFT_MAX_S), or None while the share has grown
+    less than SHARE_GROWTH_MIN since the start, or did not grow over the window. A resumed job
+    starts a new clock: tau counts from the resume."""
 
     def __init__(self, t0: float, share0: float, window: float = SHARE_WINDOW,
-                 min_s: float = SHARE_WINDOW_MIN_S):
-        self.window, self.min_s = window, min_s
+                 min_s: float = SHARE_WINDOW_MIN_S, decay: float = SHARE_DECAY):
+        if not 0.0 <= decay < 1.0:
+            raise ValueError(f"decay {decay} outside [0, 1)")
+        self.window, self.min_s, self.q = window, min_s, 1.0 - decay
         self._t, self._share = [t0], [share0]
 
     def left(self, t: float, share: float) -> float | None:
         if t >= self._t[-1]:
             self._t.append(t)
             self._share.append(share)
-        span = max(self.min_s, self.window * (t - self._t[0]))
+        t0 = self._t[0]
+        span = max(self.min_s, self.window * (t - t0))
         # the last sample at or before the window's start (the first sample if none)
         i = max(0, bisect.bisect_right(self._t, t - span) - 1)
-        dt, grown = t - self._t[i], share - self._share[i]
-        if dt <= 0.0 or grown <= 0.0 or share - self._share[0] < SHARE_GROWTH_MIN:
+        grown = share - self._share[i]
+        if t <= self._t[i] or grown <= 0.0 or share - self._share[0] < SHARE_GROWTH_MIN:
             return None
-        return max(0.0, 1.0 - share) * dt / grown
+        q, tau, tau_i = self.q, t - t0, self._t[i] - t0
+        c = grown / (tau ** q - tau_i ** q)                # s = a + c tau^q through both samples
+        end_q = tau ** q + max(0.0, 1.0 - share) / c       # tau_end^q
+        return min(SHARE_LEFT_MAX_S, max(0.0, math.exp(min(math.log(end_q) / q, 40.0)) - tau))

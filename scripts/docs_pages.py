@@ -677,18 +677,28 @@ def _spread(by_first: dict) -> str:
 
 def bench_eta() -> str:
     """results/bench_eta.json: the time left that a tree job's progress lines told against what
-    was left (scripts/bench_eta.py): per case and estimate, the lines, the median ratio, the
-    share within a factor of 2 and the share that told less than half."""
+    was left (scripts/bench_eta.py): a row per case, its tree job's seconds and lines, and per
+    estimate (a column, in the summary's order) the median told / left and the share of lines
+    within a factor of 2."""
     recs = _records("bench_eta.json", "summary")
     if recs is None:
         return not_measured("bench_eta.json")
     job_s = {}
     for r in _records("bench_eta.json") or []:
         job_s[r["case"]] = max(job_s.get(r["case"], 0.0), r.get("job_s") or 0.0)
-    rows = [[r["case"], f"{job_s[r['case']]:.0f}" if r["case"] in job_s else "–", r["estimate"], _g(r, "lines"),
-             _g(r, "median_ratio"), _share(r, "within_2x"), _share(r, "below_half")] for r in recs]
-    return table(["case", "tree job s", "time left at", "lines", "median told / left", "within 2×",
-                  "told < half"], rows)
+    estimates = list(dict.fromkeys(r["estimate"] for r in recs))
+    cases: dict = {}
+    for r in recs:
+        cases.setdefault(r["case"], {})[r["estimate"]] = r
+    rows = []
+    for case, by in cases.items():
+        lines = max((r.get("lines") or 0) for r in by.values())
+        cells = []
+        for e in estimates:
+            r = by.get(e, {})
+            cells.append("–" if r.get("median_ratio") is None else f"{r['median_ratio']:.2f} · {_share(r, 'within_2x')}")
+        rows.append([case, f"{job_s[case]:.0f}" if case in job_s else "–", str(lines), *cells])
+    return table(["case", "tree job s", "lines", *estimates], rows)
 
 
 #: the files of bench_sparse_form's table (scripts/bench_sparse_form.py's runs)

@@ -307,15 +307,20 @@ def test_tree_cores_rows_with_and_without_cores(tmp_path, monkeypatch):
 
 
 def test_eta_table_rows(tmp_path, monkeypatch):
-    """One row per case and estimate, the case's tree job seconds from its lines."""
+    """One row per case, one column per estimate (median told / left · share within 2x), the
+    case's tree job seconds from its lines; an estimate without lines is a dash."""
     _results(tmp_path, monkeypatch, "bench_eta.json",
-             {"records": [{"case": "neck-6x8-global", "job_s": 121.4}, {"case": "neck-6x8-global", "job_s": 121.4}],
+             {"records": [{"case": "neck-6x8-global", "job_s": 121.4}, {"case": "neck-6x8-global", "job_s": 121.4},
+                          {"case": "plug", "job_s": 3.0}],
               "summary": [{"case": "neck-6x8-global", "estimate": "told", "lines": 20, "median_ratio": 0.91,
                            "within_2x": 0.85, "below_half": 0.05},
-                          {"case": "neck-6x8-global", "estimate": "since start", "lines": 0}]})
+                          {"case": "neck-6x8-global", "estimate": "since start", "lines": 0},
+                          {"case": "plug", "estimate": "told", "lines": 2, "median_ratio": 0.5, "within_2x": 1.0},
+                          {"case": "plug", "estimate": "since start", "lines": 2, "median_ratio": 0.123, "within_2x": 0.0}]})
     lines = docs_pages.bench_eta().splitlines()
-    assert lines[2] == "| neck-6x8-global | 121 | told | 20 | 0.91 | 85 % | 5 % |"
-    assert lines[3] == "| neck-6x8-global | 121 | since start | 0 | – | – | – |"
+    assert lines[0] == "| case | tree job s | lines | told | since start |"
+    assert lines[2] == "| neck-6x8-global | 121 | 20 | 0.91 · 85 % | – |"
+    assert lines[3] == "| plug | 3 | 2 | 0.50 · 100 % | 0.12 · 0 % |"
 
 
 def test_highs_lp_table_with_one_file_missing(tmp_path, monkeypatch):

@@ -12,8 +12,8 @@ import pytest
 from mpi_helpers import command, env, needs_mpirun
 
 from hpcwedge.errors import UserError
-from hpcwedge.progress import (GB, SHARE_GROWTH_MIN, SHARE_WINDOW_MIN_S, MemoryGuard, MemoryLimit, Progress, ShareClock, eta, left_text,
-                               rss_bytes)
+from hpcwedge.progress import (GB, SHARE_DECAY, SHARE_GROWTH_MIN, SHARE_LEFT_MAX_S, SHARE_WINDOW, SHARE_WINDOW_MIN_S,
+                               MemoryGuard, MemoryLimit, Progress, ShareClock, eta, left_text, rss_bytes)
 from hpcwedge.scene.parse import parse_scene
 from hpcwedge.scene.values import SceneError
 
@@ -126,41 +126,72 @@ def test_time_left_units():
 
 
 def test_share_clock_is_exact_on_a_steady_rate():
-    """A share that grows 1 % a second from 0.2 at t = 100 has 80 s left at any sample."""
-    clock = ShareClock(100.0, 0.2)
+    """decay = 0: a share that grows 1 % a second from 0.2 at t = 100 has 80 s left at any sample."""
+    clock = ShareClock(100.0, 0.2, decay=0.0)
     for t in (101.0, 105.0, 130.0, 150.0):
         share = 0.2 + 0.01 * (t - 100.0)
         assert clock.left(t, share) == pytest.approx(100.0 - (t - 100.0) - 20.0)
 
 
-def test_share_clock_follows_the_recent_rate():
+def test_share_clock_is_exact_on_its_decaying_rate():
+    """A share 0.1 + 0.05 tau^0.3 (tau: seconds since the job started at t = 50) reaches 1 at
+    tau = 18^(1/0.3) = 15,290 s; the default clock (SHARE_DECAY 0.7) tells what is left from any
+    two samples, the steady rate of its window far less."""
+    assert SHARE_DECAY == 0.7
+    def share(tau):
+        return 0.1 + 0.05 * tau ** 0.3
+
+    end = 18.0 ** (1.0 / 0.3)
+    assert end == pytest.approx(15290.0, rel=1e-3)
+    clock, steady = ShareClock(50.0, share(0.0)), ShareClock(50.0, share(0.0), decay=0.0)
+    for tau in (3.0, 40.0, 100.0, 400.0):
+        assert clock.left(50.0 + tau, share(tau)) == pytest.approx(end - tau, rel=1e-9)
+        assert steady.left(50.0 + tau, share(tau)) < 0.3 * (end - tau)
+    assert clock.left(50.0 + end, 1.0) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_share_clock_follows_the_recent_growth():
     """A tree whose easy part closes first: 0 -> 0.8 in 10 s, then 0.001 a second. At t = 60
-    (share 0.85) 150 s are left; the rate since the start says 10.6 s, the window's rate (its
-    last 20 s, SHARE_WINDOW_MIN_S, all in the slow part) says 150 s."""
+    (share 0.85; 150 s left) the rate since the start says 10.6 s; the clock fits its window
+    (its last 20 s, SHARE_WINDOW_MIN_S, all in the slow part) and tells the decaying model's
+    time, (60^q + 0.15 / c)^(1/q) - 60 with c = 0.02 / (60^q - 40^q), q = 0.3: 414 s. A steady
+    rate over the same window (decay 0) says 150 s."""
     def share(t):
         return 0.08 * t if t <= 10.0 else 0.8 + 0.001 * (t - 10.0)
 
-    clock = ShareClock(0.0, 0.0)
+    q = 1.0 - SHARE_DECAY
+    clock, steady = ShareClock(0.0, 0.0), ShareClock(0.0, 0.0, decay=0.0)
     for t in range(1, 60):
         clock.left(float(t), share(t))
+        steady.left(float(t), share(t))
     since_start = 60.0 * (1.0 - share(60)) / share(60)
     assert since_start == pytest.approx(10.59, abs=0.01)
-    assert SHARE_WINDOW_MIN_S <= 40.0 and clock.left(60.0, share(60)) == pytest.approx(150.0)
-    # early on, the window (at least 20 s) reaches back to the start: the rate so far
-    early = ShareClock(0.0, 0.0)
+    c = 0.02 / (60.0 ** q - 40.0 ** q)
+    model = (60.0 ** q + 0.15 / c) ** (1.0 / q) - 60.0
+    assert SHARE_WINDOW == 0.2 and SHARE_WINDOW_MIN_S == 20.0 and model == pytest.approx(414.0, abs=0.1)
+    assert clock.left(60.0, share(60)) == pytest.approx(model)
+    assert steady.left(60.0, share(60)) == pytest.approx(150.0)
+    # early on, the window (at least 20 s) reaches back to the start
+    early = ShareClock(0.0, 0.0, decay=0.0)
     early.left(5.0, share(5))
     assert early.left(12.0, share(12)) == pytest.approx(12.0 * (1.0 - share(12)) / share(12))
 
 
 def test_share_clock_says_nothing_before_the_share_moved():
     """No time left while the share has grown less than SHARE_GROWTH_MIN since the start, or
-    not at all over the window (samples at uneven times, one repeated)."""
-    clock = ShareClock(0.0, 0.5)
+    not at all over the window (samples at uneven times, one repeated); a share that all but
+    stalled tells at most SHARE_LEFT_MAX_S."""
+    clock = ShareClock(0.0, 0.5, decay=0.0)
     assert clock.left(5.0, 0.5 + 0.5 * SHARE_GROWTH_MIN) is None
     assert clock.left(10.0, 0.6) == pytest.approx(40.0)
     assert clock.left(10.0, 0.6) == pytest.approx(40.0)
     assert clock.left(100.0, 0.6) is None                  # stalled over the window
     assert ShareClock(0.0, 0.0).left(0.0, 0.5) is None      # no time passed
+    crawl = ShareClock(0.0, 0.0)
+    crawl.left(1.0, 0.02)
+    assert crawl.left(1e4, 0.02 + 1e-12) == SHARE_LEFT_MAX_S
+    with pytest.raises(ValueError):
+        ShareClock(0.0, 0.0, decay=1.0)
 
 
 def test_progress_every_s_sets_the_lines_of_a_batch_log(tmp_path):

@@ -426,8 +426,8 @@ class Engine:
 
     def _job_line(self, job, now: float, running: str = "") -> str:
         """The progress line of `job`: its tasks, what job.progress() adds, a tree job's share
-        decided, and the time left (a task list: at this session's rate; a tree: at its share's
-        recent rate, progress.ShareClock); `running` ends it (a long task)."""
+        decided, and the time left (a task list: at this session's rate; a tree: from its share's
+        recent growth, progress.ShareClock); `running` ends it (a long task)."""
         done = job.counters.get("tasks", 0)
         left = decided = ""
         t0, done0, _ = self._job_start
