@@ -7,6 +7,7 @@ import io
 import os
 import resource
 import subprocess
+import time
 
 import pytest
 from mpi_helpers import command, env, needs_mpirun
@@ -197,10 +198,12 @@ def test_share_clock_says_nothing_before_the_share_moved():
 def test_progress_every_s_sets_the_lines_of_a_batch_log(tmp_path):
     """`run.progress_every_s` sets how often a batch run (stderr a pipe) prints its line: the
     3D pattern search of plug3d 3 x 6 (a few seconds) gives several at 0.3 s, with the share
-    of the tree decided, and the time left once 1 % is decided; at the default 10 s none."""
+    of the tree decided, and the time left once 1 % is decided; at the default 10 s none in a
+    run of less than 10 s (one on a loaded machine where it took 11 s)."""
     import re
-    lines = {}
+    lines, wall = {}, {}
     for every in (0.3, None):
+        t0 = time.monotonic()
         scene = tmp_path / f"s{every}.toml"
         run = "" if every is None else f"[run]\nprogress_every_s = {every}\nsymmetry = false\n"
         scene.write_text('name = "p"\ndim = 3\n[model]\nkind = "plug3d"\nlevels = 3\nring = 6\n'
@@ -208,9 +211,10 @@ def test_progress_every_s_sets_the_lines_of_a_batch_log(tmp_path):
                          + (run or "[run]\nsymmetry = false\n"))
         p = subprocess.run(command(None, "run", str(scene), "-o", str(tmp_path / "r.h5")), env=env(),
                            capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+        wall[every] = time.monotonic() - t0
         assert p.returncode == 0, p.stderr
         lines[every] = [ln for ln in p.stderr.splitlines() if "% of the tree decided" in ln]
-    assert len(lines[0.3]) >= 3 and lines[None] == []
+    assert len(lines[0.3]) >= 3 and len(lines[None]) <= wall[None] // 10.0
     shares = [float(re.search(r"([\d.]+) % of the tree decided", ln).group(1)) for ln in lines[0.3]]
     assert shares == sorted(shares)
     # the first task opens the tree's top levels: no time left told until 1 % is decided
