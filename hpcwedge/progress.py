@@ -27,12 +27,12 @@ DD_GROWTH = 3.0
 SHARE_WINDOW = 0.2
 SHARE_DECAY = 0.7
 SHARE_WINDOW_MIN_S = 20.0
-#: the longest time left a ShareClock tells (seconds): a share that all but stalled
-SHARE_LEFT_MAX_S = 1e8
 #: ... and only once the share has grown this much in the job: before, a tree whose first tasks
 #: opened its top levels has decided next to nothing (the curved neck m = 32 at 1 s: 3e-5 of
 #: it, "about 11 h left" with 5 s to go)
 SHARE_GROWTH_MIN = 0.01
+#: the longest time left a ShareClock tells (seconds): a share that all but stalled
+SHARE_LEFT_MAX_S = 1e8
 
 
 class MemoryLimit(UserError):
