@@ -262,11 +262,17 @@ def _show_checkpoint(args) -> int:
 
     from hpcwedge.files import resume_hint
     from hpcwedge.parallel.checkpoint import CheckpointError, checkpoint_summary
-    from hpcwedge.patterns.job import describe_saved
+    from hpcwedge.mu_c import critical, global_search
+    from hpcwedge.patterns import job as patterns_job
+
+    describers = (patterns_job.describe_saved, global_search.describe_saved, critical.describe_saved)
     try:
-        ck = checkpoint_summary(args.result, describe_saved)
+        ck = checkpoint_summary(args.result, lambda a, d: next(
+            (said for said in (f(a, d) for f in describers) if said is not None), None))
     except CheckpointError as e:
         raise _UserError(str(e)) from None
+    bounds = [j["mu_c_at_most"] for j in ck["jobs"] if j.get("mu_c_at_most") is not None]
+    ck["mu_c_at_most"] = min(bounds) if bounds else None
     if args.json:
         print(json.dumps(ck))
         return 0
@@ -277,6 +283,9 @@ def _show_checkpoint(args) -> int:
           f"written {when} ({ck['reason'] or '?'})")
     print(f"work so far: {ck['elapsed_s']:.1f} s in {sessions} session{'s' * (sessions > 1)}, "
           f"last on {ck['ranks']} rank{'s' * (ck['ranks'] > 1)} (hpcwedge {ck['version']})")
+    if ck["mu_c_at_most"] is not None:
+        print(f"global mu^c so far: at most {ck['mu_c_at_most']:.12g} (the least certified mu^c of a "
+              f"pattern found; the run goes on to look for a lower one)")
     for job in ck["jobs"]:
         state = "done" if job["finished"] else "in progress"
         if "found" in job:

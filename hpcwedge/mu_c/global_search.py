@@ -123,6 +123,8 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     if status == "settle" and bound and bound_meets(param, m, best, stats):
         status = "found"
     if status == "settle":
+        engine.tell(f"global mu^c: at most {best:.12g} (the certified mu^c of a pattern); a tree "
+                    f"of the patterns feasible at that mu looks for a lower one")
         best = settled(search, best, stats, pattern_of, engine, budget)
         status = "found"
     if certify is not None and best in pattern_of:
@@ -320,6 +322,17 @@ def bracket_task(search: GlobalSearch, payload):
     return {"best": math.nan if best is None else float(best), "status": BRACKET_STATUS.index(status),
             "zero_u": np.asarray(zu, dtype=bool), "zero_r": np.asarray(zr, dtype=bool),
             "stats": _counts_json(stats).encode()}
+
+
+def describe_saved(attrs, data) -> dict | None:
+    """What `show` says of a saved "global_bracket" job (parallel.checkpoint.checkpoint_summary's
+    describe): {"mu_c_at_most": the bracket's best, the certified mu^c of a pattern and so an
+    upper bound on the global mu^c; None while the bracket runs or when it found no pattern};
+    None for other jobs."""
+    if attrs["kind"] != "global_bracket":
+        return None
+    best = np.asarray(data.get("best", []), dtype=float)
+    return {"mu_c_at_most": float(best[0]) if len(best) and np.isfinite(best[0]) else None}
 
 
 def _recorded(solve, pattern_of: dict, zero_u, zero_r, **kw):

@@ -115,8 +115,9 @@ def checkpoint_summary(path: str, describe=None) -> dict:
     "reason", "elapsed_s" (all sessions), "resumes", "ranks", "jobs": [{"name", "kind",
     "finished", "counters"} + subtree jobs: "mu" (list), "found" (patterns, orbit
     representatives where a tree uses a symmetry), "open" (subtrees left);
-    task jobs: "tasks", "done"], in the order they ran}. describe(attrs, data) -> dict | None:
-    what the job's owner says of a job's saved state (None: a TaskJob's tasks and done)."""
+    task jobs: "tasks", "done"; + what describe says], in the order they ran}.
+    describe(attrs, data) -> dict | None: what the job's owner says of a job's saved state
+    (None: nothing more)."""
     ck = read_checkpoint(path)
     a = ck["attrs"]
     try:
@@ -129,11 +130,10 @@ def checkpoint_summary(path: str, describe=None) -> dict:
             ja, data = ck["jobs"][job_name]["attrs"], ck["jobs"][job_name]["data"]
             job = {"name": job_name, "kind": ja["kind"], "finished": bool(ja["finished"]),
                    "counters": json.loads(ja["counters"])}
-            extra = describe(ja, data) if describe is not None else None
-            if extra is not None:
-                job.update(extra)
-            else:
+            if "n_tasks" in ja:
                 job.update(tasks=int(ja["n_tasks"]), done=len(data["done"]))
+            extra = describe(ja, data) if describe is not None else None
+            job.update(extra or {})
             jobs.append(job)
     except (KeyError, TypeError, ValueError) as e:
         raise CheckpointError(f"{path}: unreadable checkpoint (a job lacks {e})") from None

@@ -411,6 +411,11 @@ class Engine:
                 self.take_result(job, src, tag, msg)
         self.master.stop(set(self._inflight), timeout, answer)
 
+    def tell(self, text: str) -> None:
+        """A line from the jobs' owner among the progress lines (nothing without progress)."""
+        if self.progress is not None:
+            self.progress.note(text)
+
     def note(self, job, last: float) -> float:
         """After a merge: the memory guard (at most every GUARD_EVERY_S), and every
         progress_every_s a progress line."""
