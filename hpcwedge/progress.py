@@ -221,7 +221,7 @@ class ShareClock:
     ShareClock(t0, share0) starts it (seconds, any clock); left(t, share) records a sample and
     returns the seconds left (at most SHARE_LEFT_MAX_S), or None while the share has grown
     less than SHARE_GROWTH_MIN since the start, or did not grow over the window. A resumed job
-    starts a new clock: tau counts from the resume."""
+    keeps its clock (ShareClock.resumed): tau counts from the job's start in its first session."""
 
     def __init__(self, t0: float, share0: float, window: float = SHARE_WINDOW,
                  min_s: float = SHARE_WINDOW_MIN_S, decay: float = SHARE_DECAY):
@@ -229,6 +229,15 @@ class ShareClock:
             raise ValueError(f"decay {decay} outside [0, 1)")
         self.window, self.min_s, self.q = window, min_s, 1.0 - decay
         self._t, self._share = [t0], [share0]
+
+    @classmethod
+    def resumed(cls, t: float, before_s: float, share: float, **settings) -> "ShareClock":
+        """The clock of a job resumed at t with before_s seconds of work in its earlier sessions
+        and `share` decided: started at t - before_s with nothing decided (its samples in
+        between are gone), with the sample (t, share)."""
+        clock = cls(t - before_s, 0.0, **settings)
+        clock.left(t, share)
+        return clock
 
     def left(self, t: float, share: float) -> float | None:
         if t >= self._t[-1]:

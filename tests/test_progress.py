@@ -178,6 +178,25 @@ def test_share_clock_follows_the_recent_growth():
     assert early.left(12.0, share(12)) == pytest.approx(12.0 * (1.0 - share(12)) / share(12))
 
 
+def test_a_resumed_share_clock_keeps_the_jobs_time():
+    """A job on the decaying share 0.05 tau^0.3, stopped at tau = 400 s and resumed at t = 7
+    (another clock): ShareClock.resumed(7, 400, share) tells the model's time left at its first
+    sample after the resume (anchored at the job's start, share 0), as the uninterrupted clock
+    does, and goes on telling it; a clock that restarted at the resume (tau from 0) says a
+    different time. The first session's samples are gone, so the window reaches back to the
+    start until its start passes the resume."""
+    def share(tau):
+        return 0.05 * tau ** 0.3
+
+    end = 20.0 ** (1.0 / 0.3)
+    clock = ShareClock.resumed(7.0, 400.0, share(400.0))
+    restarted = ShareClock(7.0, share(400.0))
+    for tau in (401.0, 410.0, 500.0, 3000.0):
+        assert clock.left(7.0 + tau - 400.0, share(tau)) == pytest.approx(end - tau, rel=1e-9)
+    told = restarted.left(7.0 + 2600.0, share(3000.0))
+    assert told is not None and not told == pytest.approx(end - 3000.0, rel=0.1)
+
+
 def test_share_clock_says_nothing_before_the_share_moved():
     """No time left while the share has grown less than SHARE_GROWTH_MIN since the start, or
     not at all over the window (samples at uneven times, one repeated); a share that all but

@@ -121,6 +121,7 @@ class Engine:
         self.job_id = 0                  # the current job's (workers hold one job's context)
         #: (when, tasks done, share of the trees decided) as the current job started
         self._job_start = (time.monotonic(), 0, 0.0)
+        self._job_before_s = 0.0         # the current job's seconds in earlier sessions
         self._share_clock = ShareClock(*self._job_start[::2])
         self._task_started = time.monotonic()     # the serial engine's current task
         self._batched = [0.0, 0]         # the current job's tasks: seconds, units of work (schedule.py)
@@ -181,7 +182,9 @@ class Engine:
             return False
         jobs = [(name, _state(job, [], finished=True)) for name, job in self._jobs.items()]
         if self._current is not None and self._current.name not in self._jobs:
-            jobs.append((self._current.name, _state(self._current, self._in_flight_tokens(), finished=False)))
+            st = _state(self._current, self._in_flight_tokens(), finished=False)
+            st["attrs"]["job_elapsed_s"] = self._job_before_s + time.monotonic() - self._job_start[0]
+            jobs.append((self._current.name, st))
         return self.checkpoints.write(jobs, self.size, reason)
 
     def _in_flight_tokens(self) -> list:
@@ -251,7 +254,10 @@ class Engine:
         self.signals.defer = True            # from here on, signals act at safe points only
         try:
             state = self.checkpoints.restored.get(job.name)
+            self._job_before_s = 0.0
             if state is not None:
+                before = float(state["attrs"].get("job_elapsed_s", 0.0))   # (older checkpoints: none)
+                self._job_before_s = before if 0.0 <= before < math.inf else 0.0
                 if state["attrs"].get("kind") != job.kind:
                     raise CheckpointError(f"job {job.name!r}: checkpoint kind {state['attrs'].get('kind')!r}, "
                                           f"this run {job.kind!r}")
@@ -261,7 +267,8 @@ class Engine:
             self._current, self._inflight, self._batched = job, {}, [0.0, 0]
             self._job_start = (time.monotonic(), job.counters.get("tasks", 0),
                                job.decided_share([]) if isinstance(job, TreeJob) else 0.0)
-            self._share_clock = ShareClock(self._job_start[0], self._job_start[2])
+            self._share_clock = (ShareClock.resumed(self._job_start[0], self._job_before_s, self._job_start[2])
+                                 if self._job_before_s > 0.0 else ShareClock(self._job_start[0], self._job_start[2]))
             self.checkpoints.restored.pop(job.name, None)
             if self.signals.stop_reason():
                 raise Interrupted(self.signals.stop_reason())

@@ -76,6 +76,45 @@ def test_engine_signal_checkpoint_resume_in_process(tmp_path, sig):
     assert out.found == ref.found and out.counters["nodes"] == ref.counters["nodes"]
 
 
+def test_a_jobs_seconds_add_up_over_its_sessions_in_the_checkpoint(tmp_path):
+    """A tree job whose tasks take at least 0.05 s each, stopped by SIGTERM at its 5th task and,
+    resumed, at its 3rd: each checkpoint holds the job's seconds of all its sessions
+    (attrs job_elapsed_s: at least 5, then 5 + 3 tasks' sleep, the second more than the first),
+    which the resumed engine's time left counts from (progress.ShareClock.resumed); the last
+    session ends with the uninterrupted answer."""
+    import time
+
+    from hpcwedge.parallel.checkpoint import read_checkpoint
+    make, _ = tree_factory(41, m=6)
+    mus = [1.0, 4.0]
+    ref = run_patterns(make, mus, budget=2)
+    ckpt = str(tmp_path / "x.ckpt")
+    seconds = []
+    for at in (5, 3):
+        calls = []
+        task = _signalling_task(calls, at, signal.SIGTERM)
+        def slow(ctx, payload, task=task):
+            time.sleep(0.05)
+            return task(ctx, payload)
+        eng = Engine()
+        eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=bool(seconds))
+        eng.install_signals()
+        try:
+            with pytest.MonkeyPatch.context() as mp:
+                mp.setattr(job_module, "explore_task", slow)
+                with pytest.raises(Interrupted):
+                    run_patterns(make, mus, engine=eng, budget=2)
+            assert eng.write_checkpoint("SIGTERM")
+        finally:
+            eng.close()
+        seconds.append(float(read_checkpoint(ckpt)["jobs"]["patterns"]["attrs"]["job_elapsed_s"]))
+    assert seconds[0] >= 5 * 0.05 and seconds[1] >= seconds[0] + 3 * 0.05
+    eng = Engine()
+    assert eng.use_checkpoint(ckpt, "hash", "scene", 1000.0, resume=True)
+    out = run_patterns(make, mus, engine=eng, budget=2)
+    assert out.found == ref.found and out.counters["nodes"] == ref.counters["nodes"]
+
+
 def test_second_stop_signal_does_not_interrupt_the_stop_checkpoint(tmp_path):
     """SLURM's SIGTERM, then mpirun's forwarded one about a second later: the first stops the
     job (Interrupted), the second arrives while the stop checkpoint is written and must
