@@ -262,10 +262,10 @@ def _show_checkpoint(args) -> int:
 
     from hpcwedge.files import resume_hint
     from hpcwedge.parallel.checkpoint import CheckpointError, checkpoint_summary
-    from hpcwedge.mu_c import critical, global_search
+    from hpcwedge.mu_c import saved
     from hpcwedge.patterns import job as patterns_job
 
-    describers = (patterns_job.describe_saved, global_search.describe_saved, critical.describe_saved)
+    describers = (patterns_job.describe_saved, saved.describe_saved)
     try:
         ck = checkpoint_summary(args.result, lambda a, d: next(
             (said for said in (f(a, d) for f in describers) if said is not None), None))

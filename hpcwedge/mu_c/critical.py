@@ -193,18 +193,6 @@ def run_mu_c(solve, items, engine: Engine | None = None, name: str = "mu_c") -> 
     return out
 
 
-def describe_saved(attrs, data) -> dict | None:
-    """What `show` says of a saved "mu_c" job (parallel.checkpoint.checkpoint_summary's
-    describe): {"mu_c_at_most": the least polished (certified) mu^c of its finished tasks,
-    an upper bound on the global mu^c; None when none is}; None for other jobs."""
-    if attrs["kind"] != "mu_c":
-        return None
-    values = np.asarray(data.get("mu_c", []), dtype=float)
-    polished = np.asarray(data.get("polished", np.zeros(len(values))), dtype=bool)
-    values = values[polished & np.isfinite(values)] if len(values) == len(polished) else values[:0]
-    return {"mu_c_at_most": float(values.min()) if len(values) else None}
-
-
 def _statuses(r: dict) -> dict:
     """A mu_c task's statuses (mu_c_task) as a dict, from a result of any version."""
     if r.get("statuses") is not None:

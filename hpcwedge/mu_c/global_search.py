@@ -88,12 +88,12 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     The MILP route skips that enumeration (exponential in m): its answer is the certified mu^c of
     the last pattern it found, the least to the MILP's tolerance (a pattern whose mu^c lies
     within ~1e-6 relative below it can go unseen, unless the bound met it: then it is the
-    least by a certificate). stats.extra["route"] says which route
-    ran; its MILP counts are stats.extra["milp_solves"] and ["milp_nodes"]; the bound's
-    stats.extra["bound_solves"] (conic programs), ["bound_certified"] (1 when it ended the
-    search) and ["bound"] (the certified value);
-    stats.extra["mu_c_unsettled"] the settled patterns whose mu^c no solve decided (the
-    answer is certified when it is 0 and every value is polished).
+    least by a certificate). stats.extra["route"] says which route ran; its MILP counts are
+    stats.extra["milp_solves"] and ["milp_nodes"]; the bound's stats.extra["bound_solves"]
+    (conic programs), ["bound_certified"] (1 when it ended the search) and ["bound"] (the
+    certified value); stats.extra["mu_c_unsettled"] the settled patterns whose mu^c no solve
+    decided (the answer is certified when it is 0 and every value is polished). Before the
+    settling, engine.tell says best, an upper bound (`show` of a checkpoint: mu_c.saved).
 
     The stages run as three jobs of `engine` (in-process by default; the master under
     mpirun): "global_bracket" (one task: the bracket), "global_patterns" (the settling tree
@@ -105,9 +105,8 @@ def global_mu_critical(param: Parametrization, m: int, mu_max: float, method: st
     certify(zero_u, zero_r, mu_c): the least pattern's value certified another way (2D: in
     exact arithmetic, exact_mu_c), or None to keep it.
 
-    Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with
-    r_t free has no solution) or "none_up_to_mu_max".
-    """
+    Returns (mu_c, status): status "found", "none_at_any_mu" (the relaxation with r_t free has
+    no solution) or "none_up_to_mu_max"."""
     if route not in ("auto", "tree", "milp"):
         raise ValueError(f"global mu^c route: 'auto', 'tree' or 'milp', got {route!r}")
     stats = stats if stats is not None else BnBStats()
@@ -295,8 +294,7 @@ def _step_state(stats: BnBStats, pattern_of: dict, best: float | None, bound: fl
     none = [False] * m
     zu, zr = pattern_of.get(best, (none, none))
     return {"best": best, "bound": bound, "longest": longest, "zero_u": [bool(v) for v in zu],
-            "zero_r": [bool(v) for v in zr],
-            "stats": _counts_json(stats)}
+            "zero_r": [bool(v) for v in zr], "stats": _counts_json(stats)}
 
 
 def _counts_json(stats: BnBStats) -> str:
@@ -322,17 +320,6 @@ def bracket_task(search: GlobalSearch, payload):
     return {"best": math.nan if best is None else float(best), "status": BRACKET_STATUS.index(status),
             "zero_u": np.asarray(zu, dtype=bool), "zero_r": np.asarray(zr, dtype=bool),
             "stats": _counts_json(stats).encode()}
-
-
-def describe_saved(attrs, data) -> dict | None:
-    """What `show` says of a saved "global_bracket" job (parallel.checkpoint.checkpoint_summary's
-    describe): {"mu_c_at_most": the bracket's best, the certified mu^c of a pattern and so an
-    upper bound on the global mu^c; None while the bracket runs or when it found no pattern};
-    None for other jobs."""
-    if attrs["kind"] != "global_bracket":
-        return None
-    best = np.asarray(data.get("best", []), dtype=float)
-    return {"mu_c_at_most": float(best[0]) if len(best) and np.isfinite(best[0]) else None}
 
 
 def _recorded(solve, pattern_of: dict, zero_u, zero_r, **kw):
