@@ -17,6 +17,12 @@ Every row is one `hpcwedge run` route (pipeline.run_scene) in its own process
              test: every pattern's mu^c polished, none unsettled; a tree solve that decides
              nothing keeps its subtree and an undecided leaf gets its certified mu^c, so
              `undecided` counts work, not doubt about the answer)
+--peers scip gurobi: the curved necks of PEER_NECKS (m = 16, 18: sizes the peers can finish)
+get our global row and each peer's (scripts/peers_global.py in its own process, the same
+--limit: the feasibility MISOCP with binary contact flags, bisection on mu to 1e-6; engine = the
+peer): status, seconds, mu_c (the bracket's upper end), mu_lo / mu_hi, milp_solves, milp_nodes,
+and rel_error = (peer - ours) / ours against our certified mu^c of the same run (negative:
+the peer says wedged below the least mu at which any pattern is, its tolerances at work).
 An enumeration cut by --limit is run once more as `probe` (the same tree, PatternTree with
 `hpcwedge run`'s options, explored in budgets of PROBE_BUDGET nodes until 0.8 * --limit wall
 seconds have passed): how far it got (nodes, SOCPs, patterns so far, and `decided`: the share of
@@ -46,6 +52,10 @@ ENUMERATE = ((4, 8, 0.2), (6, 8, 1.1 * TAN_TAPER), (8, 8, 1.1 * TAN_TAPER))
 #: (levels, ring) of the curved necks' global mu^c
 GLOBAL = ((4, 8), (6, 8), (8, 8))
 NECK_SEED = 0
+#: (levels, ring) of the necks that the peers are measured on (--peers)
+PEER_NECKS = ((2, 8), (3, 6))
+#: seconds a peer's process gets beyond the limit (its bisection stops itself at the limit)
+PEER_GRACE = 30.0
 #: tree nodes per explore call of a probe
 PROBE_BUDGET = 200
 
@@ -121,6 +131,8 @@ def main() -> None:
     ap.add_argument("--probe-only", action="store_true", help="only the probes of the enumerations beyond m = 32")
     ap.add_argument("--only", choices=("enumerate", "global"), help="only the rows of this task")
     ap.add_argument("--out", default=os.path.join(bench_2d.ROOT, "results", "bench_near_critical"))
+    ap.add_argument("--peers", nargs="+", choices=("scip", "gurobi"), default=[],
+                    help="these peers and ours on the necks of PEER_NECKS (only those rows)")
     ap.add_argument("--worker", nargs=4, metavar=("TASK", "LEVELS", "RING", "MU"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
@@ -135,6 +147,12 @@ def main() -> None:
     if args.only:
         plan = [row for row in plan if row[0] == args.only]
     records = _previous(args.out)
+    if args.peers:
+        for levels, ring in PEER_NECKS:
+            ours = _run(args, records, "global", levels, ring, 0.0)
+            for peer in args.peers:
+                _run_peer(args, records, peer, levels, ring, ours.get("mu_c"))
+        plan = []
     for task, levels, ring, mu in plan:
         rec = _run(args, records, task, levels, ring, mu)
         if task == "enumerate" and rec["status"] == "timeout":
@@ -145,8 +163,8 @@ def main() -> None:
 def _run(args, records: list[dict], task: str, levels: int, ring: int, mu: float) -> dict:
     """One row: the worker run in its own process, its record put in place of the one of the
     same label, task and body in `records`, printed."""
-    records[:] = [r for r in records if (r.get("label"), r.get("task"), r.get("levels"), r.get("ring"))
-                  != (args.label, task, levels, ring)]
+    records[:] = [r for r in records if (r.get("label"), r.get("task"), r.get("levels"), r.get("ring"), r.get("engine"))
+                  != (args.label, task, levels, ring, None)]
     rec = {"label": args.label, "task": task, "body": "plug3d" if task != "global" else f"neck-s{NECK_SEED}",
            "levels": levels, "ring": ring, "m": levels * ring, "mu": mu if task != "global" else None}
     argv = ["--limit", str(args.limit), "--worker", task, str(levels), str(ring), repr(mu)]
@@ -161,6 +179,48 @@ def _run(args, records: list[dict], task: str, levels: int, ring: int, mu: float
     return rec
 
 
+def _run_peer(args, records: list[dict], peer: str, levels: int, ring: int, ours: float | None) -> dict:
+    """A peer's global row on the neck LEVELS x RING (module doc), in place of the one of the
+    same label, body and engine in `records`, printed."""
+    import tempfile
+
+    from harness import OK, python_command, run_command
+    records[:] = [r for r in records if (r.get("label"), r.get("task"), r.get("levels"), r.get("ring"), r.get("engine"))
+                  != (args.label, "global", levels, ring, peer)]
+    rec = {"label": args.label, "task": "global", "engine": peer, "body": f"neck-s{NECK_SEED}",
+           "levels": levels, "ring": ring, "m": levels * ring, "mu": None}
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = os.path.join(tmp, "neck.toml")
+        with open(scene, "w") as f:
+            f.write(_neck_toml(levels, ring))
+        env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+        got = run_command(python_command(os.path.join(HERE, "peers_global.py"), peer, scene, "--limit", str(args.limit)),
+                          limit=args.limit + PEER_GRACE, env=env)
+    rec.update(status=got["status"], wall=got["seconds"])
+    if got["status"] == OK:
+        out = json.loads(got["stdout"].strip().splitlines()[-1])
+        rec.update({k: out.get(k) for k in ("status", "mu_c", "mu_lo", "mu_hi", "milp_solves", "milp_nodes",
+                                            "undecided", "n_vars", "n_cons", "seconds")})
+        if rec.get("mu_c") is not None and ours:
+            rec["rel_error"] = (rec["mu_c"] - ours) / ours
+    records.append(rec)
+    print(line(rec), flush=True)
+    return rec
+
+
+def _neck_toml(levels: int, ring: int) -> str:
+    """neck_scene's scene as a TOML file's text (for the peers' script)."""
+    import importlib.util
+    sys.path.insert(0, os.path.join(bench_2d.ROOT, "tests"))
+    from instances import curved_neck
+    spec = importlib.util.spec_from_file_location("fault_campaign", os.path.join(HERE, "fault_campaign.py"))
+    campaign = sys.modules.setdefault(spec.name, importlib.util.module_from_spec(spec))
+    spec.loader.exec_module(campaign)
+    data = curved_neck(levels, ring, NECK_SEED)
+    data.update(friction={"mu": [0.01]}, compute={"enumerate": False, "mu_c": "global"})
+    return campaign.toml_text(data)
+
+
 def _previous(out: str) -> list[dict]:
     """The records of an earlier run in <out>.json (none if there is no such file)."""
     try:
@@ -173,13 +233,15 @@ def _previous(out: str) -> list[dict]:
 def line(r: dict) -> str:
     keys = ("mu", "finished", "patterns", "nodes", "socps", "socps_per_pattern", "lps", "bound_solves", "undecided",
             "mu_c", "certified", "seconds")
-    return f"{r['label']:8s} {r['task']:9s} {r['body']:8s} m={r['m']:3d} {r['status']:7s} {bench_2d.fields(r, keys, 6)}"
+    keys += ("mu_lo", "mu_hi", "rel_error", "milp_nodes") if r.get("engine") else ()
+    return (f"{r['label']:8s} {r['task']:9s} {r.get('engine', 'ours'):6s} {r['body']:8s} m={r['m']:3d} {r['status']:7s} "
+            f"{bench_2d.fields(r, keys, 6)}")
 
 
 #: the CSV's columns
-COLUMNS = ["label", "task", "body", "levels", "ring", "m", "mu", "status", "patterns", "nodes", "socps", "skipped",
+COLUMNS = ["label", "task", "engine", "body", "levels", "ring", "m", "mu", "status", "patterns", "nodes", "socps", "skipped",
            "socps_per_pattern", "lps", "bound_solves", "undecided", "finished", "decided", "mu_c", "certified", "seconds",
-           "wall"]
+           "wall", "mu_lo", "mu_hi", "rel_error", "milp_solves", "milp_nodes"]
 
 
 if __name__ == "__main__":

@@ -617,18 +617,25 @@ def bench_near_critical() -> str:
     if recs is None:
         return not_measured("bench_near_critical.json")
     order = {"before": 0, "after": 1}
-    key = lambda r: (r.get("task", ""), r.get("body", ""), r.get("m") or 0, order.get(r.get("label"), 2))  # noqa: E731
+    key = lambda r: (r.get("task", ""), r.get("body", ""), r.get("m") or 0, order.get(r.get("label"), 2),  # noqa: E731
+                     r.get("engine") or "")
     rows = []
     for r in sorted(recs, key=key):
         answer = ("–" if r.get("status") != "ok" else f"mu^c {r['mu_c']:.12g}" if r.get("mu_c") is not None
                   else f"{r['patterns']:,} pattern" + "s" * (r["patterns"] != 1) if r.get("patterns") is not None else "–")
         if r.get("certified") is not None:
             answer += ", certified" if r["certified"] else ", not certified"
+        if r.get("engine"):          # a peer: its bisection's bracket, its error against our certified value
+            answer = (f"mu^c {r['mu_c']:.12g}" if r.get("mu_c") is not None
+                      else f"[{r['mu_lo']:.9g}, {r['mu_hi']:.9g}] when cut" if r.get("mu_hi") is not None else "–")
+            if r.get("rel_error") is not None:
+                answer += f" ({r['rel_error']:+.1e} against ours)"
         if r.get("finished") is False:
             answer += (" (probe: not finished)" if r.get("decided") is None
                        else f" (probe: not finished, {100 * r['decided']:.3g} % of the tree decided)")
         mu = r.get("mu")
-        rows.append([r.get("label", "–"), r.get("task", "–"), r.get("body", "–"),
+        search = r.get("task", "–") + (f" ({r['engine']})" if r.get("engine") else "")
+        rows.append([r.get("label", "–"), search, r.get("body", "–"),
                      f"{r.get('levels', '?')} × {r.get('ring', '?')}", _g(r, "m"), "global" if mu is None else f"{mu:.6g}",
                      _seconds_or_status(r, "wall"), _g(r, "seconds"), _g(r, "nodes"), _g(r, "socps"), _g(r, "lps"),
                      _g(r, "undecided"), answer])
