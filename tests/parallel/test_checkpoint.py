@@ -213,8 +213,9 @@ def test_sigterm_to_mpirun(tmp_path):
     SIGKILL ~1 s after that; the master writes its checkpoint in that grace.
     (A scene with four mu values, so that the run cannot end within the second
     mpirun waits, and plug2d rows 8 (m = 16: about 10 s of work serially; rows 5 ended
-    before the signal once the 2D LPs were kept warm); a run that ends first anyway is
-    simply started again.)"""
+    before the signal once the 2D LPs were kept warm); a run that ends first anyway, or
+    that mpirun kills before the stop checkpoint is written, leaving the periodic one
+    whole, is started again.)"""
     text = (scene_text(raw=False).replace("mu = [0.65, 1.0]", "mu = [0.65, 1.0, 2.0, 4.0]")
             .replace("rows = 4", "rows = 8"))
     scene = write_scene(tmp_path, text=text)
@@ -230,14 +231,22 @@ def test_sigterm_to_mpirun(tmp_path):
         assert all_gone(pids.values())
         if os.path.exists(ckpt):
             with h5py.File(ckpt) as f:
-                if f.attrs["reason"] == "SIGTERM":
-                    assert code != 0
-                    break
+                reason = f.attrs["reason"]
+            if reason == "SIGTERM":
+                assert code != 0
+                break
+            # mpirun's SIGKILL came before the stop checkpoint was written (once in CI, the
+            # suite's disk busy): the periodic one before it is whole, and a resume goes on
+            assert code != 0 and read_checkpoint(ckpt)["attrs"]["reason"] == reason
             os.unlink(ckpt)
-        # the run ended first (its result written, the checkpoint removed, maybe killed after)
-        assert os.path.exists(out), "neither a SIGTERM checkpoint nor a result"
+            if os.path.exists(out):
+                os.unlink(out)
+        else:
+            # the run ended first (its result written, the checkpoint removed, maybe killed after)
+            assert os.path.exists(out), "neither a checkpoint nor a result"
+            os.unlink(out)
     else:
-        pytest.fail("the run always ended before mpirun passed SIGTERM on")
+        pytest.fail("no SIGTERM checkpoint in 3 runs: each ended, or mpirun killed it, first")
     got = _finish(scene, out)                           # resumed serially
     assert got["stats"]["parallel"]["resumes"] == 1
     from hpcwedge.results.hdf5 import write_result
