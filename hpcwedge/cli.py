@@ -265,10 +265,9 @@ def _show_checkpoint(args) -> int:
     from hpcwedge.mu_c import saved
     from hpcwedge.patterns import job as patterns_job
 
-    describers = (patterns_job.describe_saved, saved.describe_saved)
     try:
-        ck = checkpoint_summary(args.result, lambda a, d: next(
-            (said for said in (f(a, d) for f in describers) if said is not None), None))
+        ck = checkpoint_summary(args.result,
+                                lambda a, d: patterns_job.describe_saved(a, d) or saved.describe_saved(a, d))
     except CheckpointError as e:
         raise _UserError(str(e)) from None
     bounds = [j["mu_c_at_most"] for j in ck["jobs"] if j.get("mu_c_at_most") is not None]
