@@ -279,6 +279,16 @@ def run_script(script: str, argv: list[str], limit: float) -> tuple[str, dict | 
     return "error", None, rec["seconds"], "\n".join(rec["stderr"].strip().splitlines()[-5:])
 
 
+def run_record(script: str, argv: list[str], limit: float, **rec) -> dict:
+    """`rec` with what run_script(script, argv, limit) gave: status, wall, the result's keys,
+    and "error" (the stderr tail) where there is one."""
+    status, res, wall, err = run_script(script, argv, limit)
+    rec.update(status=status, wall=wall, **(res or {}))
+    if err:
+        rec["error"] = err
+    return rec
+
+
 def fields(r: dict, keys: tuple[str, ...], digits: int = 3) -> str:
     """`key=value` of the keys a record has (floats to `digits` significant digits)."""
     return "  ".join(f"{k}={r[k]:.{digits}g}" if isinstance(r.get(k), float) else f"{k}={r[k]}"

@@ -55,12 +55,8 @@ def run_case(levels: int, ring: int, mu: float, symmetry: bool, limit: float) ->
     for screens in (False, True):
         rec = {"levels": levels, "ring": ring, "m": levels * ring, "mu": mu, "symmetry": symmetry,
                "screens": screens}
-        status, res, wall, err = bench_2d.run_script(
-            os.path.abspath(__file__), ["--worker", str(levels), str(ring), str(mu), str(int(symmetry)),
-                                        str(int(screens))], limit)
-        rec.update(status=status, wall=wall, **(res or {}))
-        if err:
-            rec["error"] = err
+        rec = bench_2d.run_record(os.path.abspath(__file__), ["--worker", str(levels), str(ring), str(mu),
+                                                              str(int(symmetry)), str(int(screens))], limit, **rec)
         rows.append(rec)
     off, on = rows
     if off["status"] == on["status"] == "ok":

@@ -112,13 +112,7 @@ def point_main(dim: int, engine: str, size: int) -> None:
 def run_point(dim: int, engine: str, size: int, limit: float) -> dict:
     """One point in a fresh subprocess: its record with status ok / timeout / error."""
     argv = ["--point", str(dim), engine, str(size)]
-    status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__), argv, limit)
-    rec = {"dim": dim, "engine": engine, "size": size, "status": status, "wall": wall}
-    if res:
-        rec.update(res)
-    if err:
-        rec["error"] = err
-    return rec
+    return bench_2d.run_record(os.path.abspath(__file__), argv, limit, dim=dim, engine=engine, size=size)
 
 
 def plan(quick: bool) -> list[tuple[int, str, list[int], float]]:

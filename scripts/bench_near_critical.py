@@ -165,15 +165,10 @@ def _run(args, records: list[dict], task: str, levels: int, ring: int, mu: float
     same label, task and body in `records`, printed."""
     records[:] = [r for r in records if (r.get("label"), r.get("task"), r.get("levels"), r.get("ring"), r.get("engine"))
                   != (args.label, task, levels, ring, None)]
-    rec = {"label": args.label, "task": task, "body": "plug3d" if task != "global" else f"neck-s{NECK_SEED}",
-           "levels": levels, "ring": ring, "m": levels * ring, "mu": mu if task != "global" else None}
     argv = ["--limit", str(args.limit), "--worker", task, str(levels), str(ring), repr(mu)]
-    status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__), argv, args.limit)
-    rec.update(status=status, wall=wall)
-    if res is not None:
-        rec.update(res)
-    elif err:
-        rec["error"] = err
+    rec = bench_2d.run_record(os.path.abspath(__file__), argv, args.limit, label=args.label, task=task,
+                              body="plug3d" if task != "global" else f"neck-s{NECK_SEED}", levels=levels,
+                              ring=ring, m=levels * ring, mu=mu if task != "global" else None)
     records.append(rec)
     print(line(rec), flush=True)
     return rec
@@ -210,15 +205,13 @@ def _run_peer(args, records: list[dict], peer: str, levels: int, ring: int, ours
 
 def _neck_toml(levels: int, ring: int) -> str:
     """neck_scene's scene as a TOML file's text (for the peers' script)."""
-    import importlib.util
     sys.path.insert(0, os.path.join(bench_2d.ROOT, "tests"))
     from instances import curved_neck
-    spec = importlib.util.spec_from_file_location("fault_campaign", os.path.join(HERE, "fault_campaign.py"))
-    campaign = sys.modules.setdefault(spec.name, importlib.util.module_from_spec(spec))
-    spec.loader.exec_module(campaign)
+
+    from hpcwedge.scene.parse import Scene
     data = curved_neck(levels, ring, NECK_SEED)
     data.update(friction={"mu": [0.01]}, compute={"enumerate": False, "mu_c": "global"})
-    return campaign.toml_text(data)
+    return Scene.from_dict(data).text
 
 
 def _previous(out: str) -> list[dict]:

@@ -62,12 +62,13 @@ def neck_text(levels: int, ring: int, mu: float, mu_c: str = "global") -> str:
     the global search settles a tree) as a scene file, without symmetry."""
     import sys
     sys.path.insert(0, os.path.join(ROOT, "tests"))
-    from fault_campaign import toml_text
     from instances import curved_neck
+
+    from hpcwedge.scene.parse import Scene
     data = curved_neck(levels, ring, 0, mu=mu)
     data.update(compute={"enumerate": mu_c != "global", "mu_c": mu_c},
                 run={"symmetry": False, "checkpoint_every_s": 600})
-    return toml_text(data)
+    return Scene.from_dict(data).text
 
 
 def run(ranks: int | None, scene: str, out: str, limit: float | None = None) -> dict:

@@ -178,13 +178,7 @@ def limits(quick: bool) -> dict:
 
 
 def run(argv: list[str], limit: float) -> dict:
-    status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__), ["--worker", *argv], limit)
-    rec = {"status": status, "wall": wall}
-    if res:
-        rec.update(res)
-    if err:
-        rec["error"] = err
-    return rec
+    return bench_2d.run_record(os.path.abspath(__file__), ["--worker", *argv], limit)
 
 
 def measure_2d(quick: bool, lim: dict) -> list[dict]:

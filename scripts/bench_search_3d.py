@@ -153,13 +153,8 @@ def main() -> None:
             records.append(dict(rec, status="missing"))
             print(line(records[-1]), flush=True)
             continue
-        status, res, wall, err = bench_2d.run_script(os.path.abspath(__file__),
-                                                     ["--worker", engine, task, str(levels), str(ring)], args.limit)
-        rec.update(status=status, wall=wall)
-        if res is not None:
-            rec.update(res)
-        elif err:
-            rec["error"] = err
+        rec = bench_2d.run_record(os.path.abspath(__file__), ["--worker", engine, task, str(levels), str(ring)],
+                                  args.limit, **rec)
         records.append(rec)
         print(line(rec), flush=True)
     bench_2d.write_records(args.out, records, {"mu_enumerate": MU_ENUMERATE, "mu_global": MU_GLOBAL, "limit_s": args.limit}, COLUMNS)

@@ -4,6 +4,8 @@ solver for small SOCPs take the tree's solves?
 
     PYTHONPATH=. python scripts/bench_socp_solvers.py [--scene 3x6] [--mu 0.65] [--sample 1500]
                                                       [--repeat 2] [--out results/bench_socp_solvers]
+    PYTHONPATH=. python scripts/bench_socp_solvers.py --ldl [--scenes 4x8 6x8 8x8 ...] [--mu 0.3]
+                                                      [--sample 80] [--out results/bench_socp_ldl]
 
 The SOCPs are the first attempts that plug3d LEVELSxRING's enumeration tree (mu, no
 symmetry, bench_search_3d.scene) hands to conic.solve, recorded as the tree runs (the
@@ -19,6 +21,12 @@ false claim of feasibility. Reported per class of SOCP
 iterations and statuses, and the microseconds per solve (each solve's best of `repeat`
 passes).
 Writes <out>.json (with the environment record); prints a summary.
+
+--ldl: Clarabel alone, its KKT factorisation by each of its two LDL solvers (QDLDL, faer;
+Clarabel's "auto", the product's setting, picks faer when the AMD ordering's flops per factor
+entry reach 40) on the first `sample` SOCPs of each scene's tree (budget: `sample` tree nodes),
+every solve repeated `repeat` times in turn per solver; which solver "auto" picked (its x the
+same bits as that one's), and the milliseconds and iterations per solve, per size m.
 """
 from __future__ import annotations
 
@@ -44,9 +52,11 @@ def available() -> bool:
     return True
 
 
-def tree_socps(levels: int, ring: int, mu: float, sample: int) -> tuple[list, dict]:
-    """The first `sample` first-attempt SOCPs of the enumeration tree, as (A dense, b, n_zero,
-    n_lin, n_soc, long_steps, tree status), and the tree's counts."""
+def tree_socps(levels: int, ring: int, mu: float, sample: int,
+               budget: int | None = None) -> tuple[list, dict]:
+    """The first `sample` first-attempt SOCPs of the enumeration tree (budget: its first
+    `budget` nodes; None: all), as (A dense, b, n_zero, n_lin, n_soc, long_steps, tree
+    status), and the tree's counts."""
     from hpcwedge.contact.build import contact_problem
     from hpcwedge.contact.problem import parametrize
     from hpcwedge.patterns.tree import PatternTree
@@ -67,7 +77,7 @@ def tree_socps(levels: int, ring: int, mu: float, sample: int) -> tuple[list, di
     socp.solve = recording
     try:
         tree = PatternTree(param, m, mu)
-        ex = tree.explore(tree.root())
+        ex = tree.explore(tree.root(), budget)
     finally:
         socp.solve = solve
     return recorded, {"m": m, "patterns": len(ex.found), "socps": ex.stats.solves}
@@ -87,8 +97,9 @@ def _residual_ok(A, b, n_zero, n_lin, n_soc, w, tol: float) -> bool:
     return not n_soc or float((np.hypot(c[:, 1], c[:, 2]) - c[:, 0]).max()) <= tol * size
 
 
-def clarabel_engine(problems):
-    """Prepared Clarabel solves: a list of callables returning (status, iterations, x)."""
+def clarabel_engine(problems, ldl: str | None = None):
+    """Prepared Clarabel solves: a list of callables returning (status, iterations, x).
+    ldl: Clarabel's direct_solve_method ("qdldl", "faer"; None: the product's settings)."""
     import clarabel
 
     from hpcwedge.solvers.conic import settings
@@ -99,6 +110,9 @@ def clarabel_engine(problems):
         cones = [clarabel.ZeroConeT(nz)] + ([clarabel.NonnegativeConeT(nl)] if nl else [])
         cones += [clarabel.SecondOrderConeT(3)] * ns
         opts = settings(0, False, feasibility=True, long_steps=long_steps)
+        if ldl is not None:
+            opts = settings.__wrapped__(0, False, feasibility=True, long_steps=long_steps)   # not the shared one
+            opts.direct_solve_method = ldl
 
         def run(P=P, q=q, Ac=Ac, b=b, cones=cones, opts=opts):
             sol = clarabel.DefaultSolver(P, q, Ac, b, cones, opts).solve()
@@ -160,14 +174,60 @@ def study(levels: int, ring: int, mu: float, sample: int, repeat: int) -> dict:
     return row
 
 
+LDL_SCENES = ("3x6", "4x8", "6x8", "8x8", "10x8", "12x8", "8x16", "10x16")
+
+
+def ldl_study(levels: int, ring: int, mu: float, sample: int, repeat: int) -> dict:
+    """One scene of --ldl (module doc): per LDL solver the mean ms and iterations per solve
+    (each solve's best of `repeat`), and which solver Clarabel's "auto" picked."""
+    problems, tree = tree_socps(levels, ring, mu, sample, budget=sample)
+    runs = {k: clarabel_engine(problems, None if k == "auto" else k) for k in ("auto", "qdldl", "faer")}
+    best = {k: np.full(len(problems), np.inf) for k in runs}
+    answers: dict = {}
+    for _ in range(repeat):
+        for i in range(len(problems)):
+            for k, fs in runs.items():
+                t0 = time.perf_counter()
+                answers[k, i] = fs[i]()
+                best[k][i] = min(best[k][i], time.perf_counter() - t0)
+    picked = {k: sum(np.array_equal(answers["auto", i][2], answers[k, i][2]) for i in range(len(problems)))
+              for k in ("qdldl", "faer")}
+    row = {"scene": f"plug3d {levels}x{ring}", "m": tree["m"], "mu": mu, "sampled": len(problems),
+           "auto_same_bits_as": picked, "solvers": {}}
+    for k in runs:
+        row["solvers"][k] = {"ms_per_solve": round(float(best[k].mean()) * 1e3, 3),
+                             "mean_iterations": round(float(np.mean([answers[k, i][1] for i in range(len(problems))])), 2),
+                             "statuses": {s: sum(answers[k, i][0] == s for i in range(len(problems)))
+                                          for s in sorted({answers[k, i][0] for i in range(len(problems))})}}
+    row["qdldl_over_faer"] = round(row["solvers"]["qdldl"]["ms_per_solve"] / row["solvers"]["faer"]["ms_per_solve"], 3)
+    return row
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="3x6")
     ap.add_argument("--mu", type=float, default=0.65)
     ap.add_argument("--sample", type=int, default=1500)
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--out", default=os.path.join(os.path.dirname(HERE), "results", "bench_socp_solvers"))
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--ldl", action="store_true", help="Clarabel's LDL solvers by size (module doc)")
+    ap.add_argument("--scenes", nargs="+", default=list(LDL_SCENES))
     args = ap.parse_args(argv)
+    results = os.path.join(os.path.dirname(HERE), "results")
+    if args.ldl:
+        mu = 0.3 if args.mu == ap.get_default("mu") else args.mu
+        sample = 80 if args.sample == ap.get_default("sample") else args.sample
+        rows = []
+        for sc in args.scenes:
+            levels, ring = (int(v) for v in sc.split("x"))
+            row = ldl_study(levels, ring, mu, sample, args.repeat)
+            rows.append(row)
+            print(f"{row['scene']} (m = {row['m']}): " + ", ".join(
+                f"{k} {v['ms_per_solve']} ms ({v['mean_iterations']} iterations)" for k, v in row["solvers"].items())
+                + f"; auto = qdldl bits on {row['auto_same_bits_as']['qdldl']}, faer on "
+                f"{row['auto_same_bits_as']['faer']} of {row['sampled']}", flush=True)
+        write_json((args.out or os.path.join(results, "bench_socp_ldl")) + ".json", {"rows": rows})
+        return 0
     levels, ring = (int(v) for v in args.scene.split("x"))
     row = study(levels, ring, args.mu, args.sample, args.repeat)
     print(f"{row['scene']} (m = {row['m']}, mu = {row['mu']}): {row['sampled']} of the tree's "
@@ -179,7 +239,7 @@ def main(argv=None) -> int:
         parts = [f"{cls} {v['count']}: {v['us_per_solve']} us, {v['mean_iterations']} iterations, {v['statuses']}, "
                  f"{v['points_verified']} points verified" for cls, v in e["by_tree_status"].items()]
         print(f"  {name}: {e['us_per_solve']} us a solve; " + "; ".join(parts))
-    write_json(args.out + ".json", {"rows": [row]})
+    write_json((args.out or os.path.join(results, "bench_socp_solvers")) + ".json", {"rows": [row]})
     return 0
 
 

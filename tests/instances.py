@@ -1,6 +1,6 @@
 """Random small contact problems for the tests (supported and free bodies, 2D and 3D, with
-a planted node symmetry, random partial 3D patterns) and the helpers two test files share;
-the independent routes are in hpcwedge.reference."""
+a planted node symmetry, random partial 3D patterns, a tree's walk over patterns) and the
+helpers two test files share; the independent routes are in hpcwedge.reference."""
 from __future__ import annotations
 
 import math
@@ -309,3 +309,16 @@ def scene_param(data: dict):
     from hpcwedge.scene.parse import parse_scene
     prob = contact_problem(parse_scene(data))
     return parametrize(prob), prob.m
+
+
+def tree_walk(rng: np.random.Generator, m: int, steps: int):
+    """Patterns of a depth-first walk as a tree visits them: one node fixed (contact or gap)
+    per step down, back to a random depth now and then: (zero_u, zero_r) pairs."""
+    state = np.zeros(m, int)                     # 0 free, 1 contact, 2 gap
+    for _ in range(steps):
+        free = np.flatnonzero(state == 0)
+        if free.size == 0 or rng.random() < 0.2:
+            state[rng.permutation(m)[:rng.integers(1, m + 1)]] = 0
+        else:
+            state[free[0]] = rng.integers(1, 3)
+        yield state == 1, state == 2

@@ -1,19 +1,17 @@
 """What `show` says of a checkpoint's mu^c jobs (mu_c/saved.py): the least certified mu^c so far,
 on a real run stopped by SIGTERM in its settling tree and on saved job data."""
-import importlib.util
-import os
 import signal
-import sys
 import time
 
 import numpy as np
 import pytest
 from instances import curved_neck, scene_param
-from mpi_helpers import ROOT, launch, run, show_json, wait_for_checkpoint
+from mpi_helpers import launch, run, show_json, wait_for_checkpoint
 
 from hpcwedge.files import checkpoint_path
 from hpcwedge.mu_c.critical import mu_critical
 from hpcwedge.mu_c.saved import describe_saved
+from hpcwedge.scene.parse import Scene
 from hpcwedge.parallel.checkpoint import read_checkpoint
 
 
@@ -23,14 +21,11 @@ def test_show_of_a_checkpoint_in_the_settling_tree_tells_the_brackets_value_as_a
     of the checkpoint says "global mu^c so far: at most X" (JSON "mu_c_at_most"), X the
     certified mu^c of the bracket's saved pattern computed here again; the resumed run's
     progress lines tell X as the settling tree starts, and its answer is no more than X."""
-    spec = importlib.util.spec_from_file_location("fault_campaign", os.path.join(ROOT, "scripts", "fault_campaign.py"))
-    campaign = sys.modules.setdefault(spec.name, importlib.util.module_from_spec(spec))
-    spec.loader.exec_module(campaign)           # (its dataclasses look their module up there)
     data = curved_neck(4, 6, 0, mu=0.5)
     data.update(compute={"enumerate": False, "mu_c": "global"},
                 run={"symmetry": False, "checkpoint_every_s": 0.05})
     scene, out = tmp_path / "neck.toml", str(tmp_path / "r.h5")
-    scene.write_text(campaign.toml_text(data))
+    scene.write_text(Scene.from_dict(data).text)
     ckpt = checkpoint_path(out)
     proc = launch(None, "run", str(scene), "-o", out, "-q")
     try:

@@ -22,3 +22,16 @@ def test_engines_on_the_tree_socps(tmp_path):
             assert e["by_tree_status"]["PrimalInfeasible"]["points_verified"] == 0, name
     if bench_socp_solvers.available():
         assert row["engines"]["qoco"]["by_tree_status"]["Solved"]["points_verified"] > 0
+
+
+def test_ldl_study_solves_alike_with_either_ldl_solver():
+    """--ldl on plug3d 2 x 4: QDLDL and faer reach the same statuses and iterations on every
+    recorded SOCP, and Clarabel's "auto" returns the bits of one of them on all of them."""
+    row = bench_socp_solvers.ldl_study(2, 4, 0.3, sample=30, repeat=1)
+    assert row["m"] == 8 and row["sampled"] == 30
+    solvers = row["solvers"]
+    assert set(solvers) == {"auto", "qdldl", "faer"}
+    assert solvers["qdldl"]["statuses"] == solvers["faer"]["statuses"] == solvers["auto"]["statuses"]
+    assert set(solvers["auto"]["statuses"]) <= {"Solved", "PrimalInfeasible"}
+    assert max(row["auto_same_bits_as"].values()) == 30
+    assert row["qdldl_over_faer"] > 0

@@ -2,7 +2,7 @@
 SOCP feasible => circumscribed feasible) — and the violation of a point (lp_violation)."""
 import numpy as np
 import pytest
-from instances import random_partial_rows, random_problem
+from instances import random_partial_rows, random_problem, tree_walk
 
 from hpcwedge.contact.problem import parametrize
 from hpcwedge.solvers.feasibility import decide
@@ -114,19 +114,6 @@ def test_eliminated_lp_agrees_with_the_x_space_lp():
     assert counts.get("lp_x_space", 0) <= 2            # the eliminated LP answered
 
 
-def _walk(rng, m, steps):
-    """Patterns of a depth-first walk as a tree visits them: one node fixed (contact or gap)
-    per step down, back to a random depth now and then: (zero_u, zero_r) pairs."""
-    state = np.zeros(m, int)                     # 0 free, 1 contact, 2 gap
-    for _ in range(steps):
-        free = np.flatnonzero(state == 0)
-        if free.size == 0 or rng.random() < 0.2:
-            state[rng.permutation(m)[:rng.integers(1, m + 1)]] = 0
-        else:
-            state[free[0]] = rng.integers(1, 3)
-        yield state == 1, state == 2
-
-
 def _same(a, b) -> bool:
     return a[0] == b[0] and (a[1] is None) == (b[1] is None) and (a[1] is None or np.array_equal(a[1], b[1]))
 
@@ -152,7 +139,7 @@ def test_tree_lp_agrees_with_the_cold_lp_and_its_points_meet_the_rows(chain):
         p = parametrize(random_problem(rng, m, bool(seed % 2)))
         for mu in (0.2, 0.9, 4.0):
             warm, counts = TreeLp(p, m, mu, chain), {}
-            for zu, zr in _walk(rng, m, 40):
+            for zu, zr in tree_walk(rng, m, 40):
                 status, x = warm.solve(zu, zr, counts)
                 rows = pattern_rows(p, m, zu, zr)
                 if status == Status.UNDECIDED:
@@ -163,7 +150,7 @@ def test_tree_lp_agrees_with_the_cold_lp_and_its_points_meet_the_rows(chain):
                 if status == Status.FEASIBLE:
                     assert abs(rows.norm @ x - 1) <= 1e-9 and lp_violation(rows, mu, x) <= 1e-8
             again = pickle.loads(pickle.dumps(warm))     # as a tree sent to another rank: the same answers
-            for zu, zr in list(_walk(np.random.default_rng(seed), m, 10)):
+            for zu, zr in list(tree_walk(np.random.default_rng(seed), m, 10)):
                 a, b = again.solve(zu, zr), warm.solve(zu, zr)
                 assert _same(a, b) if not chain else a[0] == b[0] or Status.UNDECIDED in (a[0], b[0])
             assert sum(counts.values()) == 40 and set(counts) <= {"warm_feasible", "warm_infeasible", "warm_unsure"}

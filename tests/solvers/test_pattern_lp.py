@@ -2,24 +2,12 @@
 lp.py, and its margin steps (the Dinkelbach route of bracket.dinkelbach_hi) against a cold
 bisection."""
 import numpy as np
-from instances import random_problem
+from instances import random_problem, tree_walk
 
 from hpcwedge.contact.problem import parametrize
 from hpcwedge.solvers.lp import lp_feasible, lp_violation
 from hpcwedge.solvers.pattern_lp import PatternLp, point_holds, ratio
 from hpcwedge.solvers.rows import Status, pattern_rows
-
-
-def _walk(rng, m, steps):
-    """Patterns of a depth-first walk as a tree visits them (as test_lp's)."""
-    state = np.zeros(m, int)                     # 0 free, 1 contact, 2 gap
-    for _ in range(steps):
-        free = np.flatnonzero(state == 0)
-        if free.size == 0 or rng.random() < 0.2:
-            state[rng.permutation(m)[:rng.integers(1, m + 1)]] = 0
-        else:
-            state[free[0]] = rng.integers(1, 3)
-        yield state == 1, state == 2
 
 
 def test_pattern_lp_agrees_with_the_cold_lp_along_a_bisection():
@@ -36,7 +24,7 @@ def test_pattern_lp_agrees_with_the_cold_lp_along_a_bisection():
         rng = np.random.default_rng(100 + seed)
         m = 5
         p = parametrize(random_problem(rng, m, bool(seed % 2)))
-        for zu, zr in _walk(rng, m, 12):
+        for zu, zr in tree_walk(rng, m, 12):
             rows = pattern_rows(p, m, zu, zr)
             if not zr.all() and rows.Z is not None:
                 warm, counts = PatternLp(rows), {}
