@@ -5,7 +5,7 @@ import pytest
 from instances import random_problem_3d
 
 from hpcwedge.contact.build import contact_problem
-from hpcwedge.contact.problem import parametrize
+from hpcwedge.contact.problem import parametrize, reaction_coordinates
 from hpcwedge.scene.parse import parse_scene
 
 
@@ -29,6 +29,30 @@ def test_parametrize_3d(seed, free):
     else:
         assert p.n_alpha == 0 and np.allclose(p.R, np.eye(3 * m))
         assert np.allclose(p.U, np.linalg.inv(prob.K))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_reaction_coordinates_of_a_free_body_span_the_equilibrium_rows(seed):
+    """parametrize sets a free body's reaction form with E = N's orthonormal basis instead of
+    an SVD of B^T: the same U' and B bit for bit as the SVD route (reaction_coordinates with
+    no E), and E orthonormal rows spanning the same space (projectors within 1e-13), E B = 0
+    and E r = 0 for every r = R x (equilibrium); N r = 0 <=> E r = 0."""
+    rng = np.random.default_rng(seed)
+    prob = random_problem_3d(rng, [3, 4, 5][seed % 3], True)
+    p = parametrize(prob)
+    assert "reactions" in p.__dict__              # set by parametrize, not by the property's SVD
+    fast, svd = p.reactions, reaction_coordinates(p.U, p.R, p.n_alpha)
+    assert np.array_equal(fast.U, svd.U) and np.array_equal(fast.B, svd.B)
+    k = prob.N.shape[1]
+    assert fast.E.shape == svd.E.shape == (k, 3 * prob.m)
+    assert np.abs(fast.E @ fast.E.T - np.eye(k)).max() <= 1e-13
+    assert np.abs(fast.E.T @ fast.E - svd.E.T @ svd.E).max() <= 1e-13
+    assert np.abs(fast.E @ fast.B).max() <= 1e-13
+    x = rng.standard_normal(p.d)
+    assert np.abs(fast.E @ (p.R @ x)).max() <= 1e-12 * np.abs(p.R @ x).max()
+    # a supported body: no equilibrium rows either way
+    q = parametrize(random_problem_3d(rng, 3, False))
+    assert q.reactions.E.shape == (0, 9)
 
 
 def test_plug3d_lineality_is_the_spin_about_the_axis():
