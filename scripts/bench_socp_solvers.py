@@ -23,8 +23,8 @@ passes).
 Writes <out>.json (with the environment record); prints a summary.
 
 --ldl: Clarabel alone, its KKT factorisation by each of its two LDL solvers (QDLDL, faer;
-Clarabel's "auto", the product's setting, picks faer when the AMD ordering's flops per factor
-entry reach 40) on the first `sample` SOCPs of each scene's tree (budget: `sample` tree nodes),
+Clarabel's "auto", the product's setting, picks one of them by the work of the factorisation)
+on the first `sample` SOCPs of each scene's tree (budget: `sample` tree nodes),
 every solve repeated `repeat` times in turn per solver; which solver "auto" picked (its x the
 same bits as that one's), and the milliseconds and iterations per solve, per size m.
 """
