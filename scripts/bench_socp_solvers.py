@@ -206,8 +206,8 @@ def ldl_study(levels: int, ring: int, mu: float, sample: int, repeat: int) -> di
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="3x6")
-    ap.add_argument("--mu", type=float, default=0.65)
-    ap.add_argument("--sample", type=int, default=1500)
+    ap.add_argument("--mu", type=float, default=None, help="default 0.65 (--ldl: 0.3)")
+    ap.add_argument("--sample", type=int, default=None, help="default 1500 (--ldl: 80)")
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--out", default=None)
     ap.add_argument("--ldl", action="store_true", help="Clarabel's LDL solvers by size (module doc)")
@@ -215,8 +215,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     results = os.path.join(os.path.dirname(HERE), "results")
     if args.ldl:
-        mu = 0.3 if args.mu == ap.get_default("mu") else args.mu
-        sample = 80 if args.sample == ap.get_default("sample") else args.sample
+        mu = 0.3 if args.mu is None else args.mu
+        sample = 80 if args.sample is None else args.sample
         rows = []
         for sc in args.scenes:
             levels, ring = (int(v) for v in sc.split("x"))
@@ -229,7 +229,8 @@ def main(argv=None) -> int:
         write_json((args.out or os.path.join(results, "bench_socp_ldl")) + ".json", {"rows": rows})
         return 0
     levels, ring = (int(v) for v in args.scene.split("x"))
-    row = study(levels, ring, args.mu, args.sample, args.repeat)
+    row = study(levels, ring, 0.65 if args.mu is None else args.mu, 1500 if args.sample is None else args.sample,
+                args.repeat)
     print(f"{row['scene']} (m = {row['m']}, mu = {row['mu']}): {row['sampled']} of the tree's "
           f"{row['socps']} SOCPs")
     for name, e in row["engines"].items():
