@@ -31,6 +31,8 @@ APEX_RTOL = 1e-8
 #: optimum (a cone active with a zero multiplier) the multipliers are ill-determined;
 #: measured down to -4e-7 relative on plug3d 3x4 where the active set was right
 SIGN_RTOL = 1e-6
+#: _least_lift keeps the inactive u_n rows this far (a factor on the least lift) inside
+LIFT_MARGIN = 2.0
 #: a signed certificate's mu and a verified point's may close a bracket this narrow (relative)
 BOUNDS_RTOL = 1e-12
 #: Newton gives up when ||F|| has not fallen below STALL_RATIO times its value STALL_STEPS
@@ -90,8 +92,11 @@ def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
             if res is None:
                 break
             c, mu_s, support, signed, drop_s, drop_l = res
-            w = w_perp + V @ c
+            w = _least_lift(L, w_perp, V @ c)
             ok = violation(rows, mu_s, Z @ w) <= POLISH3_TOL
+            if not ok:
+                w = w_perp + V @ c
+                ok = violation(rows, mu_s, Z @ w) <= POLISH3_TOL
             if ok and signed:
                 return mu_s, support, Z @ w, True
             if ok and len(Ap) and unsigned is None:
@@ -104,6 +109,24 @@ def kkt_polish(rows: ConeRows, x: np.ndarray, mu: float,
                 break
             S, Lin = np.setdiff1d(S, drop_s), np.setdiff1d(Lin, drop_l)
     return _bounds_meet(upper, lower) or unsigned
+
+
+def _least_lift(L: np.ndarray, w_perp: np.ndarray, w_act: np.ndarray) -> np.ndarray:
+    """w_act + t w_perp with t in [0, 1] the least (times LIFT_MARGIN) at which every u_n
+    row L holds at t's point (1: the point as Newton left it). w_perp moves no active row:
+    it holds the inactive rows only, and is often rounding alone (w0 less its projection on
+    the active rows' span: eps ||w0||, which at a point of ||x|| ~ 1e4 ||r|| puts more than
+    POLISH3_TOL into the reactions: a random free body, m = 8, whose pattern of least mu^c
+    went unpolished so). The caller verifies the point (the cones off the active set
+    included) and falls back to t = 1."""
+    if not L.shape[0]:
+        return w_act
+    base, lift = L @ w_act, L @ w_perp
+    need = base < 0
+    if np.any(need & (lift <= 0)):
+        return w_act + w_perp
+    t = float(np.max(-base[need] / lift[need], initial=0.0)) * LIFT_MARGIN
+    return w_act + min(t, 1.0) * w_perp
 
 
 def _bounds_meet(upper: list, lower: list) -> tuple | None:

@@ -91,3 +91,34 @@ def test_a_degenerate_optimum_certified_by_two_halves():
     rows = pattern_rows(param, m, zu, ~zu)
     assert violation(rows, r.mu_c, r.x) <= 1e-12
     assert decide(rows, r.mu_c * (1 - 1e-6), SolverOptions()).status == Status.INFEASIBLE
+
+
+def test_a_large_lift_off_point_polished_without_its_rounding():
+    """A random free body (m = 8, seed 1042: the compliance puts the rigid motion at ~1e4 times
+    the reactions), its pattern of least mu^c (contact nodes 1, 2, 4, 6, 7): Newton converges
+    with signed multipliers, and the point's part off the active rows is rounding alone
+    (~6e-12 of a w of norm 7e3), which before put 1.4e-12 .. 2.1e-12 into the cones (above
+    POLISH3_TOL): the value was left unpolished, 0.89744527324 from a bisection (7e-9 high)
+    in a brute force over the patterns and, in the global search, 0.89744527106 (5e-9 high).
+    kkt._least_lift drops it. Independent checks: the point verifies; Clarabel proves the
+    pattern infeasible 1e-6 below and finds it feasible 1e-6 above; the least-ratio SOCP (one
+    Dinkelbach step, tight tolerances) is infeasible with margin 1e-7 below, not 1e-7 above."""
+    from hpcwedge.mu_c.bracket import Probe
+    from hpcwedge.mu_c.dinkelbach import _dinkelbach_step
+    from hpcwedge.solvers.feasibility import SolverOptions
+    rng = np.random.default_rng(1042)
+    m = int(rng.integers(5, 9))
+    p = parametrize(random_problem_3d(rng, m, free=True))
+    zu = np.zeros(m, bool)
+    zu[[1, 2, 4, 6, 7]] = True
+    r = mu_critical(p, m, zu, ~zu, mu_hi=5.0)
+    assert m == 8 and r.polished and abs(r.mu_c - 0.8974452667537) <= 1e-11
+    rows = pattern_rows(p, m, zu, ~zu)
+    assert violation(rows, r.mu_c, r.x) <= 1e-12 and np.linalg.norm(r.x) > 1e3
+    assert decide(rows, r.mu_c * (1 - 1e-6)).status == Status.INFEASIBLE
+    assert decide(rows, r.mu_c * (1 + 1e-6)).status == Status.FEASIBLE
+    for rel, sign in ((-1e-7, 1), (1e-7, -1)):
+        mu = r.mu_c * (1 + rel)
+        x = _dinkelbach_step(rows, mu, np.ones(len(rows.nodes)), Probe(SolverOptions(tolerances="tight")))
+        worst = (np.linalg.norm(rows.rt @ x, axis=1) - mu * (rows.rn @ x)).max()
+        assert sign * worst > 1e-9
