@@ -5,13 +5,17 @@
                                                       [--nodes 0] [--out results/bench_tree_pruning]
     PYTHONPATH=. python scripts/bench_tree_pruning.py --neck --levels 4 --ring 8 --cores 80 [--roots] \
         --out results/bench_tree_pruning_neck_4x8
+    PYTHONPATH=. python scripts/bench_tree_pruning.py --neck --levels 6 --ring 8 \
+        --fractions 0.5 0.8 0.9 0.97 0.99 1.000000001 --out results/bench_tree_pruning_neck_mu
 
 The tree of plug3d LEVELS x RING at mu (PatternTree with `hpcwedge run`'s options, symmetry off)
 explored depth first for --nodes tree nodes (0: to the end); --neck: instead the settling tree
 of tests/instances.py's curved neck LEVELS x RING (seed 0, where elasticity sets mu^c), at
 its global mu^c (1 + 1e-9) as global_search.py poses it (Clarabel's own steps, branching on
 the largest relaxed r_n); its mu^c is --mu, or `hpcwedge run`'s global mu^c when --mu is not
-given. Per SOCP: its status and how many
+given; --fractions F..: one such tree at each F mu^c instead (F < 1: a tree that proves no
+pattern feasible there; how much of the settling tree's size is the nearness of mu^c), each
+with its seconds (CPU, one process; read them as +-2x on the shared machine). Per SOCP: its status and how many
 nodes it fixes (contact, gap), and per depth the feasible and infeasible ones. --cores K: K
 infeasible tree nodes (seeded draw) shrunk to a minimal core by a deletion filter (each fixing
 dropped in turn while the node's relaxation stays infeasible, feasibility.decide): fixings the
@@ -61,8 +65,10 @@ def minimal_core(decide_fixed, contact: list[int], gap: list[int]) -> tuple[list
 
 
 def measure(levels: int, ring: int, mu: float | None, nodes: int | None, neck: bool = False,
-            cores: int = 0, roots: bool = False) -> dict:
-    """The counts of the module doc for one tree (neck: mu None asks `hpcwedge run` for it)."""
+            cores: int = 0, roots: bool = False, fraction: float = 1 + 1e-9) -> dict:
+    """The counts of the module doc for one tree (neck: mu None asks `hpcwedge run` for it;
+    the tree at fraction * mu^c)."""
+    import time
     import numpy as np
 
     from hpcwedge.contact.build import contact_problem
@@ -77,7 +83,7 @@ def measure(levels: int, ring: int, mu: float | None, nodes: int | None, neck: b
     if neck:
         from bench_near_critical import neck_scene
         mu_c = neck_mu_c(levels, ring) if mu is None else mu
-        prob, tree_mu = contact_problem(neck_scene(levels, ring)), mu_c * (1 + 1e-9)
+        prob, tree_mu = contact_problem(neck_scene(levels, ring)), mu_c * fraction
         options = {"options": DEFAULT_OPTIONS, "branch": TREE_BRANCH}
     else:
         prob, tree_mu, options = contact_problem(plug_scene(levels, ring, mu)), mu, {}
@@ -113,7 +119,9 @@ def measure(levels: int, ring: int, mu: float | None, nodes: int | None, neck: b
             return dec
 
     tree = Recording(param, m, tree_mu, **options)
+    start = time.process_time()
     out = tree.explore(tree.root(), nodes or None)
+    seconds = time.process_time() - start
 
     def infeasible(contact: list[int], gap: list[int]) -> bool:
         zu, zr = np.zeros(m, bool), np.zeros(m, bool)
@@ -133,7 +141,8 @@ def measure(levels: int, ring: int, mu: float | None, nodes: int | None, neck: b
         first[i] = sum(again.explore(kid, nodes or None).stats.nodes
                        for kid in (Subtree(1, 1 << i, 0), Subtree(1, 0, 1 << i))) + 1
     return {"body": f"neck-{levels}x{ring}-s0" if neck else f"plug3d-{levels}x{ring}", "levels": levels,
-            "ring": ring, "m": m, "mu": tree_mu, "node_budget": nodes, "nodes": out.stats.nodes,
+            "ring": ring, "m": m, "mu": tree_mu, "fraction_of_mu_c": fraction if neck else None,
+            "seconds": seconds, "node_budget": nodes, "nodes": out.stats.nodes,
             "socps": out.stats.solves, "skipped": out.stats.skipped, "patterns": len(out.found),
             "found": [[n.contact, n.gap] for n in out.found],
             "finished": not out.open, "counts": dict(counts), "solves_by_status_contact_gap": dict(by_fixed),
@@ -162,17 +171,29 @@ def main() -> None:
     ap.add_argument("--neck", action="store_true", help="the curved neck's settling tree instead of plug3d")
     ap.add_argument("--cores", type=int, default=0, help="infeasible nodes to shrink to a minimal core")
     ap.add_argument("--roots", action="store_true", help="the tree's size for every first branching node")
+    ap.add_argument("--fractions", type=float, nargs="+", default=[1 + 1e-9],
+                    help="--neck: the trees at these multiples of mu^c (default 1 + 1e-9)")
     ap.add_argument("--out", default=os.path.join(bench_2d.ROOT, "results", "bench_tree_pruning"))
     args = ap.parse_args()
     mu = 0.2 if args.mu is None and not args.neck else args.mu
-    rec = measure(args.levels, args.ring, mu, args.nodes, args.neck, args.cores, args.roots)
-    harness.write_records(args.out, [rec], csv_file=False)
+    if args.neck and mu is None:
+        mu = neck_mu_c(args.levels, args.ring)
+    records = []
+    for fraction in args.fractions if args.neck else [1 + 1e-9]:
+        records.append(measure(args.levels, args.ring, mu, args.nodes, args.neck, args.cores, args.roots, fraction))
+        summary(records[-1])
+    harness.write_records(args.out, records, csv_file=False)
+
+
+def summary(rec: dict) -> None:
+    """Prints one tree's counts."""
     c = rec["counts"]
-    print(f"{rec['body']} mu {rec['mu']}: {rec['nodes']} nodes, {rec['socps']} SOCPs "
+    at = f" ({rec['fraction_of_mu_c']} mu^c)" if rec["fraction_of_mu_c"] is not None else ""
+    print(f"{rec['body']} mu {rec['mu']}{at}: {rec['nodes']} nodes, {rec['socps']} SOCPs "
           f"({c.get('feasible', 0)} feasible, {c.get('infeasible', 0)} infeasible), {rec['patterns']} patterns; "
           f"nogoods: mean {c.get('nogood_total', 0) / max(c.get('infeasible', 1), 1):.1f} of "
           f"{c.get('fixed_total', 0) / max(c.get('infeasible', 1), 1):.1f} fixings, "
-          f"{c.get('nogood_would_prune', 0)} SOCPs a global store would have pruned")
+          f"{c.get('nogood_would_prune', 0)} SOCPs a global store would have pruned; {rec['seconds']:.1f} s")
     print(json.dumps(rec["nogood_sizes_contact_gap"]))
     print("feasible, infeasible by depth:", json.dumps(rec["feasible_infeasible_by_depth"]))
     if rec["core_summary"]:

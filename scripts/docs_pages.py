@@ -452,6 +452,31 @@ def stress_3d() -> str:
                   "undecided", "mu^c error", "seconds"], rows)
 
 
+#: the order of stress_global_3d's verdicts in its table
+GLOBAL_VERDICTS = ("agree", "flagged", "none", "wrong", "timeout", "error")
+
+
+def stress_global_3d() -> str:
+    """results/stress_global_3d.json (scripts/stress_global_3d.py): a row per verdict, with its
+    cases, their m, the largest |error| against brute force's least polished mu^c, and the
+    cases where brute force had an unpolished value below that."""
+    recs = _records("stress_global_3d.json")
+    if recs is None:
+        return not_measured("stress_global_3d.json")
+    by = {}
+    for r in recs:
+        by.setdefault(r["verdict"], []).append(r)
+    rows = []
+    for v in sorted(by, key=lambda v: GLOBAL_VERDICTS.index(v) if v in GLOBAL_VERDICTS else len(GLOBAL_VERDICTS)):
+        rs = by[v]
+        ms = [r["m"] for r in rs if "m" in r]
+        errs = [abs(r["rel_error"]) for r in rs if r.get("rel_error") is not None]
+        rows.append([v, f"{len(rs):,}", f"{min(ms)}–{max(ms)}" if ms else "–", f"{max(errs):.1e}" if errs else "–",
+                     str(sum(bool(r.get("unpolished_below")) for r in rs)),
+                     ", ".join(str(r["case"]) for r in rs) if v != "agree" else "–"])
+    return table(["verdict", "cases", "m", "largest |error|", "brute force: an unpolished value below", "which"], rows)
+
+
 def _scip_cell(p: dict | None, ours: dict, limit: float | None) -> str:
     """The SCIP peer's answer and CPU seconds beside ours: the same pattern set (hash) or its
     mu^c's distance from ours; a run cut at the time limit as "> limit s"."""
@@ -677,6 +702,32 @@ def bench_tree_cores() -> str:
                   "nodes from each first branching"], rows)
 
 
+#: the files of bench_tree_fractions' table (bench_tree_pruning.py --neck --fractions)
+TREE_FRACTION_FILES = ("bench_tree_pruning_neck_mu_4x8.json", "bench_tree_pruning_neck_mu_6x8.json")
+
+
+def bench_tree_fractions() -> str:
+    """results/bench_tree_pruning_neck_mu_*.json: the curved neck's tree at multiples of its
+    global mu^c (a row per tree): its nodes, and their share of the settling tree's (the
+    record of the same body closest above mu^c, 1 + 1e-9 when measured)."""
+    rows = []
+    for name in TREE_FRACTION_FILES:
+        recs = [r for r in _records(name) or [] if r.get("fraction_of_mu_c") is not None]
+        above = [r for r in recs if r["fraction_of_mu_c"] >= 1.0]
+        settling = min(above, key=lambda r: r["fraction_of_mu_c"])["nodes"] if above else None
+        for r in sorted(recs, key=lambda r: r["fraction_of_mu_c"]):
+            c = r.get("counts", {})
+            share = f"{r['nodes'] / settling:.2f}" if settling else "–"
+            rows.append([r.get("body", "–"), _g(r, "m"), str(r["fraction_of_mu_c"]), f"{r['mu']:.6g}",
+                         _g(r, "nodes"), share, f"{c.get('feasible', 0):,} / {c.get('infeasible', 0):,}",
+                         _full_depth(r.get("feasible_infeasible_by_depth") or {}), _g(r, "patterns"),
+                         f"{r['seconds']:.1f}" if "seconds" in r else "–"])
+    if not rows:
+        return not_measured(*TREE_FRACTION_FILES)
+    return table(["tree", "m", "mu / mu^c", "mu", "nodes", "of the settling tree's", "SOCPs feasible / infeasible",
+                  "every node feasible to depth", "patterns", "CPU s"], rows)
+
+
 def _spread(by_first: dict) -> str:
     """The least and largest tree over the first branching nodes ("–": not measured)."""
     return f"{min(by_first.values()):,}–{max(by_first.values()):,}" if by_first else "–"
@@ -853,6 +904,8 @@ BENCHMARKS: dict = {
                                 "PYTHONPATH=. .venv/bin/python scripts/bench_search_3d.py --full"),
     "stress_3d": (stress_3d, "results/stress_3d.json, results/stress_3d_before.json",
                   "PYTHONPATH=. .venv/bin/python scripts/stress_3d.py"),
+    "stress_global_3d": (stress_global_3d, "results/stress_global_3d.json",
+                         "PYTHONPATH=. .venv/bin/python scripts/stress_global_3d.py --cases 200"),
     "bench_growth": (bench_growth, "results/bench_growth.json", "PYTHONPATH=. .venv/bin/python scripts/bench_growth.py"),
     "bench_global_scale": (bench_global_scale, "results/bench_global_scale.json",
                            ".venv/bin/python scripts/bench_global_scale.py [--limit 300]"),
@@ -865,6 +918,9 @@ BENCHMARKS: dict = {
     "bench_tree_cores": (bench_tree_cores, ", ".join(f"results/{f}" for f in TREE_CORE_FILES),
                          "PYTHONPATH=. .venv/bin/python scripts/bench_tree_pruning.py [--neck --levels 4 --ring 8"
                          " --cores 80 --out results/bench_tree_pruning_neck_4x8]"),
+    "bench_tree_fractions": (bench_tree_fractions, ", ".join(f"results/{f}" for f in TREE_FRACTION_FILES),
+                             "PYTHONPATH=. .venv/bin/python scripts/bench_tree_pruning.py --neck --levels 6 --ring 8"
+                             " --fractions 0.5 0.8 0.9 0.97 0.99 1.000000001 --out results/bench_tree_pruning_neck_mu_6x8"),
     "bench_highs_lp": (bench_highs_lp, ", ".join(f"results/{f}" for f, _ in HIGHS_LP_FILES),
                        ".venv/bin/python scripts/bench_highs_lp.py [--checkout DIR --out results/bench_highs_lp_before]"),
     "bench_matrix": (bench_matrix, "results/bench_matrix.json", ".venv/bin/python scripts/bench_matrix.py"),

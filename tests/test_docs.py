@@ -306,6 +306,39 @@ def test_tree_cores_rows_with_and_without_cores(tmp_path, monkeypatch):
     assert lines[3] == "| plug3d-4x8 | 32 | 0.2 | 16,367 | 8,184 / 8,183 | – | – | 0.0 of 0.0 | 0 | – |"
 
 
+def test_tree_fractions_rows_share_of_the_settling_tree(tmp_path, monkeypatch):
+    """A row per record with a fraction, sorted by it; "of the settling tree's" divides by the
+    nodes of the record closest above mu^c; a record without a fraction (a cores run) is left
+    out, and a body without a record above mu^c shows a dash there."""
+    def rec(f, nodes, seconds=1.0):
+        return {"body": "neck-4x8-s0", "m": 32, "mu": 0.37 * f, "fraction_of_mu_c": f, "nodes": nodes,
+                "seconds": seconds, "patterns": int(f > 1), "counts": {"feasible": nodes // 2, "infeasible": nodes // 2},
+                "feasible_infeasible_by_depth": {"0": [1, 0], "6": [62, 2]}}
+    cores = {"body": "neck-4x8-s0", "m": 32, "mu": 0.37, "nodes": 7, "fraction_of_mu_c": None}
+    _results(tmp_path, monkeypatch, "bench_tree_pruning_neck_mu_4x8.json",
+             {"records": [rec(1.1, 6000), rec(0.5, 100), rec(1.000000001, 2000), cores]})
+    _results(tmp_path, monkeypatch, "bench_tree_pruning_neck_mu_6x8.json", {"records": [rec(0.8, 300)]})
+    lines = docs_pages.bench_tree_fractions().splitlines()
+    assert len(lines) == 6
+    assert lines[2] == "| neck-4x8-s0 | 32 | 0.5 | 0.185 | 100 | 0.05 | 50 / 50 | 5 | 0 | 1.0 |"
+    assert lines[3].startswith("| neck-4x8-s0 | 32 | 1.000000001 | 0.37 | 2,000 | 1.00 |")
+    assert lines[4].startswith("| neck-4x8-s0 | 32 | 1.1 | 0.407 | 6,000 | 3.00 |")
+    assert lines[5].startswith("| neck-4x8-s0 | 32 | 0.8 | 0.296 | 300 | – |")
+
+
+def test_stress_global_rows_by_verdict(tmp_path, monkeypatch):
+    """A row per verdict in GLOBAL_VERDICTS' order: cases, m range, largest |error|, how many
+    had an unpolished brute-force value below, and the cases themselves unless they agree."""
+    recs = [{"case": 0, "m": 6, "verdict": "agree", "rel_error": -5e-14, "unpolished_below": False},
+            {"case": 1, "m": 10, "verdict": "agree", "rel_error": 2e-13, "unpolished_below": True},
+            {"case": 2, "verdict": "timeout"},
+            {"case": 3, "m": 7, "verdict": "flagged", "rel_error": -3e-8, "unpolished_below": True}]
+    _results(tmp_path, monkeypatch, "stress_global_3d.json", {"records": recs})
+    lines = docs_pages.stress_global_3d().splitlines()
+    assert lines[2:] == ["| agree | 2 | 6–10 | 2.0e-13 | 1 | – |", "| flagged | 1 | 7–7 | 3.0e-08 | 1 | 3 |",
+                         "| timeout | 1 | – | – | 0 | 2 |"]
+
+
 def test_eta_table_rows(tmp_path, monkeypatch):
     """One row per case, one column per estimate (median told / left · share within 2x), the
     case's tree job seconds from its lines; an estimate without lines is a dash."""

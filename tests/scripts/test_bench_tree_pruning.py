@@ -62,3 +62,19 @@ def test_neck_settling_tree_and_minimal_cores():
     assert len(by_root) == m and rec["nodes"] in by_root.values() and min(by_root.values()) > m
     s = rec["core_summary"]
     assert s["least_core"] <= s["mean_core"] <= s["mean_fixings"]
+
+
+def test_neck_trees_at_fractions_of_mu_c():
+    """--fractions: the curved neck 2 x 5's tree at 0.9 and 2 times its mu^c (the value above)
+    finds brute force's patterns at that mu: none below mu^c, at 2 mu^c several; each record
+    says its fraction and mu."""
+    from instances import curved_neck, scene_param
+
+    mu_c = 0.4593401459998697
+    p, m = scene_param(curved_neck(2, 5, 0))
+    for fraction in (0.9, 2.0):
+        rec = bench_tree_pruning.measure(2, 5, mu_c, 0, neck=True, fraction=fraction)
+        assert rec["fraction_of_mu_c"] == fraction and rec["mu"] == mu_c * fraction and rec["seconds"] >= 0
+        feasible = brute_3d(p, m, rec["mu"])
+        assert rec["finished"] and {c for c, _ in rec["found"]} == feasible
+        assert (len(feasible) > 1) == (fraction > 1)
