@@ -39,10 +39,40 @@ on_signal() {
     fi
   fi
 }
-# SIGTERM to the launcher's children (the ranks on this host; rank 0 among them), or to
-# the launcher when it has none yet
+# The launcher's children that are ranks (OMPI_COMM_WORLD_RANK or PMIX_RANK in their environment)
+local_ranks() {
+  local p
+  for p in $(ps -o pid= --ppid "$child" 2>/dev/null); do
+    tr '\0' '\n' < "/proc/$p/environ" 2>/dev/null | grep -q -e '^OMPI_COMM_WORLD_RANK=' -e '^PMIX_RANK=' && echo "$p"
+  done
+}
+# Whether process $1 catches or ignores SIGTERM (bit 15 of SigCgt or SigIgn in /proc/PID/status):
+# hpcwedge's handlers are in, and a SIGTERM no longer kills it
+takes_term() {
+  local f m
+  for f in SigCgt SigIgn; do
+    m=$(sed -n "s/^$f:[[:space:]]*//p" "/proc/$1/status" 2>/dev/null)
+    [ -n "$m" ] && (( (16#${m: -4} >> 14) & 1 )) && return 0
+  done
+  return 1
+}
+# SIGTERM to the launcher's children (the ranks on this host; rank 0 among them), or to the
+# launcher when it has none. A rank still starting (not yet forked, or loading Python) would be
+# killed by it, and the run with it: up to STOP_WAIT seconds, while the run lives, until all
+# RANKS ranks are there and take SIGTERM (on a loaded CI machine a stop 1.6 s after the launch
+# killed a rank: exit 143, no checkpoint)
+STOP_WAIT=20
 stop_ranks() {
-  local ranks
+  local until=$((SECONDS + STOP_WAIT)) ranks n ready p
+  while kill -0 "$child" 2>/dev/null && [ "$SECONDS" -lt "$until" ]; do
+    ranks=$(local_ranks) n=0 ready=1
+    for p in $ranks; do
+      n=$((n + 1))
+      takes_term "$p" || ready=0
+    done
+    [ "$n" -ge "$RANKS" ] && [ "$ready" = 1 ] && break
+    sleep 0.2
+  done
   ranks=$(ps -o pid= --ppid "$child" 2>/dev/null)
   if [ -n "$ranks" ]; then
     # shellcheck disable=SC2086  # one pid per word
